@@ -1,0 +1,280 @@
+"""Cycle records: one bucket-loading cycle as CSV + JSON sidecar.
+
+Format (version 1)
+------------------
+``LOG.csv``: a header row, then one row per sample, comma-separated, SI
+units. Lines starting with ``#`` are comments. Columns (order free):
+
+=============  ======  ==========================================================
+column         unit    meaning
+=============  ======  ==========================================================
+t              s       time, strictly increasing
+x, z           m       bucket-tip position (x into the pile, z up)
+blade_angle    rad     blade direction (back edge -> tip) above +x; tip-down < 0
+F_T            N       measured tangential force on the blade (eq 16)
+F_N            N       measured normal force on the blade (eq 17)
+fill_volume    m^3     optional: soil volume in the bucket
+W_load         N       optional: soil weight in the bucket
+=============  ======  ==========================================================
+
+``LOG.json`` (same stem): ``{"format": "wheelloader.cyclelog", "version": 1,
+"pile": {"x": [...], "z": [...]}, "pile_after": {...} | null, "bucket":
+{Bucket fields}, "metadata": {...}}``. ``pile`` is the surface when the
+cycle started (depth is measured to it); ``bucket`` may list only the fields
+that differ from the defaults.
+
+A path without forces (for prediction) is the same CSV with only ``t, x, z,
+blade_angle``: see :func:`load_path_csv`.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import CycleLogError, ParameterError
+from .kinematics import DEFAULT_SLOPE_WINDOW, ContactState, contact_state
+from .machine import Bucket
+from .paths import BucketPath
+from .pile import Pile
+
+FORMAT_NAME = "wheelloader.cyclelog"
+FORMAT_VERSION = 1
+PATH_COLUMNS = ("t", "x", "z", "blade_angle")
+FORCE_COLUMNS = ("F_T", "F_N")
+OPTIONAL_COLUMNS = ("fill_volume", "W_load")
+
+
+@dataclass(frozen=True, eq=False)
+class CycleLog:
+    """One recorded bucket-loading cycle.
+
+    Attributes
+    ----------
+    path : BucketPath
+        Tip path (t, x, z, blade angle).
+    tangential, normal : numpy.ndarray
+        Measured F_T and F_N [N].
+    pile : Pile
+        Pile surface at the start of the cycle.
+    bucket : Bucket
+        Bucket geometry.
+    fill_volume : numpy.ndarray or None
+        Logged bucket fill [m^3].
+    measured_load : numpy.ndarray or None
+        Logged soil weight in the bucket W_load [N].
+    pile_after : Pile or None
+        Surface after the cycle.
+    metadata : dict
+        Free-form JSON-serialisable information (source, soil, seed, ...).
+    """
+
+    path: BucketPath
+    tangential: np.ndarray
+    normal: np.ndarray
+    pile: Pile
+    bucket: Bucket = field(default_factory=Bucket)
+    fill_volume: np.ndarray | None = None
+    measured_load: np.ndarray | None = None
+    pile_after: Pile | None = None
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.path, BucketPath):
+            raise CycleLogError(f"CycleLog.path must be a BucketPath, got {type(self.path).__name__}")
+        if not isinstance(self.pile, Pile):
+            raise CycleLogError(f"CycleLog.pile must be a Pile, got {type(self.pile).__name__}")
+        if not isinstance(self.bucket, Bucket):
+            raise CycleLogError(f"CycleLog.bucket must be a Bucket, got {type(self.bucket).__name__}")
+        n = len(self.path)
+        for name in ("tangential", "normal", "fill_volume", "measured_load"):
+            value = getattr(self, name)
+            if value is None:
+                if name in ("tangential", "normal"):
+                    raise CycleLogError(f"CycleLog.{name} is required")
+                continue
+            arr = np.array(value, dtype=float)
+            if arr.shape != (n,):
+                raise CycleLogError(f"CycleLog.{name} must have one value per sample ({n}), got shape {arr.shape}")
+            if not np.all(np.isfinite(arr)):
+                bad = int(np.flatnonzero(~np.isfinite(arr))[0])
+                raise CycleLogError(
+                    f"CycleLog.{name} has NaN/inf values (first at sample {bad}, t={self.path.t[bad]:g} s)")
+            if name in ("fill_volume", "measured_load") and np.any(arr < 0.0):
+                raise CycleLogError(f"CycleLog.{name} must be >= 0")
+            arr.flags.writeable = False
+            object.__setattr__(self, name, arr)
+        if not isinstance(self.metadata, dict):
+            raise CycleLogError("CycleLog.metadata must be a dict")
+
+    def __len__(self) -> int:
+        return len(self.path)
+
+    @property
+    def resultant(self) -> np.ndarray:
+        """Measured F_R = sqrt(F_T^2 + F_N^2) [N]."""
+        return np.hypot(self.tangential, self.normal)
+
+    def contact_state(self, slope_window: float = DEFAULT_SLOPE_WINDOW) -> ContactState:
+        """Contact geometry of this cycle, using the logged fill or load when present."""
+        return contact_state(self.path.x, self.path.z, self.path.blade_angle, self.pile, self.bucket,
+                             slope_window=slope_window, fill_volume=self.fill_volume, measured_load=self.measured_load)
+
+    # ----------------------------------------------------------------- io
+    def save(self, csv_path: str | Path, overwrite: bool = False) -> Path:
+        """Write ``csv_path`` and its JSON sidecar; refuse to overwrite unless asked."""
+        csv_path = Path(csv_path)
+        sidecar = csv_path.with_suffix(".json")
+        if not overwrite:
+            for target in (csv_path, sidecar):
+                if target.exists():
+                    raise FileExistsError(f"{target} exists; pass overwrite=True to replace it")
+        columns = {"t": self.path.t, "x": self.path.x, "z": self.path.z, "blade_angle": self.path.blade_angle,
+                   "F_T": self.tangential, "F_N": self.normal}
+        if self.fill_volume is not None:
+            columns["fill_volume"] = self.fill_volume
+        if self.measured_load is not None:
+            columns["W_load"] = self.measured_load
+        _write_columns(csv_path, columns)
+        meta = {
+            "format": FORMAT_NAME,
+            "version": FORMAT_VERSION,
+            "pile": self.pile.to_dict(),
+            "pile_after": None if self.pile_after is None else self.pile_after.to_dict(),
+            "bucket": self.bucket.to_dict(),
+            "metadata": self.metadata,
+        }
+        sidecar.write_text(json.dumps(meta, indent=1, default=_json_default))
+        return csv_path
+
+    @classmethod
+    def load(cls, csv_path: str | Path) -> CycleLog:
+        """Read a cycle log (CSV + JSON sidecar) with clear errors for bad files."""
+        csv_path = Path(csv_path)
+        columns = _read_columns(csv_path, required=PATH_COLUMNS + FORCE_COLUMNS)
+        path = _path_from_columns(csv_path, columns)
+        sidecar = csv_path.with_suffix(".json")
+        if not sidecar.exists():
+            raise CycleLogError(f"{csv_path}: JSON sidecar {sidecar.name} not found (it holds the pile and bucket)")
+        try:
+            meta = json.loads(sidecar.read_text())
+        except json.JSONDecodeError as exc:
+            raise CycleLogError(f"{sidecar}: not valid JSON ({exc})") from None
+        if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
+            raise CycleLogError(f'{sidecar}: "format" must be "{FORMAT_NAME}"')
+        if meta.get("version") != FORMAT_VERSION:
+            raise CycleLogError(f"{sidecar}: unsupported version {meta.get('version')!r} (expected {FORMAT_VERSION})")
+        try:
+            pile = Pile.from_dict(meta.get("pile"))
+            pile_after = None if meta.get("pile_after") is None else Pile.from_dict(meta["pile_after"])
+            bucket = Bucket.from_dict(meta.get("bucket") or {})
+        except ParameterError as exc:
+            raise CycleLogError(f"{sidecar}: {exc}") from None
+        metadata = meta.get("metadata") or {}
+        log = cls(path, columns["F_T"], columns["F_N"], pile, bucket, columns.get("fill_volume"),
+                  columns.get("W_load"), pile_after, metadata)
+        _check_geometry(csv_path, log)
+        return log
+
+
+def load_path_csv(csv_path: str | Path, name: str | None = None) -> BucketPath:
+    """Read a path CSV (columns t, x, z, blade_angle; extra columns ignored)."""
+    csv_path = Path(csv_path)
+    columns = _read_columns(csv_path, required=PATH_COLUMNS)
+    return _path_from_columns(csv_path, columns, name)
+
+
+def save_path_csv(path: BucketPath, csv_path: str | Path, overwrite: bool = False) -> Path:
+    """Write a :class:`BucketPath` as CSV (t, x, z, blade_angle)."""
+    csv_path = Path(csv_path)
+    if csv_path.exists() and not overwrite:
+        raise FileExistsError(f"{csv_path} exists; pass overwrite=True to replace it")
+    _write_columns(csv_path, {"t": path.t, "x": path.x, "z": path.z, "blade_angle": path.blade_angle})
+    return csv_path
+
+
+# ------------------------------------------------------------------ helpers
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
+
+
+def _write_columns(csv_path: Path, columns: dict[str, np.ndarray]) -> None:
+    names = list(columns)
+    data = np.column_stack([np.asarray(columns[k], dtype=float) for k in names])
+    with open(csv_path, "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(names)
+        for row in data:
+            writer.writerow([repr(float(v)) for v in row])
+
+
+def _read_columns(csv_path: Path, required: tuple[str, ...]) -> dict[str, np.ndarray]:
+    if not csv_path.exists():
+        raise FileNotFoundError(2, "No such file", str(csv_path))
+    with open(csv_path, newline="") as fh:
+        rows = [row for row in csv.reader(line for line in fh if line.strip() and not line.lstrip().startswith("#"))]
+    if not rows:
+        raise CycleLogError(f"{csv_path}: empty file (expected a header row with {', '.join(required)})")
+    header = [h.strip() for h in rows[0]]
+    missing = [c for c in required if c not in header]
+    if missing:
+        raise CycleLogError(f"{csv_path}: missing column(s) {missing}; found {header}")
+    if len(set(header)) != len(header):
+        raise CycleLogError(f"{csv_path}: duplicate column names in {header}")
+    body = rows[1:]
+    if len(body) < 2:
+        raise CycleLogError(f"{csv_path}: needs at least 2 data rows, found {len(body)}")
+    wanted = [c for c in header if c in PATH_COLUMNS + FORCE_COLUMNS + OPTIONAL_COLUMNS]
+    out: dict[str, np.ndarray] = {}
+    for col in wanted:
+        j = header.index(col)
+        values = np.empty(len(body))
+        for i, row in enumerate(body):
+            if len(row) != len(header):
+                raise CycleLogError(f"{csv_path}: row {i + 2} has {len(row)} fields, header has {len(header)}")
+            try:
+                values[i] = float(row[j])
+            except ValueError:
+                raise CycleLogError(f"{csv_path}: row {i + 2}, column {col!r}: not a number: {row[j]!r}") from None
+        if not np.all(np.isfinite(values)):
+            i = int(np.flatnonzero(~np.isfinite(values))[0])
+            raise CycleLogError(f"{csv_path}: column {col!r} has NaN/inf (first at row {i + 2})")
+        out[col] = values
+    return out
+
+
+def _path_from_columns(csv_path: Path, columns: dict[str, np.ndarray], name: str | None = None) -> BucketPath:
+    t = columns["t"]
+    steps = np.diff(t)
+    if np.any(steps <= 0.0):
+        i = int(np.flatnonzero(steps <= 0.0)[0])
+        raise CycleLogError(
+            f"{csv_path}: time is not strictly increasing at row {i + 3} (t={t[i + 1]!r} after {t[i]!r})")
+    angle = columns["blade_angle"]
+    if np.max(np.abs(angle)) > math.pi:
+        raise CycleLogError(
+            f"{csv_path}: blade_angle reaches {np.max(np.abs(angle)):.3g}; angles must be in radians "
+            "(values beyond pi look like degrees)"
+        )
+    return BucketPath(t, columns["x"], columns["z"], angle, name or csv_path.stem)
+
+
+def _check_geometry(csv_path: Path, log: CycleLog) -> None:
+    # Forces must be non-negative where the tip is out of soil? Real sensors have offsets; only reject
+    # values that cannot be forces of this model: F_N strongly negative everywhere means a sign flip.
+    if np.all(log.normal <= 0.0) and np.any(log.normal < 0.0):
+        raise CycleLogError(f"{csv_path}: F_N is never positive; check the sign convention (F_N > 0 presses "
+                            "the blade away from the soil wedge, eq 17)")
+    if log.fill_volume is not None and np.max(log.fill_volume) > 10.0 * log.bucket.capacity:
+        raise CycleLogError(f"{csv_path}: fill_volume reaches {np.max(log.fill_volume):g} m^3, more than 10x the "
+                            f"bucket capacity {log.bucket.capacity:g} m^3 (litres instead of m^3?)")

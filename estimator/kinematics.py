@@ -1,0 +1,179 @@
+"""Bucket-pile kinematics: what the force model needs per sample.
+
+From a bucket-tip path (x, z, blade angle per sample) and the pile surface
+as it was when the cycle started, compute per sample:
+
+* ``depth`` d [m]: penetration depth of the tip B, measured to the actual
+  local surface: ``(z_s(x) - z) cos(alpha)``, which is the perpendicular
+  distance for a planar slope and follows carved surfaces (the paper's
+  dual-cycle correction, Section IV-B). Zero when the tip is above ground.
+* ``alpha`` [rad]: local surface slope, the chord slope of the surface over
+  ``x +- slope_window`` (continuous across kinks).
+* ``rho`` [rad]: blade angle relative to the local surface,
+  ``rho = alpha - blade_angle``.
+* ``blade_length`` L_t [m]: blade length in soil, ``d / sin(rho)`` capped by
+  the bucket floor length.
+* ``fill_volume`` [m^3]: soil in the bucket, from carving the surface along
+  the path (or as logged).
+
+Sign conventions
+----------------
+x is horizontal, positive in the digging direction (into the pile); z is up.
+``blade_angle`` is the angle of the blade direction, from its back edge A to
+its tip B, above the +x axis, counter-clockwise positive: a bucket floor
+tilted tip-down has a negative blade angle; curling the bucket raises it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import ParameterError
+from .machine import Bucket
+from .pile import CarveResult, Pile
+
+GRAVITY = 9.81
+
+#: Default half-width of the chord used for the local slope [m].
+DEFAULT_SLOPE_WINDOW = 0.1
+#: Blade angles below this (relative to the surface) count as "flat" when
+#: computing the blade length in soil [rad].
+_MIN_SIN_ANGLE = math.radians(10.0)
+
+
+@dataclass(frozen=True, eq=False)
+class ContactState:
+    """Per-sample geometry of the blade in the pile (see module docstring).
+
+    Attributes
+    ----------
+    depth, rho, alpha, blade_length, fill_volume : numpy.ndarray
+        As described in the module docstring; SI units.
+    measured_load : numpy.ndarray or None
+        Logged soil weight in the bucket W_load [N], when the log has it;
+        otherwise the load is ``gamma * g * fill_volume``.
+    carve : CarveResult or None
+        The carving that produced ``fill_volume``, when it was computed.
+    """
+
+    depth: np.ndarray
+    rho: np.ndarray
+    alpha: np.ndarray
+    blade_length: np.ndarray
+    fill_volume: np.ndarray
+    measured_load: np.ndarray | None = None
+    carve: CarveResult | None = field(default=None, repr=False)
+
+    def __len__(self) -> int:
+        return int(self.depth.size)
+
+    @property
+    def in_soil(self) -> np.ndarray:
+        """True where the tip is below the surface."""
+        return self.depth > 0.0
+
+    def load_weight(self, gamma: float) -> np.ndarray:
+        """W_load [N]: the logged load, or ``gamma g V_fill`` (linear in gamma)."""
+        if self.measured_load is not None:
+            return self.measured_load
+        return gamma * GRAVITY * self.fill_volume
+
+    def subset(self, mask: np.ndarray) -> ContactState:
+        """The samples where ``mask`` is true."""
+        ml = None if self.measured_load is None else self.measured_load[mask]
+        return ContactState(self.depth[mask], self.rho[mask], self.alpha[mask], self.blade_length[mask],
+                            self.fill_volume[mask], ml, None)
+
+
+def blade_length_in_soil(depth, rho, floor_length: float):
+    """L_t = d / sin(rho), with sin(rho) floored at sin(10 deg), capped at the floor length [m]."""
+    sin_rho = np.maximum(np.abs(np.sin(rho)), math.sin(_MIN_SIN_ANGLE))
+    return np.minimum(np.maximum(depth, 0.0) / sin_rho, floor_length)
+
+
+def contact_state(
+    x: object,
+    z: object,
+    blade_angle: object,
+    pile: Pile,
+    bucket: Bucket,
+    *,
+    slope_window: float = DEFAULT_SLOPE_WINDOW,
+    initial_fill: float = 0.0,
+    fill_volume: object | None = None,
+    measured_load: object | None = None,
+) -> ContactState:
+    """Contact geometry along a tip path on a pile (vectorised).
+
+    Parameters
+    ----------
+    x, z, blade_angle : array_like
+        Tip path [m, m, rad], one value per sample.
+    pile : Pile
+        Surface at the start of the cycle; depth is measured to it.
+    bucket : Bucket
+        Bucket geometry (floor length, width, capacity).
+    slope_window : float
+        Half-width of the chord for the local slope [m].
+    initial_fill : float
+        Soil already in the bucket [m^3] when the fill is computed by carving.
+    fill_volume : array_like, optional
+        Logged bucket fill per sample [m^3]; if omitted it is computed by
+        carving ``pile`` along the path.
+    measured_load : array_like, optional
+        Logged soil weight in the bucket per sample [N].
+
+    Returns
+    -------
+    ContactState
+    """
+    xs = np.asarray(x, dtype=float)
+    zs = np.asarray(z, dtype=float)
+    theta = np.asarray(blade_angle, dtype=float)
+    if not (xs.ndim == zs.ndim == theta.ndim == 1 and xs.size == zs.size == theta.size):
+        raise ParameterError("x, z and blade_angle must be 1-D arrays of equal length")
+    if xs.size == 0:
+        raise ParameterError("the path has no samples")
+    for name, arr in (("x", xs), ("z", zs), ("blade_angle", theta)):
+        if not np.all(np.isfinite(arr)):
+            raise ParameterError(f"path {name} contains NaN or infinite values")
+    if not slope_window > 0.0:
+        raise ParameterError(f"slope_window must be > 0 m, got {slope_window!r}")
+    alpha = pile.slope_angle(xs, slope_window)
+    vertical = pile.surface_height(xs) - zs
+    depth = np.maximum(vertical, 0.0) * np.cos(alpha)
+    rho = alpha - theta
+    blade_length = blade_length_in_soil(depth, rho, bucket.floor_length)
+    carve = None
+    if fill_volume is None:
+        carve = pile.carve(xs, zs, bucket.width, bucket.capacity, initial_fill)
+        fill = carve.fill_history
+    else:
+        fill = _optional_series("fill_volume", fill_volume, xs.size)
+    load = None if measured_load is None else _optional_series("measured_load", measured_load, xs.size)
+    return ContactState(depth, rho, alpha, blade_length, fill, load, carve)
+
+
+def contact_single(pile: Pile, x: float, z: float, blade_angle: float, floor_length: float,
+                   slope_window: float = DEFAULT_SLOPE_WINDOW) -> tuple[float, float, float, float]:
+    """Scalar fast path: ``(depth, rho, alpha, blade_length)`` for one tip pose."""
+    alpha = pile.slope_angle(x, slope_window)
+    vertical = pile._height_scalar(x) - z
+    if vertical <= 0.0:
+        return 0.0, alpha - blade_angle, alpha, 0.0
+    depth = vertical * math.cos(alpha)
+    rho = alpha - blade_angle
+    sin_rho = max(abs(math.sin(rho)), math.sin(_MIN_SIN_ANGLE))
+    return depth, rho, alpha, min(depth / sin_rho, floor_length)
+
+
+def _optional_series(name: str, values: object, size: int) -> np.ndarray:
+    arr = np.asarray(values, dtype=float)
+    if arr.shape != (size,):
+        raise ParameterError(f"{name} must have one value per sample ({size}), got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)) or np.any(arr < 0.0):
+        raise ParameterError(f"{name} must be finite and >= 0")
+    return arr

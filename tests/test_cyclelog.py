@@ -1,0 +1,87 @@
+import json
+
+import numpy as np
+import pytest
+
+from wheelloader.estimator import Bucket, CycleLogError, Pile, contact_state, default_path, preset, soil_forces
+from wheelloader.estimator.cyclelog import CycleLog, load_path_csv, save_path_csv
+
+
+@pytest.fixture()
+def log():
+    pile, bucket, path = Pile.trapezoid(), Bucket(), default_path()
+    state = contact_state(path.x, path.z, path.blade_angle, pile, bucket)
+    forces = soil_forces(preset("gravel"), state, bucket)
+    return CycleLog(path, forces.tangential, forces.normal, pile, bucket, fill_volume=state.fill_volume,
+                    pile_after=state.carve.pile, metadata={"soil": "gravel"})
+
+
+def test_round_trip(tmp_path, log):
+    target = tmp_path / "cycle.csv"
+    log.save(target)
+    back = CycleLog.load(target)
+    assert np.array_equal(back.tangential, log.tangential) and np.array_equal(back.path.x, log.path.x)
+    assert back.pile == log.pile and back.pile_after == log.pile_after and back.bucket == log.bucket
+    assert back.metadata == {"soil": "gravel"}
+    assert np.array_equal(back.fill_volume, log.fill_volume) and back.measured_load is None
+    state = back.contact_state()
+    assert np.allclose(soil_forces(preset("gravel"), state, back.bucket).tangential, log.tangential)
+
+
+def test_refuses_to_overwrite(tmp_path, log):
+    log.save(tmp_path / "c.csv")
+    with pytest.raises(FileExistsError):
+        log.save(tmp_path / "c.csv")
+    log.save(tmp_path / "c.csv", overwrite=True)
+
+
+def _write(tmp_path, text, sidecar=True):
+    target = tmp_path / "bad.csv"
+    target.write_text(text)
+    if sidecar:
+        meta = {"format": "wheelloader.cyclelog", "version": 1, "pile": Pile.trapezoid().to_dict(), "bucket": {},
+                "metadata": {}}
+        target.with_suffix(".json").write_text(json.dumps(meta))
+    return target
+
+
+GOOD_HEADER = "t,x,z,blade_angle,F_T,F_N\n"
+
+
+@pytest.mark.parametrize("body,match", [
+    ("t,x,z,F_T,F_N\n0,0,0,0,0\n1,0,0,0,0\n", "missing column"),
+    (GOOD_HEADER + "0,0,0,0,1,1\n0.1,0,0,0,nan,1\n", "NaN"),
+    (GOOD_HEADER + "0,0,0,0,1,1\n0,0,0,0,1,1\n", "not strictly increasing"),
+    (GOOD_HEADER + "0,0,0,-5,1,1\n0.1,0,0,40,1,1\n", "radians"),
+    (GOOD_HEADER + "0,0,0,0,1,1\n", "at least 2 data rows"),
+    (GOOD_HEADER + "0,0,0,0,1,1\n0.1,0,0,0,abc,1\n", "not a number"),
+    (GOOD_HEADER + "0,0,0,0,1,-1\n0.1,0,0,0,1,-2\n", "sign convention"),
+    ("", "empty file"),
+])
+def test_bad_files_get_clear_errors(tmp_path, body, match):
+    with pytest.raises(CycleLogError, match=match):
+        CycleLog.load(_write(tmp_path, body))
+
+
+def test_missing_sidecar_and_comments(tmp_path):
+    target = _write(tmp_path, "# a comment\n" + GOOD_HEADER + "0,0,0,0,1,1\n0.1,0.1,0,0,1,1\n", sidecar=False)
+    with pytest.raises(CycleLogError, match="sidecar"):
+        CycleLog.load(target)
+    assert len(load_path_csv(target)) == 2
+    with pytest.raises(FileNotFoundError):
+        CycleLog.load(tmp_path / "nope.csv")
+
+
+def test_path_csv_round_trip(tmp_path):
+    path = default_path()
+    save_path_csv(path, tmp_path / "p.csv")
+    assert np.array_equal(load_path_csv(tmp_path / "p.csv").blade_angle, path.blade_angle)
+    with pytest.raises(FileExistsError):
+        save_path_csv(path, tmp_path / "p.csv")
+
+
+def test_constructor_validation(log):
+    with pytest.raises(CycleLogError, match="one value per sample"):
+        CycleLog(log.path, log.tangential[:-1], log.normal, log.pile)
+    with pytest.raises(CycleLogError, match="NaN"):
+        CycleLog(log.path, np.full(len(log.path), np.nan), log.normal, log.pile)
