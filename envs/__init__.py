@@ -1,0 +1,1 @@
+"""Gymnasium environments for bucket loading on the FEE force simulator."""

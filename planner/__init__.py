@@ -1,0 +1,1 @@
+"""CasADi trajectory optimisation and MPC for the next cycle's bucket path."""
