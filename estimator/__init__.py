@@ -5,6 +5,7 @@ soil parameters, bucket and loader, pile geometry, bucket paths, contact
 kinematics, the force model and cycle logs.
 """
 
+from .calibration import METHODS, Calibration, FitQuality, StageResult, calibrate, load_params
 from .errors import CalibrationError, CycleLogError, ParameterError, PlanningError, WheelloaderError
 from .force_model import (
     DEFAULT_OPTIONS,
@@ -21,9 +22,14 @@ from .kinematics import ContactState, contact_single, contact_state
 from .machine import Bucket, Loader
 from .paths import BucketPath, bezier_path, default_path, paper_paths, polyline_path
 from .pile import CarveResult, Pile, SurfaceCarver
+from .prediction import Prediction, predict
 from .soil import PAPER_BOUNDS, PARAMETER_NAMES, PRESET_NAMES, SoilParams, as_soil, preset
+from .synthetic import random_bezier_path, random_soil, synthetic_cycle
+from .uncertainty import Uncertainty
 
 __all__ = [
+    "METHODS", "Calibration", "FitQuality", "Prediction", "StageResult", "Uncertainty", "calibrate", "load_params",
+    "predict", "random_bezier_path", "random_soil", "synthetic_cycle",
     "Bucket", "BucketPath", "CalibrationError", "CarveResult", "ContactState", "CycleLogError",
     "DEFAULT_OPTIONS", "FLAG_NAMES", "GRAVITY", "Loader", "ModelOptions", "PAPER_BOUNDS", "PARAMETER_NAMES",
     "PRESET_NAMES", "ParameterError", "Pile", "PlanningError", "SoilForces", "SoilParams", "SurfaceCarver",

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from . import __version__
@@ -44,6 +45,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``wheelloader`` console script."""
+    # Small dense problems (281-sample fits, 8 parameters) run several times slower with a multi-threaded
+    # BLAS on a 2-core machine; default to one thread unless the user chose otherwise.
+    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
     from wheelloader.estimator.errors import WheelloaderError
 
     parser = build_parser()

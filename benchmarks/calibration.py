@@ -1,0 +1,229 @@
+"""Calibration benchmark: the default method against the paper's two methods, side by side.
+
+Protocol (the paper's train-test protocol, Section IV-B): for each soil, a
+noisy synthetic cycle on path 1 of :func:`~wheelloader.estimator.paths.paper_paths`
+is the training cycle; paths 2-4 (noisy, other seeds) are the unseen test
+cycles. Every method calibrates on the training cycle ``--repeats`` times
+(median wall time) and is scored by the F_R RMSE on the training cycle and on
+the three test paths, next to the RMSE of the true parameters (the noise
+floor). The robustness part draws ``--robustness`` random cycles (random soil
+within the paper's bounds, random Bezier path, noise) and counts how often
+each method reaches the noise floor (F_R RMSE <= 1.02 x RMSE at the true
+parameters); the paper's methods start from the mid-range guess.
+
+BLAS threads are limited to one (``OPENBLAS_NUM_THREADS=1`` etc., set before
+numpy loads): every solve here is tiny and thread hand-offs only add noise on
+a shared 2-core machine; all methods run under the same setting.
+
+Run: ``python benchmarks/calibration.py [--out results/calibration]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+METHODS = ("default", "single-stage", "multi-stage")
+DEFAULT_SOILS = ("gravel", "dirt", "modified_sand", "lean_clay")
+
+
+def machine_info() -> dict:
+    """Platform, CPU count and library versions."""
+    import numpy
+    import scipy
+
+    info = {"platform": platform.platform(), "processor": platform.processor(), "cpu_count": os.cpu_count(),
+            "python": sys.version.split()[0], "numpy": numpy.__version__, "scipy": scipy.__version__,
+            "blas_threads_env": {k: os.environ.get(k) for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
+                                                                  "MKL_NUM_THREADS")}}
+    try:
+        import casadi
+
+        info["casadi"] = casadi.__version__
+    except ImportError:  # pragma: no cover
+        info["casadi"] = None
+    return info
+
+
+def floor_rmse(cycle, soil, percent: bool = False) -> float:
+    """F_R RMSE of the true parameters on the cycle's in-soil samples (the noise floor) [N] (or [%])."""
+    from wheelloader.estimator.prediction import predict
+
+    q = predict(soil, cycle).quality
+    return q.percent_r if percent else q.rmse_r
+
+
+def run_soil(name: str, args, rng_seed: int) -> dict:
+    """Train on path 1, test on paths 2-4, every method."""
+    import numpy as np
+
+    from wheelloader.estimator import paper_paths, preset
+    from wheelloader.estimator.calibration import calibrate
+    from wheelloader.estimator.prediction import predict
+    from wheelloader.estimator.synthetic import synthetic_cycle
+
+    soil = preset(name)
+    paths = paper_paths()
+    cycles = [synthetic_cycle(soil, p, noise=args.noise, vibration=args.vibration, seed=rng_seed + k)
+              for k, p in enumerate(paths)]
+    train, tests = cycles[0], cycles[1:]
+    out = {"soil": name, "true": soil.to_dict(), "floor_train_rmse_r": floor_rmse(train, soil),
+           "floor_train_rmse_r_percent": floor_rmse(train, soil, percent=True),
+           "floor_test_rmse_r": [floor_rmse(c, soil) for c in tests], "methods": {}}
+    for method in METHODS:
+        times, cal = [], None
+        for _ in range(args.repeats):
+            cal = calibrate(train, method)
+            times.append(cal.time_s)
+        test_q = [predict(cal, c).quality for c in tests]
+        out["methods"][method] = {
+            "median_time_s": float(np.median(times)),
+            "times_s": times,
+            "nfev": cal.nfev,
+            "success": cal.success,
+            "message": cal.message,
+            "train_rmse": cal.quality.to_dict(),
+            "test_rmse_r": [[q.rmse_r, q.percent_r] for q in test_q],
+            "test_rmse_r_percent_mean": float(np.mean([q.percent_r for q in test_q])),
+            "params": cal.params.to_dict(),
+            "K": cal.sinkage_modulus,
+            "stages": [s.to_dict() for s in cal.stages],
+            "identifiability_status": cal.uncertainty.to_dict()["parameters"],
+        }
+        out["methods"][method]["_cal"] = cal  # for plotting; removed before writing JSON
+    out["_train"] = train
+    return out
+
+
+def run_robustness(count: int, seed: int, args) -> dict:
+    """Fraction of random cycles on which each method reaches the noise floor."""
+    import numpy as np
+
+    from wheelloader.estimator.calibration import calibrate
+    from wheelloader.estimator.synthetic import random_bezier_path, random_soil, synthetic_cycle
+
+    rng = np.random.default_rng(seed)
+    rows = []
+    for _ in range(count):
+        soil, path = random_soil(rng), random_bezier_path(rng)
+        cycle = synthetic_cycle(soil, path, noise=args.noise, vibration=args.vibration, seed=rng)
+        floor = floor_rmse(cycle, soil)
+        row = {"soil": soil.to_dict(), "floor_rmse_r": floor}
+        for method in METHODS:
+            cal = calibrate(cycle, method)
+            row[method] = {"rmse_r": cal.quality.rmse_r, "ratio": cal.quality.rmse_r / floor,
+                           "time_s": cal.time_s, "success": cal.success}
+        rows.append(row)
+    summary = {m: {"fraction_at_noise_floor": float(np.mean([r[m]["ratio"] <= 1.02 for r in rows])),
+                   "median_ratio": float(np.median([r[m]["ratio"] for r in rows])),
+                   "median_time_s": float(np.median([r[m]["time_s"] for r in rows]))} for m in METHODS}
+    return {"count": count, "seed": seed, "criterion": "F_R RMSE <= 1.02 x RMSE at the true parameters",
+            "summary": summary, "cycles": rows}
+
+
+def plot(results: dict, out: Path) -> None:
+    """Fig. 6-style plot of the first soil and a time/RMSE comparison."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from wheelloader.estimator.plotting import plot_calibration
+
+    first = results["soils"][0]
+    plot_calibration(first["_train"], [first["methods"][m]["_cal"] for m in METHODS],
+                     out / f"fit_{first['soil']}.png", title=f"training cycle, soil {first['soil']}")
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    names = [s["soil"] for s in results["soils"]]
+    width = 0.25
+    for k, m in enumerate(METHODS):
+        xs = [i + (k - 1) * width for i in range(len(names))]
+        axes[0].bar(xs, [s["methods"][m]["median_time_s"] * 1e3 for s in results["soils"]], width, label=m)
+        axes[1].bar(xs, [s["methods"][m]["test_rmse_r_percent_mean"] for s in results["soils"]], width, label=m)
+    for ax, label in zip(axes, ("median calibration time [ms]", "mean F_R RMSE on 3 unseen paths [%]"),
+                         strict=True):
+        ax.set_xticks(range(len(names)), names)
+        ax.set_ylabel(label)
+        ax.legend()
+    axes[0].set_yscale("log")
+    fig.tight_layout()
+    fig.savefig(out / "comparison.png", dpi=120)
+    plt.close(fig)
+
+
+def print_table(results: dict) -> None:
+    """Side-by-side table of the measured figures."""
+    head = (f"{'soil':<14}{'method':<14}{'time ms':>9}{'evals':>7}{'conv':>6}{'train F_R %':>13}"
+            f"{'floor %':>9}{'test F_R % (paths 2-4)':>26}")
+    print(head)
+    print("-" * len(head))
+    for s in results["soils"]:
+        floor_pct = s["floor_train_rmse_r_percent"]
+        for m in METHODS:
+            r = s["methods"][m]
+            tests = " ".join(f"{v[1]:6.2f}" for v in r["test_rmse_r"])
+            print(f"{s['soil']:<14}{m:<14}{r['median_time_s'] * 1e3:9.1f}{r['nfev']:7d}{str(r['success']):>6}"
+                  f"{r['train_rmse']['F_R'][1]:13.2f}{floor_pct:9.2f}{tests:>26}")
+    sp = results["speedup_multi_over_default"]
+    print(f"\nmedian speed-up of 'default' over 'multi-stage': {sp['median']:.2f}x (per soil: "
+          + ", ".join(f"{k} {v:.2f}x" for k, v in sp["per_soil"].items()) + ")")
+    if "robustness" in results:
+        rb = results["robustness"]
+        print(f"robustness over {rb['count']} random cycles ({rb['criterion']}):")
+        for m, v in rb["summary"].items():
+            print(f"  {m:<14} reached the noise floor in {100 * v['fraction_at_noise_floor']:.0f} % "
+                  f"(median RMSE/floor {v['median_ratio']:.3f}, median time {v['median_time_s'] * 1e3:.1f} ms)")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the benchmark and write ``results.json`` and plots into ``--out``."""
+    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default="results/calibration", help="output directory (default: %(default)s)")
+    parser.add_argument("--seed", type=int, default=20240501, help="random seed (default: %(default)s)")
+    parser.add_argument("--soils", nargs="+", default=list(DEFAULT_SOILS), help="soil presets")
+    parser.add_argument("--repeats", type=int, default=5, help="timed calibrations per method and soil")
+    parser.add_argument("--noise", type=float, default=0.05, help="white noise, fraction of peak F_R")
+    parser.add_argument("--vibration", type=float, default=0.02, help="5-15 Hz vibration, fraction of peak F_R")
+    parser.add_argument("--robustness", type=int, default=50, help="random cycles for the robustness part (0: skip)")
+    args = parser.parse_args(argv)
+
+    import numpy as np
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    from wheelloader.estimator.calibration import calibrate
+    from wheelloader.estimator.synthetic import synthetic_cycle
+
+    calibrate(synthetic_cycle("dirt", noise=0.0), "default")  # warm-up: imports, caches
+    soils = [run_soil(name, args, args.seed + 10 * i) for i, name in enumerate(args.soils)]
+    per_soil = {s["soil"]: s["methods"]["multi-stage"]["median_time_s"] / s["methods"]["default"]["median_time_s"]
+                for s in soils}
+    results = {"benchmark": "calibration", "machine": machine_info(), "settings": vars(args),
+               "rmse_definition": "F_R RMSE over in-soil samples; % = 100 RMSE / mean(|F_R observed|)",
+               "soils": soils,
+               "speedup_multi_over_default": {"median": float(np.median(list(per_soil.values()))),
+                                              "per_soil": per_soil}}
+    if args.robustness > 0:
+        results["robustness"] = run_robustness(args.robustness, args.seed + 999, args)
+    results["wall_time_s"] = time.perf_counter() - t0
+    plot(results, out)
+    print_table(results)
+    for s in soils:
+        s.pop("_train")
+        for m in s["methods"].values():
+            m.pop("_cal")
+    (out / "results.json").write_text(json.dumps(results, indent=1, default=float))
+    print(f"\nresults written to {out.resolve()}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

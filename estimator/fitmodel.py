@@ -1,0 +1,397 @@
+"""The force model arranged for fitting: batched basis, full model and analytic Jacobian.
+
+For fixed ``(phi, delta)`` the failure angle beta* depends only on the sample
+geometry (alpha, rho), so the FEE force of eq 1 is affine in
+``(gamma, C, C_a)``::
+
+    F = gamma * B_gamma + C * B_c + C_a * B_a + q0,
+    B_gamma = d^2 w g N_gamma + r g V N_q        (W_load = gamma g V, eq 1)
+    B_c     = w d N_c,   B_a = w d N_a,   q0 = r W_meas N_q (logged load only)
+
+with ``r`` the surcharge ramp of :mod:`wheelloader.estimator.force_model`.
+The blade forces (eqs 15-17) are then
+
+    F_T = K w b d^n + F sin(delta) + C_a w L_t,     F_N = F cos(delta),
+
+with ``K = k_c / b + k_phi`` (eq 15), the only identifiable Bekker
+combination. So for fixed ``(phi, delta, n)`` the forces are linear in
+``theta_lin = (gamma, C, C_a, K)``: the default calibration exploits this
+(variable projection). The tension clamp ``F >= 0`` breaks linearity; the
+full model here applies it exactly as :func:`~wheelloader.estimator.force_model.soil_forces`.
+
+The fit parameter vector used throughout the estimator is
+:data:`FIT_NAMES` = ``(gamma, C, C_a, phi, delta, K, n)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import CalibrationError
+from .force_model import DEFAULT_OPTIONS, GRAVITY, ModelOptions
+from .kinematics import ContactState
+from .machine import Bucket
+from .soil import PAPER_BOUNDS, SoilParams
+
+#: Names of the seven identifiable fit parameters (K = k_c / b + k_phi).
+FIT_NAMES: tuple[str, ...] = ("gamma", "cohesion", "adhesion", "phi", "delta", "K", "n")
+#: Indices of the parameters the forces are linear in (for fixed phi, delta, n).
+LINEAR_INDEX = (0, 1, 2, 5)
+#: Indices of the nonlinear parameters.
+NONLINEAR_INDEX = (3, 4, 6)
+
+#: Smallest number of in-soil samples a calibration accepts.
+MIN_SAMPLES = 12
+
+
+def fit_bounds(bounds: dict[str, tuple[float, float]], edge_thickness: float) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds of :data:`FIT_NAMES` from bounds on the eight soil parameters (K from k_c, k_phi)."""
+    lo = np.array([bounds["gamma"][0], bounds["cohesion"][0], bounds["adhesion"][0], bounds["phi"][0],
+                   bounds["delta"][0], bounds["k_c"][0] / edge_thickness + bounds["k_phi"][0], bounds["n"][0]])
+    hi = np.array([bounds["gamma"][1], bounds["cohesion"][1], bounds["adhesion"][1], bounds["phi"][1],
+                   bounds["delta"][1], bounds["k_c"][1] / edge_thickness + bounds["k_phi"][1], bounds["n"][1]])
+    return lo, hi
+
+
+def soil_to_fit(soil: SoilParams, edge_thickness: float) -> np.ndarray:
+    """Fit vector ``(gamma, C, C_a, phi, delta, K, n)`` of a :class:`SoilParams`."""
+    return np.array([soil.gamma, soil.cohesion, soil.adhesion, soil.phi, soil.delta,
+                     soil.sinkage_modulus(edge_thickness), soil.n])
+
+
+def split_sinkage(K: float, edge_thickness: float, bounds: dict[str, tuple[float, float]] = PAPER_BOUNDS,
+                  prior: SoilParams | None = None) -> tuple[float, float]:
+    """Split the identifiable ``K = k_c / b + k_phi`` into ``(k_c, k_phi)``.
+
+    Forces determine only K (eq 15). The split is a convention, not an
+    estimate: with a ``prior`` whose K is positive, keep its share of
+    ``k_c / b`` in K; otherwise put everything into ``k_phi``. The result is
+    then moved inside the bounds keeping K exact whenever the bounds allow.
+    """
+    b = edge_thickness
+    kc_lo, kc_hi = bounds["k_c"]
+    kp_lo, kp_hi = bounds["k_phi"]
+    share = 0.0
+    if prior is not None and prior.sinkage_modulus(b) > 0.0:
+        share = (prior.k_c / b) / prior.sinkage_modulus(b)
+    kc = share * K * b
+    kc = min(max(kc, kc_lo), kc_hi)
+    kp = K - kc / b
+    if kp > kp_hi:  # move the excess back into k_c
+        kp = kp_hi
+        kc = min(max((K - kp) * b, kc_lo), kc_hi)
+    elif kp < kp_lo:
+        kp = kp_lo
+        kc = min(max((K - kp) * b, kc_lo), kc_hi)
+    return float(kc), float(kp)
+
+
+def fit_to_soil(p: np.ndarray, edge_thickness: float, bounds: dict[str, tuple[float, float]] = PAPER_BOUNDS,
+                prior: SoilParams | None = None) -> SoilParams:
+    """:class:`SoilParams` from a fit vector, splitting K with :func:`split_sinkage`."""
+    kc, kp = split_sinkage(float(p[5]), edge_thickness, bounds, prior)
+    return SoilParams(gamma=float(p[0]), cohesion=float(p[1]), adhesion=float(p[2]), phi=float(p[3]),
+                      delta=float(p[4]), k_c=kc, k_phi=kp, n=float(p[6]))
+
+
+# ------------------------------------------------------------------- beta*
+def _clamped_angles(alpha, rho, phi, delta, options: ModelOptions):
+    """Clamp like :func:`force_model.clamp_angles`, broadcasting phi/delta; also d rho_eff / d(phi or delta)."""
+    rho_hi = math.pi - options.eps1 - options.eps2 - delta - phi
+    alpha_eff = np.clip(alpha, -options.alpha_max, options.alpha_max)
+    high = rho > rho_hi
+    rho_eff = np.where(rho < options.rho_min, options.rho_min, np.where(high, rho_hi, rho))
+    return alpha_eff, rho_eff, high
+
+
+def batched_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS, tol: float = 1e-12,
+                 max_iter: int = 60):
+    """beta* for broadcast arrays (same algorithm as :func:`force_model.optimal_beta`).
+
+    Returns ``(beta, where)`` with ``where`` = 0 interior root, 1 at the lower
+    bound eps1, 2 at the upper bound ``pi - (rho+delta+phi) - eps2``, 3 at
+    ``pi/2 - alpha``. ``alpha``, ``rho`` must be clamped.
+    """
+    alpha, rho, phi, delta = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (alpha, rho, phi, delta)))
+    s = rho + delta + phi
+    hi_a = math.pi - s - options.eps2
+    hi_b = 0.5 * math.pi - alpha
+    hi = np.minimum(hi_a, hi_b)
+    lo = np.full_like(hi, options.eps1)
+
+    def slope(b):
+        t1 = np.tan(alpha + b)
+        c2 = 1.0 / np.tan(alpha + b + phi)
+        c3 = 1.0 / np.tan(b)
+        c4 = 1.0 / np.tan(b + s)
+        return -t1 + c2 - c3 - c4, -t1 * t1 - c2 * c2 + c3 * c3 + c4 * c4
+
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        g_lo, _ = slope(lo)
+        g_hi, _ = slope(hi)
+        at_lo = g_lo >= 0.0
+        at_hi = (g_hi <= 0.0) & ~at_lo
+        inner = ~(at_lo | at_hi)
+        a, b = lo.copy(), hi.copy()
+        x = 0.5 * (a + b)
+        active = inner.copy()
+        for _ in range(max_iter):
+            g, dg = slope(x)
+            pos = g > 0.0
+            b = np.where(pos, x, b)
+            a = np.where(pos, a, x)
+            newton = x - g / dg
+            ok = (dg > 0.0) & (newton > a) & (newton < b)
+            x_new = np.where(ok, newton, 0.5 * (a + b))
+            step = np.where(active, np.abs(x_new - x), 0.0)
+            x = x_new
+            if not np.any(step >= tol):
+                break
+    beta = np.where(at_lo, lo, np.where(at_hi, hi, x))
+    where = np.where(at_lo, 1, np.where(at_hi, np.where(hi_a <= hi_b, 2, 3), 0))
+    return beta, where
+
+
+# ----------------------------------------------------------------- factors
+@dataclass(frozen=True, eq=False)
+class Factors:
+    """Bearing factors at beta* and their total derivatives w.r.t. phi and delta (arrays, broadcast shape)."""
+
+    n_gamma: np.ndarray
+    n_c: np.ndarray
+    n_a: np.ndarray
+    n_q: np.ndarray
+    flags_rho: np.ndarray
+    d_phi: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+    d_delta: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+
+
+def factors(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS, derivatives: bool = False) -> Factors:
+    """Bearing factors (eqs 10-13) at beta* (eq 14) for broadcast ``phi``, ``delta``.
+
+    With ``derivatives=True`` also the total derivatives ``dN/dphi`` and
+    ``dN/ddelta`` including ``d beta*/d(phi, delta)`` (implicit function
+    theorem on ``d ln N_gamma / d beta = 0`` for interior roots; the moving
+    bound for bound solutions) and the clamp of rho at its upper limit.
+    The envelope theorem makes ``dN_gamma/dbeta = 0`` at interior roots, but
+    N_c, N_a, N_q do depend on beta, so their beta terms are kept.
+    """
+    alpha = np.asarray(alpha, dtype=float)
+    rho = np.asarray(rho, dtype=float)
+    alpha_e, rho_e, rho_high = _clamped_angles(alpha, rho, phi, delta, options)
+    flags_rho = (rho < options.rho_min) | rho_high
+    beta, where = batched_beta(alpha_e, rho_e, phi, delta, options)
+    u = rho_e + delta + beta + phi
+    S = np.sin(u)
+    CU = np.cos(u)
+    sin_b = np.sin(beta)
+    cos_a = np.cos(alpha_e)
+    A1 = np.cos(alpha_e + beta)
+    A2 = np.sin(alpha_e + beta + phi)
+    A2c = np.cos(alpha_e + beta + phi)
+    D = 2.0 * cos_a * sin_b * S
+    ng_raw = A1 * A2 / D  # eq 10
+    ng = np.maximum(ng_raw, 0.0)
+    cos_phi = np.cos(phi)
+    nc = cos_phi / (sin_b * S)  # eq 11
+    v = rho_e + beta + phi
+    sin_r = np.sin(rho_e)
+    na = -np.cos(v) / (sin_r * S)  # eq 12
+    nq = A2 / S  # eq 13
+    if not derivatives:
+        return Factors(ng, nc, na, nq, flags_rho)
+
+    cot_u = CU / S
+    cot_b = np.cos(beta) / sin_b
+    ng_pos = ng_raw > 0.0
+    # partial derivatives (beta, phi, delta, rho held independent)
+    dng_db = np.where(ng_pos, (-np.sin(alpha_e + beta) * A2 + A1 * A2c) / D - ng_raw * (cot_b + cot_u), 0.0)
+    dng_dp = np.where(ng_pos, A1 * A2c / D - ng_raw * cot_u, 0.0)
+    dng_dd = np.where(ng_pos, -ng_raw * cot_u, 0.0)
+    dng_dr = dng_dd
+    dnc_db = -nc * (cot_b + cot_u)
+    dnc_dp = -np.sin(phi) / (sin_b * S) - nc * cot_u
+    dnc_dd = -nc * cot_u
+    dnc_dr = dnc_dd
+    sv = np.sin(v) / (sin_r * S)
+    dna_db = sv - na * cot_u
+    dna_dp = dna_db
+    dna_dd = -na * cot_u
+    dna_dr = sv - na * cot_u - na * np.cos(rho_e) / sin_r
+    dnq_db = A2c / S - nq * cot_u
+    dnq_dp = dnq_db
+    dnq_dd = -nq * cot_u
+    dnq_dr = dnq_dd
+    # d rho_eff / d phi = d rho_eff / d delta = -1 where clamped at the upper limit
+    drho = np.where(rho_high, -1.0, 0.0)
+    # d beta* / d phi and / d delta
+    s_tot = rho_e + delta + phi
+    csc2_s = 1.0 / np.sin(beta + s_tot) ** 2
+    csc2_p = 1.0 / np.sin(alpha_e + beta + phi) ** 2
+    t1 = np.tan(alpha_e + beta)
+    c2 = A2c / A2
+    c4 = np.cos(beta + s_tot) / np.sin(beta + s_tot)
+    dg_db = -t1 * t1 - c2 * c2 + cot_b * cot_b + c4 * c4
+    dg_dp = -csc2_p + csc2_s
+    dg_dd = csc2_s
+    dg_dr = csc2_s
+    with np.errstate(divide="ignore", invalid="ignore"):
+        db_dp_in = -(dg_dp + dg_dr * drho) / dg_db
+        db_dd_in = -(dg_dd + dg_dr * drho) / dg_db
+    db_dp = np.select([where == 0, where == 2], [db_dp_in, -(1.0 + drho)], 0.0)
+    db_dd = np.select([where == 0, where == 2], [db_dd_in, -(1.0 + drho)], 0.0)
+
+    def total(dd_b, dd_x, dd_r, db_dx):
+        return dd_x + dd_b * db_dx + dd_r * drho
+
+    d_phi = (total(dng_db, dng_dp, dng_dr, db_dp), total(dnc_db, dnc_dp, dnc_dr, db_dp),
+             total(dna_db, dna_dp, dna_dr, db_dp), total(dnq_db, dnq_dp, dnq_dr, db_dp))
+    d_delta = (total(dng_db, dng_dd, dng_dr, db_dd), total(dnc_db, dnc_dd, dnc_dr, db_dd),
+               total(dna_db, dna_dd, dna_dr, db_dd), total(dnq_db, dnq_dd, dnq_dr, db_dd))
+    return Factors(ng, nc, na, nq, flags_rho, d_phi, d_delta)
+
+
+# ------------------------------------------------------------------- data
+@dataclass(frozen=True, eq=False)
+class FitData:
+    """Measured forces and geometry of the in-soil samples of one cycle, ready for fitting.
+
+    Attributes
+    ----------
+    index : numpy.ndarray
+        Indices of the in-soil samples (depth > 0) in the cycle.
+    depth, alpha, rho, blade_length, fill_volume : numpy.ndarray
+        Geometry of those samples (SI).
+    measured_load : numpy.ndarray or None
+        Logged W_load [N] of those samples.
+    y_t, y_n : numpy.ndarray
+        Measured F_T, F_N [N] of those samples.
+    width, edge_thickness : float
+        Bucket width w and cutting-edge thickness b [m].
+    options : ModelOptions
+        Validity-domain options of the force model.
+    """
+
+    index: np.ndarray
+    depth: np.ndarray
+    alpha: np.ndarray
+    rho: np.ndarray
+    blade_length: np.ndarray
+    fill_volume: np.ndarray
+    measured_load: np.ndarray | None
+    y_t: np.ndarray
+    y_n: np.ndarray
+    width: float
+    edge_thickness: float
+    options: ModelOptions = DEFAULT_OPTIONS
+
+    @classmethod
+    def from_state(cls, state: ContactState, tangential, normal, bucket: Bucket,
+                   options: ModelOptions = DEFAULT_OPTIONS, min_samples: int = MIN_SAMPLES) -> FitData:
+        """Select the in-soil samples of ``state`` and check the measured forces."""
+        f_t = np.asarray(tangential, dtype=float)
+        f_n = np.asarray(normal, dtype=float)
+        n = len(state)
+        for name, arr in (("tangential", f_t), ("normal", f_n)):
+            if arr.shape != (n,):
+                raise CalibrationError(f"measured {name} force must have one value per sample ({n}), "
+                                       f"got shape {arr.shape}")
+            if not np.all(np.isfinite(arr)):
+                bad = int(np.flatnonzero(~np.isfinite(arr))[0])
+                raise CalibrationError(f"measured {name} force has NaN/inf values (first at sample {bad})")
+        if n < min_samples:
+            raise CalibrationError(f"too few samples: the cycle has {n}, a calibration needs at least {min_samples}")
+        idx = np.flatnonzero(state.depth > 0.0)
+        if idx.size == 0:
+            raise CalibrationError("every sample is out of soil (depth <= 0): the tip never enters the pile; "
+                                   "check the pile surface and the path coordinates")
+        if idx.size < min_samples:
+            raise CalibrationError(f"too few in-soil samples: {idx.size} of {n} have depth > 0, a calibration "
+                                   f"needs at least {min_samples}")
+        ml = None if state.measured_load is None else np.asarray(state.measured_load, float)[idx]
+        return cls(idx, state.depth[idx], state.alpha[idx], state.rho[idx], state.blade_length[idx],
+                   state.fill_volume[idx], ml, f_t[idx], f_n[idx], bucket.width, bucket.edge_thickness, options)
+
+    def __len__(self) -> int:
+        return int(self.index.size)
+
+    @property
+    def ramp(self) -> np.ndarray:
+        """Surcharge ramp ``min(d / contact_depth, 1)`` (force_model)."""
+        return np.minimum(self.depth / self.options.contact_depth, 1.0)
+
+    # ---------------------------------------------------------- basis
+    def fee_basis(self, f: Factors):
+        """``(B_gamma, B_c, B_a, q0)`` of the module docstring from :class:`Factors` (broadcast)."""
+        d, w, r = self.depth, self.width, self.ramp
+        if self.measured_load is None:
+            b_gamma = d * d * w * GRAVITY * f.n_gamma + r * GRAVITY * self.fill_volume * f.n_q
+            q0 = np.zeros_like(b_gamma)
+        else:
+            b_gamma = d * d * w * GRAVITY * f.n_gamma + np.zeros_like(f.n_q)
+            q0 = r * self.measured_load * f.n_q
+        return b_gamma, w * d * f.n_c, w * d * f.n_a, q0
+
+    def fee_basis_derivative(self, dn: tuple[np.ndarray, ...]):
+        """Derivative of :meth:`fee_basis` given derivatives of the four factors."""
+        dng, dnc, dna, dnq = dn
+        d, w, r = self.depth, self.width, self.ramp
+        if self.measured_load is None:
+            return (d * d * w * GRAVITY * dng + r * GRAVITY * self.fill_volume * dnq, w * d * dnc, w * d * dna,
+                    np.zeros_like(dnq))
+        return d * d * w * GRAVITY * dng, w * d * dnc, w * d * dna, r * self.measured_load * dnq
+
+    def sinkage_basis(self, n):
+        """``w b d^n`` for scalar or array ``n`` (array n: shape (len(n), samples))."""
+        n = np.asarray(n, dtype=float)
+        wb = self.width * self.edge_thickness
+        if n.ndim == 0:
+            return wb * np.power(self.depth, n)
+        return wb * np.power(self.depth[None, :], n[:, None])
+
+    # ----------------------------------------------------------- model
+    def forces(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Model ``(F_T, F_N, tension)`` of the in-soil samples for fit vector ``p`` (same as soil_forces)."""
+        gamma, c, ca, phi, delta, k, n = (float(v) for v in p)
+        f = factors(self.alpha, self.rho, phi, delta, self.options)
+        bg, bc, ba, q0 = self.fee_basis(f)
+        fee = gamma * bg + c * bc + ca * ba + q0  # eq 1
+        tension = fee < 0.0
+        fee = np.maximum(fee, 0.0)
+        sink = self.sinkage_basis(n)
+        f_t = k * sink + fee * math.sin(delta) + ca * self.width * self.blade_length  # eqs 15-16
+        f_n = fee * math.cos(delta)  # eq 17
+        return f_t, f_n, tension
+
+    def forces_and_jacobian(self, p: np.ndarray):
+        """``(F_T, F_N, J_T, J_N)``: forces and their analytic Jacobians (samples x 7) w.r.t. :data:`FIT_NAMES`."""
+        gamma, c, ca, phi, delta, k, n = (float(v) for v in p)
+        f = factors(self.alpha, self.rho, phi, delta, self.options, derivatives=True)
+        bg, bc, ba, q0 = self.fee_basis(f)
+        fee_raw = gamma * bg + c * bc + ca * ba + q0
+        on = fee_raw >= 0.0
+        fee = np.where(on, fee_raw, 0.0)
+        dbg_p, dbc_p, dba_p, dq_p = self.fee_basis_derivative(f.d_phi)
+        dbg_d, dbc_d, dba_d, dq_d = self.fee_basis_derivative(f.d_delta)
+        dfee_phi = np.where(on, gamma * dbg_p + c * dbc_p + ca * dba_p + dq_p, 0.0)
+        dfee_delta = np.where(on, gamma * dbg_d + c * dbc_d + ca * dba_d + dq_d, 0.0)
+        sd, cd = math.sin(delta), math.cos(delta)
+        sink = self.sinkage_basis(n)
+        wl = self.width * self.blade_length
+        f_t = k * sink + fee * sd + ca * wl
+        f_n = fee * cd
+        m = len(self)
+        jt = np.empty((m, 7))
+        jn = np.zeros((m, 7))
+        bg_on, bc_on, ba_on = (np.where(on, v, 0.0) for v in (bg, bc, ba))
+        jt[:, 0], jn[:, 0] = sd * bg_on, cd * bg_on
+        jt[:, 1], jn[:, 1] = sd * bc_on, cd * bc_on
+        jt[:, 2], jn[:, 2] = sd * ba_on + wl, cd * ba_on
+        jt[:, 3], jn[:, 3] = sd * dfee_phi, cd * dfee_phi
+        jt[:, 4], jn[:, 4] = cd * fee + sd * dfee_delta, -sd * fee + cd * dfee_delta
+        jt[:, 5] = sink
+        jt[:, 6] = k * sink * np.log(self.depth)
+        return f_t, f_n, jt, jn

@@ -1,0 +1,153 @@
+"""Predict the forces of a (new) bucket path with calibrated soil parameters."""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .calibration import Calibration, FitQuality, load_params
+from .cyclelog import CycleLog
+from .errors import ParameterError
+from .force_model import DEFAULT_OPTIONS, ModelOptions, SoilForces, soil_forces
+from .kinematics import DEFAULT_SLOPE_WINDOW, ContactState, contact_state
+from .machine import Bucket
+from .paths import BucketPath
+from .pile import Pile
+from .soil import SoilParams
+
+
+@dataclass(frozen=True, eq=False)
+class Prediction:
+    """Predicted forces along a path.
+
+    Attributes
+    ----------
+    path : BucketPath
+        The path.
+    forces : SoilForces
+        Model output per sample (F_T, F_N, F_R, flags, ...).
+    state : ContactState
+        Contact geometry (depth to the given surface, rho, alpha, ...).
+    soil : SoilParams
+        Parameters used.
+    observed_tangential, observed_normal : numpy.ndarray or None
+        Measured forces when a cycle log was given.
+    quality : FitQuality or None
+        RMSE against the measured forces (in-soil samples), when available.
+    """
+
+    path: BucketPath
+    forces: SoilForces
+    state: ContactState = field(repr=False)
+    soil: SoilParams
+    observed_tangential: np.ndarray | None = field(default=None, repr=False)
+    observed_normal: np.ndarray | None = field(default=None, repr=False)
+    quality: FitQuality | None = None
+
+    @property
+    def tangential(self) -> np.ndarray:
+        """Predicted F_T [N]."""
+        return self.forces.tangential
+
+    @property
+    def normal(self) -> np.ndarray:
+        """Predicted F_N [N]."""
+        return self.forces.normal
+
+    @property
+    def resultant(self) -> np.ndarray:
+        """Predicted F_R [N]."""
+        return self.forces.resultant
+
+    def save_csv(self, csv_path: str | Path, overwrite: bool = False) -> Path:
+        """Write ``t, x, z, blade_angle, depth, F_T, F_N, F_R, flags`` (+ observed columns when present)."""
+        csv_path = Path(csv_path)
+        if csv_path.exists() and not overwrite:
+            raise FileExistsError(f"{csv_path} exists; pass overwrite=True to replace it")
+        cols = {"t": self.path.t, "x": self.path.x, "z": self.path.z, "blade_angle": self.path.blade_angle,
+                "depth": self.state.depth, "F_T": self.tangential, "F_N": self.normal, "F_R": self.resultant}
+        if self.observed_tangential is not None:
+            cols["F_T_obs"] = self.observed_tangential
+            cols["F_N_obs"] = self.observed_normal
+        names = list(cols)
+        with open(csv_path, "w", newline="") as fh:
+            writer = csv.writer(fh)
+            writer.writerow([*names, "flags"])
+            for i in range(len(self.path)):
+                writer.writerow([repr(float(cols[k][i])) for k in names] + [int(self.forces.flags[i])])
+        return csv_path
+
+
+def predict(
+    params: SoilParams | Calibration | dict | str | Path,
+    path_or_cycle: BucketPath | CycleLog,
+    pile: Pile | None = None,
+    bucket: Bucket | None = None,
+    *,
+    options: ModelOptions = DEFAULT_OPTIONS,
+    slope_window: float = DEFAULT_SLOPE_WINDOW,
+    initial_fill: float = 0.0,
+) -> Prediction:
+    """Forces of the calibrated model along a path.
+
+    Parameters
+    ----------
+    params : SoilParams, Calibration, dict, str or Path
+        Soil parameters (a params.json path, a ``{"soil": ...}`` or bare dict,
+        or a preset name are accepted).
+    path_or_cycle : BucketPath or CycleLog
+        A new path, or a logged cycle (its pile, bucket and logged fill/load
+        are used unless ``pile``/``bucket`` are given; the measured forces
+        give :attr:`Prediction.quality`).
+    pile : Pile, optional
+        Surface the path starts from; depth is measured to it (a carved
+        surface from a previous cycle gives the paper's dual-cycle
+        correction). Default: the cycle's pile, else ``Pile.trapezoid()``.
+    bucket : Bucket, optional
+        Default: the cycle's bucket, else ``Bucket()``.
+    options : ModelOptions
+        Force-model options.
+    slope_window : float
+        Half-width of the local slope chord [m].
+    initial_fill : float
+        Soil already in the bucket [m^3] (new paths only).
+
+    Returns
+    -------
+    Prediction
+    """
+    soil = load_params(params)
+    observed_t = observed_n = None
+    if isinstance(path_or_cycle, CycleLog):
+        cycle = path_or_cycle
+        path = cycle.path
+        same_surface = pile is None
+        pile = cycle.pile if pile is None else pile
+        bucket = cycle.bucket if bucket is None else bucket
+        fill = cycle.fill_volume if same_surface else None
+        load = cycle.measured_load
+        observed_t, observed_n = cycle.tangential, cycle.normal
+    elif isinstance(path_or_cycle, BucketPath):
+        path = path_or_cycle
+        pile = Pile.trapezoid() if pile is None else pile
+        bucket = Bucket() if bucket is None else bucket
+        fill = load = None
+    else:
+        raise ParameterError(f"path_or_cycle must be a BucketPath or a CycleLog, got {type(path_or_cycle).__name__}")
+    if not isinstance(pile, Pile):
+        raise ParameterError(f"pile must be a Pile, got {type(pile).__name__}")
+    if not isinstance(bucket, Bucket):
+        raise ParameterError(f"bucket must be a Bucket, got {type(bucket).__name__}")
+    state = contact_state(path.x, path.z, path.blade_angle, pile, bucket, slope_window=slope_window,
+                          initial_fill=initial_fill, fill_volume=fill, measured_load=load)
+    forces = soil_forces(soil, state, bucket, options)
+    quality = None
+    if observed_t is not None:
+        mask = state.depth > 0.0
+        if np.any(mask):
+            quality = FitQuality.from_forces(observed_t[mask], observed_n[mask], forces.tangential[mask],
+                                             forces.normal[mask])
+    return Prediction(path, forces, state, soil, observed_t, observed_n, quality)

@@ -1,0 +1,287 @@
+"""The default calibration: variable projection + global grid + analytic local refinement.
+
+For fixed nonlinear parameters ``(phi, delta, n)`` the forces are linear in
+``theta_lin = (gamma, C, C_a, K)`` (see :mod:`wheelloader.estimator.fitmodel`),
+so the eq-19 cost can be minimised exactly over ``theta_lin`` inside its
+bounds (a 4-variable box-constrained least-squares problem,
+:func:`wheelloader.estimator.boxqp.solve_box_qp`). What remains is a
+3-parameter problem (the *projected* cost), which is searched globally on a
+coarse grid:
+
+1. beta* and the bearing factors are computed once per ``(phi, delta)`` grid
+   pair, for all pairs at once (they do not depend on n or on the linear
+   parameters);
+2. the normal equations of every ``(phi, delta, n)`` grid point are built by
+   a few matrix products and all box-constrained solves run in one batch;
+3. the best few grid points that are local minima of the projected cost
+   start a joint bounded nonlinear least-squares refinement of all seven
+   identifiable parameters (``scipy.optimize.least_squares``, trust-region
+   reflective) with the analytic Jacobian of
+   :meth:`FitData.forces_and_jacobian`, which includes ``d beta*/d(phi, delta)``
+   and the exact tension clamp;
+4. a finer grid over one coarse ``(phi, delta)`` cell around the best
+   solution looks for a deeper basin hidden between coarse grid points (the
+   cost has kinks where beta* switches between its bounds) and refines it;
+5. a previous cycle's result (warm start) is refined as one more start.
+
+The grid makes the method independent of the initial guess; the refinement
+makes the result exact to solver tolerance.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .boxqp import solve_box_qp
+from .fitmodel import LINEAR_INDEX, FitData, factors
+
+#: Default grid sizes over (phi, delta, n).
+DEFAULT_GRID = (9, 9, 8)
+
+
+@dataclass
+class Evaluations:
+    """Counters of model work: parameter sets at which forces were evaluated, and Jacobians."""
+
+    nfev: int = 0
+    njev: int = 0
+
+
+def weights(lam: float) -> tuple[float, float]:
+    """Row weights ``(sqrt(lambda), sqrt(1 - lambda))`` of the stacked [F_T; F_N] residual (eq 19a)."""
+    return math.sqrt(lam), math.sqrt(1.0 - lam)
+
+
+def _linear_columns(data: FitData, phis: np.ndarray, deltas: np.ndarray):
+    """For P pairs: T- and N-row columns of (gamma, C, C_a) (P, N, 3) and the offsets (P, N)."""
+    f = factors(data.alpha[None, :], data.rho[None, :], phis[:, None], deltas[:, None], data.options)
+    bg, bc, ba, q0 = data.fee_basis(f)
+    sd = np.sin(deltas)[:, None]
+    cd = np.cos(deltas)[:, None]
+    wl = data.width * data.blade_length[None, :]
+    at = np.stack([sd * bg, sd * bc, sd * ba + wl], axis=-1)
+    an = np.stack([cd * bg, cd * bc, cd * ba], axis=-1)
+    return at, an, sd * q0, cd * q0
+
+
+def projected_grid(data: FitData, lo: np.ndarray, hi: np.ndarray, phis: np.ndarray, deltas: np.ndarray,
+                   ns: np.ndarray, lam: float = 0.5):
+    """Projected eq-19 cost on the grid ``phis x deltas x ns``.
+
+    Returns
+    -------
+    cost : numpy.ndarray
+        Shape ``(len(phis), len(deltas), len(ns))``: ``min over theta_lin`` of
+        eq 19a (tension clamp ignored).
+    theta : numpy.ndarray
+        Shape ``(..., 4)``: the minimising ``(gamma, C, C_a, K)``.
+    """
+    wt, wn = weights(lam)
+    pp, dd = np.meshgrid(phis, deltas, indexing="ij")
+    pp, dd = pp.ravel(), dd.ravel()
+    at, an, ot, on = _linear_columns(data, pp, dd)
+    at, an = wt * at, wn * an
+    yt = wt * (data.y_t[None, :] - ot)  # (P, N)
+    yn = wn * (data.y_n[None, :] - on)
+    sk = wt * data.sinkage_basis(ns)  # (M, N)
+    P, M = pp.size, len(ns)
+    h33 = np.einsum("pni,pnj->pij", at, at) + np.einsum("pni,pnj->pij", an, an)  # (P, 3, 3)
+    h3k = np.einsum("pni,mn->pmi", at, sk)  # (P, M, 3)
+    hkk = np.einsum("mn,mn->m", sk, sk)  # (M,)
+    g3 = np.einsum("pni,pn->pi", at, yt) + np.einsum("pni,pn->pi", an, yn)  # (P, 3)
+    gk = yt @ sk.T  # (P, M)
+    c = np.einsum("pn,pn->p", yt, yt) + np.einsum("pn,pn->p", yn, yn)
+    H = np.empty((P, M, 4, 4))
+    H[:, :, :3, :3] = h33[:, None]
+    H[:, :, :3, 3] = h3k
+    H[:, :, 3, :3] = h3k
+    H[:, :, 3, 3] = hkk[None, :]
+    g = np.empty((P, M, 4))
+    g[:, :, :3] = g3[:, None]
+    g[:, :, 3] = gk
+    cc = np.broadcast_to(c[:, None], (P, M))
+    li = list(LINEAR_INDEX)
+    theta, cost = solve_box_qp(H.reshape(P * M, 4, 4), g.reshape(P * M, 4), cc.reshape(P * M), lo[li], hi[li])
+    shape = (len(phis), len(deltas), M)
+    return cost.reshape(shape), theta.reshape(shape + (4,))
+
+
+def grid_local_minima(cost: np.ndarray, count: int) -> list[tuple[int, ...]]:
+    """Indices of up to ``count`` grid points that are local minima (26-neighbourhood), best first."""
+    padded = np.pad(cost, 1, mode="constant", constant_values=np.inf)
+    is_min = np.ones(cost.shape, dtype=bool)
+    shape = cost.shape
+    for off in np.ndindex(3, 3, 3):
+        if off == (1, 1, 1):
+            continue
+        neigh = padded[off[0]:off[0] + shape[0], off[1]:off[1] + shape[1], off[2]:off[2] + shape[2]]
+        is_min &= cost <= neigh
+    idx = np.argwhere(is_min & np.isfinite(cost))
+    order = np.argsort(cost[tuple(idx.T)])
+    return [tuple(int(v) for v in idx[i]) for i in order[:count]]
+
+
+@dataclass
+class RefineResult:
+    """Outcome of one bounded nonlinear least-squares refinement."""
+
+    x: np.ndarray
+    cost: float
+    success: bool
+    status: int
+    message: str
+    nfev: int
+    njev: int
+    start: np.ndarray = field(repr=False)
+
+
+def refine(data: FitData, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5,
+           counter: Evaluations | None = None, max_nfev: int = 100, xtol: float = 1e-8,
+           ftol: float = 1e-10, gtol: float = 1e-10) -> RefineResult:
+    """Joint bounded least squares on the seven fit parameters with the analytic Jacobian.
+
+    Parameters whose bounds coincide are held fixed. ``cost`` is eq 19a
+    (sum of weighted squared residuals) at the result.
+    """
+    wt, wn = weights(lam)
+    free = hi > lo
+    x_fixed = np.clip(np.asarray(x0, float), lo, hi)
+    counter = counter if counter is not None else Evaluations()
+    cache: dict[str, object] = {}
+
+    def full(z):
+        x = x_fixed.copy()
+        x[free] = z
+        return x
+
+    def evaluate(z):
+        key = z.tobytes()
+        if cache.get("key") != key:
+            f_t, f_n, jt, jn = data.forces_and_jacobian(full(z))
+            counter.nfev += 1
+            counter.njev += 1
+            cache["key"] = key
+            cache["r"] = np.concatenate([wt * (f_t - data.y_t), wn * (f_n - data.y_n)])
+            cache["J"] = np.vstack([wt * jt, wn * jn])[:, free]
+        return cache
+
+    def fun(z):
+        return evaluate(z)["r"]
+
+    def jac(z):
+        return evaluate(z)["J"]
+
+    z0 = x_fixed[free]
+    # trf needs a strictly interior start: nudge bound values inside by a hair
+    span = hi[free] - lo[free]
+    z0 = np.clip(z0, lo[free] + 1e-10 * span, hi[free] - 1e-10 * span)
+    scale = np.where(span > 0, span, 1.0)
+    # scale: typical magnitude of each parameter (K's bound range is far larger than its typical values)
+    typical = np.maximum(np.abs(z0), 1e-3 * scale)
+    res = least_squares(fun, z0, jac=jac, bounds=(lo[free], hi[free]), method="trf", x_scale=typical,
+                        xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev)
+    x = full(res.x)
+    return RefineResult(x, float(2.0 * res.cost), bool(res.success), int(res.status), str(res.message),
+                        int(res.nfev), int(res.njev), np.asarray(x0, float))
+
+
+def polish_linear(data: FitData, x: np.ndarray, lo: np.ndarray, hi: np.ndarray, lam: float,
+                  counter: Evaluations) -> tuple[np.ndarray, float] | None:
+    """Re-solve ``(gamma, C, C_a, K)`` exactly at the nonlinear parameters of ``x``; ``(x_new, eq-19 cost)``.
+
+    The bounded nonlinear solver approaches parameters that sit on a bound
+    (C = 0 for a cohesionless soil, say) only asymptotically; the exact box
+    solve lands on the bound. The cost is re-evaluated with the full model
+    (tension clamp included); ``None`` if the tension clamp is active.
+    """
+    _, theta = projected_grid(data, lo, hi, np.array([x[3]]), np.array([x[4]]), np.array([x[6]]), lam)
+    x_new = x.copy()
+    x_new[list(LINEAR_INDEX)] = theta[0, 0, 0]
+    f_t, f_n, tension = data.forces(x_new)
+    counter.nfev += 1
+    if np.any(tension):
+        return None
+    return x_new, float(lam * np.sum((f_t - data.y_t) ** 2) + (1.0 - lam) * np.sum((f_n - data.y_n) ** 2))
+
+
+@dataclass
+class DefaultFit:
+    """Result of :func:`fit_default` (internal; wrapped into a Calibration)."""
+
+    x: np.ndarray
+    cost: float
+    success: bool
+    status: int
+    message: str
+    evaluations: Evaluations
+    grid_time: float
+    refine_time: float
+    grid_best: np.ndarray
+    grid_cost: float
+    refinements: list[RefineResult]
+
+
+def _starts_from_grid(cost, theta, axes, count):
+    starts = []
+    for ijk in grid_local_minima(cost, count):
+        x = np.empty(7)
+        x[list(LINEAR_INDEX)] = theta[ijk]
+        x[3], x[4], x[6] = axes[0][ijk[0]], axes[1][ijk[1]], axes[2][ijk[2]]
+        starts.append((float(cost[ijk]), x))
+    return starts
+
+
+def fit_default(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5, initial: np.ndarray | None = None,
+                grid: tuple[int, int, int] = DEFAULT_GRID, n_starts: int = 3, max_nfev: int = 100,
+                zoom: int = 7) -> DefaultFit:
+    """Variable-projection grid search, analytic refinement, then a zoomed grid (module docstring).
+
+    The zoom step re-grids ``(phi, delta)`` with ``zoom x zoom`` points over
+    one coarse cell around the best refined solution (the landscape has kinks
+    where beta* switches between its bounds, which can hide a deeper basin
+    inside a coarse cell) and refines the zoomed grid's best local minima
+    whose projected cost undercuts the best solution so far.
+    """
+    counter = Evaluations()
+    t0 = time.perf_counter()
+    nl = (3, 4, 6)
+    axes = [np.linspace(lo[i], hi[i], m) if hi[i] > lo[i] else np.array([lo[i]]) for i, m in zip(nl, grid, strict=True)]
+    cost, theta = projected_grid(data, lo, hi, axes[0], axes[1], axes[2], lam)
+    counter.nfev += cost.size
+    starts = [x for _, x in _starts_from_grid(cost, theta, axes, n_starts)]
+    if not starts:
+        raise RuntimeError("projected cost is not finite anywhere on the grid")
+    grid_best, grid_cost = starts[0].copy(), float(np.min(cost))
+    if initial is not None:
+        starts.insert(0, np.clip(np.asarray(initial, float), lo, hi))
+    t1 = time.perf_counter()
+    results = [refine(data, x0, lo, hi, lam, counter, max_nfev=max_nfev) for x0 in starts]
+    best = min(results, key=lambda r: r.cost)
+    if zoom > 1:
+        zaxes = []
+        for k, i in enumerate(nl[:2]):
+            step = (hi[i] - lo[i]) / max(len(axes[k]) - 1, 1)
+            a, b = max(lo[i], best.x[i] - step), min(hi[i], best.x[i] + step)
+            zaxes.append(np.linspace(a, b, zoom) if b > a else np.array([a]))
+        zaxes.append(axes[2])
+        zcost, ztheta = projected_grid(data, lo, hi, zaxes[0], zaxes[1], zaxes[2], lam)
+        counter.nfev += zcost.size
+        for c, x0 in _starts_from_grid(zcost, ztheta, zaxes, 2):
+            if c < best.cost:
+                r = refine(data, x0, lo, hi, lam, counter, max_nfev=max_nfev)
+                results.append(r)
+                if r.cost < best.cost:
+                    best = r
+    polished = polish_linear(data, best.x, lo, hi, lam, counter)
+    if polished is not None and polished[1] < best.cost:
+        best = RefineResult(polished[0], polished[1], best.success, best.status,
+                            best.message + " (linear parameters polished by the exact bounded solve)",
+                            best.nfev, best.njev, best.start)
+    t2 = time.perf_counter()
+    return DefaultFit(best.x, best.cost, best.success, best.status, best.message, counter, t1 - t0, t2 - t1,
+                      grid_best, grid_cost, results)
