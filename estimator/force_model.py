@@ -131,7 +131,7 @@ def bearing_factors_cotangent(alpha, rho, beta, phi, delta):
     return n_gamma, n_c, n_a, n_q
 
 
-def clamp_angles(alpha, rho, phi: float, delta: float, options: ModelOptions = DEFAULT_OPTIONS):
+def clamp_angles(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS):
     """Clamp (alpha, rho) into the validity domain; return ``(alpha_eff, rho_eff, flags)``."""
     alpha = np.asarray(alpha, dtype=float)
     rho = np.asarray(rho, dtype=float)
@@ -144,7 +144,7 @@ def clamp_angles(alpha, rho, phi: float, delta: float, options: ModelOptions = D
     return alpha_eff, rho_eff, flags.astype(np.int64)
 
 
-def beta_bounds(alpha, rho, phi: float, delta: float, options: ModelOptions = DEFAULT_OPTIONS):
+def beta_bounds(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS):
     """Feasible beta range ``(lo, hi)`` on the valid branch, for clamped angles."""
     hi = np.minimum(math.pi - (rho + delta + phi) - options.eps2, 0.5 * math.pi - alpha)
     lo = np.full_like(hi, options.eps1)
@@ -162,16 +162,17 @@ def _log_ngamma_slope(beta, alpha, phi, s):
     return g, dg
 
 
-def optimal_beta(alpha, rho, phi: float, delta: float, options: ModelOptions = DEFAULT_OPTIONS,
-                 tol: float = 1e-11, max_iter: int = 60) -> np.ndarray:
+def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS,
+                 tol: float = 1e-11, max_iter: int = 60, guess=None) -> np.ndarray:
     """Failure angle beta* minimising N_gamma (eq 10) under eq 14, on the valid branch.
 
     ``alpha`` and ``rho`` must already be clamped (see :func:`clamp_angles`).
-    Safeguarded Newton on ``d ln N_gamma / d beta`` inside a bisection
-    bracket; vectorised.
+    ``phi`` and ``delta`` may be scalars or arrays (one soil per sample, as in
+    a batch of environments); all inputs broadcast. ``guess`` optionally
+    warm-starts the iteration (e.g. the previous step's beta*). Safeguarded
+    Newton on ``d ln N_gamma / d beta`` inside a bisection bracket.
     """
-    alpha = np.asarray(alpha, dtype=float)
-    rho = np.asarray(rho, dtype=float)
+    alpha, rho, phi, delta = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (alpha, rho, phi, delta)))
     s = rho + delta + phi
     lo, hi = beta_bounds(alpha, rho, phi, delta, options)
     g_lo, _ = _log_ngamma_slope(lo, alpha, phi, s)
@@ -179,15 +180,15 @@ def optimal_beta(alpha, rho, phi: float, delta: float, options: ModelOptions = D
     at_lo = g_lo >= 0.0
     at_hi = g_hi <= 0.0
     inner = ~(at_lo | at_hi)
-    beta = np.where(at_lo, lo, hi)
+    beta = np.array(np.where(at_lo, lo, hi), dtype=float)
     if np.any(inner):
-        a = lo[inner] if lo.ndim else lo
-        b = hi[inner] if hi.ndim else hi
-        al = alpha[inner] if alpha.ndim else alpha
-        ss = s[inner] if s.ndim else s
+        a, b, al, ph, ss = lo[inner], hi[inner], alpha[inner], phi[inner], s[inner]
         x = 0.5 * (a + b)
+        if guess is not None:
+            g0 = np.broadcast_to(np.asarray(guess, dtype=float), alpha.shape)[inner]
+            x = np.where((g0 > a) & (g0 < b), g0, x)
         for _ in range(max_iter):
-            g, dg = _log_ngamma_slope(x, al, phi, ss)
+            g, dg = _log_ngamma_slope(x, al, ph, ss)
             pos = g > 0.0
             b = np.where(pos, x, b)
             a = np.where(pos, a, x)
@@ -199,10 +200,7 @@ def optimal_beta(alpha, rho, phi: float, delta: float, options: ModelOptions = D
             x = x_new
             if step < tol:
                 break
-        if np.ndim(beta):
-            beta[inner] = x
-        else:
-            beta = x
+        beta[inner] = x
     return beta
 
 

@@ -257,3 +257,16 @@ def test_forces_grow_with_depth_and_density(soil, rho, alpha, fill, d1, d2):
     denser = soil_forces(soil.replace(gamma=min(soil.gamma * 1.2, PAPER_BOUNDS["gamma"][1])), state, bucket)
     assert np.all(denser.fee_force >= out.fee_force * (1 - 1e-12))
     assert np.all(denser.resultant >= out.resultant * (1 - 1e-12))
+
+
+def test_optimal_beta_accepts_per_sample_soils_and_warm_start():
+    rng = np.random.default_rng(3)
+    alpha = rng.uniform(-0.3, 0.6, 50)
+    rho = rng.uniform(deg(10), deg(80), 50)
+    phi = rng.uniform(0.0, deg(45), 50)
+    delta = rng.uniform(0.0, deg(45), 50)
+    alpha_c, rho_c, _ = clamp_angles(alpha, rho, phi, delta)
+    batched = optimal_beta(alpha_c, rho_c, phi, delta)
+    one_by_one = [float(optimal_beta(alpha_c[i:i + 1], rho_c[i:i + 1], phi[i], delta[i])[0]) for i in range(50)]
+    assert np.allclose(batched, one_by_one, atol=1e-10)
+    assert np.allclose(optimal_beta(alpha_c, rho_c, phi, delta, guess=batched + 1e-3), batched, atol=1e-10)

@@ -1,0 +1,587 @@
+"""The bucket-loading environment: one digging cycle of a wheel loader on the FEE force simulator."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from wheelloader.estimator import (
+    DEFAULT_OPTIONS,
+    GRAVITY,
+    Pile,
+    SoilParams,
+    SurfaceCarver,
+    contact_single,
+    soil_forces_single,
+)
+from wheelloader.estimator.errors import ParameterError
+from wheelloader.estimator.force_model import FLAG_OUT_OF_SOIL
+
+from .config import (
+    NOISE_CHUNK,
+    EnvConfig,
+    choose_soil,
+    draw_noise_chunk,
+    draw_start_pose,
+    make_config,
+    next_pile,
+)
+from .truth import as_truth, stone_decay
+
+#: Keys accepted in ``reset(options=...)``.
+RESET_OPTIONS = ("keep_pile", "relax", "soil", "truth", "sensor_noise")
+
+
+class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
+    r"""One bucket-loading (digging) cycle of a wheel loader, forces from the modified FEE.
+
+    ## Description
+
+    A quasi-2D wheel-loader bucket digs into a pile. The agent commands the
+    bucket-tip velocity along x (horizontal, into the pile) and z (up) and the
+    bucket tilt (curl) rate; the motion is kinematic and rate-limited. The
+    tip carves the pile surface and fills the bucket (up to its capacity;
+    the rest spills). The soil forces on the blade, tangential ``F_T``
+    (eq 16) and normal ``F_N`` (eq 17), come from the project's force model
+    (:func:`~wheelloader.estimator.soil_forces_single`) evaluated with a
+    hidden "true" soil; the agent sees them with Gaussian sensor noise. The
+    same env, reset with calibrated parameters and without noise (see
+    :meth:`make_twin`), is the digital twin on which a planner can rehearse.
+
+    Depth is measured to the pile surface as it was at the start of the cycle;
+    fill and the look-ahead surface heights come from the carved surface.
+
+    ## Action Space
+
+    ``Box(-1, 1, (3,), float32)``, normalised and clipped to [-1, 1]:
+
+    | Num | Action                          | Scale                              | Unit  |
+    |-----|---------------------------------|------------------------------------|-------|
+    | 0   | commanded tip velocity along x  | ``loader.max_speed`` (1.0)         | m/s   |
+    | 1   | commanded tip velocity along z  | ``loader.max_speed`` (1.0)         | m/s   |
+    | 2   | commanded tilt (curl) rate      | ``loader.max_tilt_rate`` (1.0)     | rad/s |
+
+    The realised velocity moves towards the command by at most
+    ``loader.max_acceleration * dt`` (2 m/s^2) per axis and
+    ``max_tilt_acceleration * dt`` (4 rad/s^2) for the tilt. The tip stays in
+    the workspace: x over the pile grid, z from the ground to the crest plus
+    ``lift_headroom``, blade angle within ``blade_angle_limits``.
+
+    ## Observation Space
+
+    ``Box(low, high, (12 + len(lookahead),), float32)``, all finite bounds:
+
+    | Num | Observation                                      | Unit  |
+    |-----|--------------------------------------------------|-------|
+    | 0   | tip x                                            | m     |
+    | 1   | tip z                                            | m     |
+    | 2   | blade angle (above +x, tip-down negative)        | rad   |
+    | 3   | tip velocity along x                             | m/s   |
+    | 4   | tip velocity along z                             | m/s   |
+    | 5   | tilt rate                                        | rad/s |
+    | 6   | depth below the start-of-cycle surface           | m     |
+    | 7   | rho, blade angle relative to the local surface   | rad   |
+    | 8   | alpha, local slope of the start surface          | rad   |
+    | 9   | bucket fill fraction (fill / capacity)           | -     |
+    | 10  | last measured F_T (noisy, clipped to sensor range)| kN   |
+    | 11  | last measured F_N (noisy, clipped to sensor range)| kN   |
+    | 12+ | carved surface height at ``x + lookahead[i]`` minus tip z | m |
+
+    ## Rewards
+
+    ``reward = reward_fill + reward_energy + reward_validity + reward_stall
+    + reward_force`` (each term is in ``info``; weights in
+    :class:`~wheelloader.envs.config.RewardWeights`):
+
+    * ``reward_fill = fill * dV_bucket / capacity`` (fill gained this step);
+    * ``reward_energy = -energy * (dE_soil + dE_payload)``: mechanical work
+      done on the soil, ``max(0, F_T ds_t + F_N ds_n)`` with the tip
+      displacement resolved along and across the blade, plus lifting work on
+      the payload, ``max(0, W_load dz)`` [J];
+    * ``reward_validity = -validity`` on steps with the tip in soil outside
+      the model's validity domain (force-model flags other than "out of soil");
+    * ``reward_stall = -stall`` on stalled steps;
+    * ``reward_force = -force * (max(0, F_T/F_push - s) + max(0, F_N/F_lift - s))``
+      with ``s = force_soft_limit``.
+
+    ## Starting State
+
+    The tip starts at ``start_pose`` (default: 0.10 m before the pile toe,
+    0.03 m above the ground, blade angle -5 deg) plus uniform noise of
+    ``start_noise`` half-widths (0.03 m, 0.01 m, 2 deg), at rest, with an
+    empty bucket. The pile is the configured one, or the carved pile of the
+    previous cycle when ``keep_pile`` is set.
+
+    ## Episode End
+
+    * Termination, cycle done: the tip has been in soil and is now more than
+      ``exit_clearance`` (0.02 m) above the start surface. In the multi-cycle
+      variant the next cycle starts instead (empty bucket, carved pile) until
+      ``cycles_per_episode`` cycles are done.
+    * Termination, stall: the force needed exceeds the loader's limit,
+      ``F_T > loader.max_push_force`` (20 kN) or ``F_N > loader.max_lift_force``
+      (25 kN), for ``stall_patience`` consecutive steps (default 1). A stalled
+      step does not move the bucket (pose held, velocity zeroed, carving undone).
+    * Truncation: ``max_episode_steps`` from :func:`gymnasium.register`
+      (600 steps = 10 s at 60 Hz for ``BucketLoading-v0``).
+
+    ## Arguments
+
+    ``gym.make("wheelloader/BucketLoading-v0", **kwargs)`` with
+
+    * ``soil``: hidden soil: preset name (default ``"gravel"``),
+      :class:`SoilParams`, parameter dict, ``"random"`` (uniform over the
+      presets), list of soils, or a range dict ``{"phi": (lo, hi), ...,
+      "base": "sand"}`` / :class:`~wheelloader.envs.config.SoilRandomization`
+      for domain randomisation (resampled at every reset by default).
+    * ``pile``: :class:`Pile` or ``{"shape": "trapezoid"|"ideal_slope", ...}``
+      (default: 30 deg trapezoid, 1 m high).
+    * ``loader``, ``bucket``: :class:`Loader`, :class:`Bucket` or dicts.
+    * ``control_rate``: steps per second [Hz] (default 60).
+    * ``sensor_noise``: std of the additive force noise [N] (default 150);
+      ``sensor_range``: saturation of the force sensor [N] (default 100 kN).
+    * ``reward_weights``: :class:`RewardWeights` or dict.
+    * ``truth``: :class:`~wheelloader.envs.truth.TruthOptions` or dict:
+      compaction, rate-dependent resistance, stones, soil drift (all off).
+    * ``start_pose``, ``start_noise``, ``blade_angle_limits``,
+      ``lift_headroom`` [m], ``max_tilt_acceleration`` [rad/s^2],
+      ``stall_patience`` [steps], ``exit_clearance`` [m], ``lookahead``
+      distances [m], ``slope_window`` [m].
+    * ``keep_pile`` (default False), ``relax`` (False, True = relax to the
+      soil's friction angle, or a repose angle [rad]), ``relax_iterations``
+      (sweeps of :meth:`Pile.relaxed` per new cycle, default 500: a partial
+      slump of steep carved walls), ``cycles_per_episode`` (default 1).
+    * ``render_mode``: ``None``, ``"rgb_array"`` or ``"human"``.
+
+    ``reset(options=...)`` accepts ``keep_pile``, ``relax``, ``soil``
+    (``"keep"``, ``"resample"`` or a soil, e.g. calibrated parameters),
+    ``truth`` and ``sensor_noise``. Finished cycles are available as
+    :class:`~wheelloader.estimator.cyclelog.CycleLog` through
+    :meth:`last_cycle_log` and :meth:`cycle_logs`.
+
+    ## Version History
+
+    * v0: initial version.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 60}
+
+    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
+        self.cfg: EnvConfig = make_config(**kwargs)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ParameterError(f"render_mode must be one of {self.metadata['render_modes']} or None, "
+                                 f"got {render_mode!r}")
+        self.render_mode = render_mode
+        self.metadata = {**type(self).metadata, "render_fps": int(round(self.cfg.control_rate))}
+        self.action_space = spaces.Box(-1.0, 1.0, (3,), dtype=np.float32)
+        low, high = self.cfg.obs_bounds()
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self._low = [float(v) for v in low]
+        self._high = [float(v) for v in high]
+        self._renderer = None
+        self._soil: SoilParams | None = None
+        self._start_pile: Pile = self.cfg.pile
+        self._carver: SurfaceCarver | None = None
+        self._cycles: list[dict[str, Any]] = []
+        self.max_logged_cycles = 20
+        self._seed: int | None = None
+        self._record: dict[str, list] | None = None
+        self._cache_settings()
+
+    # ------------------------------------------------------------------ setup helpers
+    def _cache_settings(self) -> None:
+        cfg = self.cfg
+        self._dt = cfg.dt
+        ld = cfg.loader
+        self._vmax, self._wmax = ld.max_speed, ld.max_tilt_rate
+        self._dv, self._dw = ld.max_acceleration * cfg.dt, cfg.max_tilt_acceleration * cfg.dt
+        self._xlim, self._zlim, self._alim = cfg.x_limits, cfg.z_limits, cfg.blade_angle_limits
+        self._fpush, self._flift = ld.max_push_force, ld.max_lift_force
+        self._truth = cfg.truth
+        self._truth_active = cfg.truth.active
+        self._decay = stone_decay(cfg.truth, cfg.dt)
+        self._sigma = cfg.sensor_noise
+        self._frange = cfg.sensor_range
+
+    @property
+    def soil(self) -> SoilParams:
+        """The soil the simulator uses now (hidden truth, or calibrated parameters in a twin)."""
+        if self._soil is None:
+            raise ParameterError("call reset() before reading the soil")
+        return self._soil
+
+    # ------------------------------------------------------------------ reset
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        if seed is not None:
+            self._seed = int(seed)
+        opts = dict(options or {})
+        unknown = sorted(set(opts) - set(RESET_OPTIONS))
+        if unknown:
+            raise ParameterError(f"reset options: unknown key(s) {unknown}; expected some of {list(RESET_OPTIONS)}")
+        changes: dict[str, Any] = {}
+        if "truth" in opts:
+            changes["truth"] = as_truth(opts["truth"])
+        if "sensor_noise" in opts:
+            sigma = opts["sensor_noise"]
+            if isinstance(sigma, bool) or not isinstance(sigma, (int, float)) or not sigma >= 0 or sigma == math.inf:
+                raise ParameterError(f"reset option sensor_noise must be a finite number >= 0, got {sigma!r}")
+            changes["sensor_noise"] = float(sigma)
+        if changes:
+            self.cfg = dataclasses.replace(self.cfg, **changes)
+            self._cache_settings()
+        if self._record is not None and len(self._record["t"]) >= 2:
+            self._finish_cycle("reset")
+        keep = bool(opts.get("keep_pile", self.cfg.keep_pile))
+        relax = opts.get("relax", self.cfg.relax)
+        if not isinstance(relax, bool) and not (isinstance(relax, (int, float)) and 0 < relax < 0.5 * math.pi):
+            raise ParameterError(f"reset option relax must be a bool or a repose angle in (0, pi/2) rad, got {relax!r}")
+        carved = self._carver.pile() if self._carver is not None else None
+        self._soil = choose_soil(self.cfg, self._soil, opts.get("soil"), self.np_random)
+        self._start_cycle(next_pile(self.cfg, carved, keep, relax, self._soil), new_episode=True)
+        self._k = 0
+        self._noise_n, self._noise_u = draw_noise_chunk(self.np_random)
+        self._cycle_count = 0
+        f_t, f_n = self._initial_forces(0)
+        obs = self._observation(f_t, f_n)
+        if self.render_mode == "human":
+            self.render()
+        return obs, {"soil": self._soil, "cycle": self._cycle_count}
+
+    def _start_cycle(self, pile: Pile, new_episode: bool) -> None:
+        """Fresh bucket at a new start pose on ``pile`` (draws the start pose from np_random)."""
+        self._start_pile = pile
+        cfg = self.cfg
+        self._carver = SurfaceCarver(pile, cfg.bucket.width, cfg.bucket.capacity, 0.0)
+        self._x, self._z, self._th = draw_start_pose(cfg, self.np_random)
+        self._vx = self._vz = self._om = 0.0
+        self._stall_count = 0
+        self._stone = 0.0
+        self._beta: float | None = None
+        self._energy_soil = self._energy_payload = 0.0
+        self._cycle_t = 0
+        self._record = {k: [] for k in ("t", "x", "z", "blade_angle", "F_T", "F_N", "fill", "true_F_T",
+                                        "true_F_N", "flags")}
+        depth, rho, alpha, lt = contact_single(pile, self._x, self._z, self._th, cfg.bucket.floor_length,
+                                               cfg.slope_window)
+        self._depth, self._rho, self._alpha, self._lt = depth, rho, alpha, lt
+        self._entered = depth > 0.0
+
+    def _initial_forces(self, k: int) -> tuple[float, float]:
+        """Forces at the start pose (measured with the noise of step index ``k``), logged as sample 0."""
+        f_t, f_n, beta, flags = soil_forces_single(self._soil, self._depth, self._rho, self._alpha, self._lt, 0.0,
+                                                   self.cfg.bucket, DEFAULT_OPTIONS)
+        if self._depth > 0.0:
+            self._beta = beta
+        j = k % NOISE_CHUNK
+        m_t = self._measure(f_t, self._noise_n[j, 0])
+        m_n = self._measure(f_n, self._noise_n[j, 1])
+        self._log_sample(m_t, m_n, f_t, f_n, flags)
+        self._mt, self._mn = m_t, m_n
+        return m_t, m_n
+
+    def _measure(self, force: float, z: float) -> float:
+        value = force + self._sigma * float(z)
+        r = self._frange
+        return -r if value < -r else (r if value > r else value)
+
+    def _log_sample(self, m_t: float, m_n: float, f_t: float, f_n: float, flags: int) -> None:
+        rec = self._record
+        if rec is None:  # stepping after the end of an episode: nothing is logged
+            return
+        rec["t"].append(self._cycle_t * self._dt)
+        rec["x"].append(self._x)
+        rec["z"].append(self._z)
+        rec["blade_angle"].append(self._th)
+        rec["F_T"].append(m_t)
+        rec["F_N"].append(m_n)
+        rec["fill"].append(self._carver.fill)
+        rec["true_F_T"].append(f_t)
+        rec["true_F_N"].append(f_n)
+        rec["flags"].append(flags)
+
+    # ------------------------------------------------------------------ step
+    def step(self, action: np.ndarray):
+        if self._carver is None:
+            raise ParameterError("call reset() before step()")
+        a0, a1, a2 = (float(v) for v in np.asarray(action, dtype=np.float64).reshape(3))
+        # clip to [-1, 1]; a NaN command counts as 0
+        a0 = 0.0 if a0 != a0 else (-1.0 if a0 < -1.0 else (1.0 if a0 > 1.0 else a0))
+        a1 = 0.0 if a1 != a1 else (-1.0 if a1 < -1.0 else (1.0 if a1 > 1.0 else a1))
+        a2 = 0.0 if a2 != a2 else (-1.0 if a2 < -1.0 else (1.0 if a2 > 1.0 else a2))
+        cfg = self.cfg
+        dt, dv, dw = self._dt, self._dv, self._dw
+        carver = self._carver
+        soil = self._soil
+        bucket = cfg.bucket
+        # --- kinematics (rate-limited velocity, workspace clip)
+        x, z, th = self._x, self._z, self._th
+        d = a0 * self._vmax - self._vx
+        vx = self._vx + (-dv if d < -dv else (dv if d > dv else d))
+        d = a1 * self._vmax - self._vz
+        vz = self._vz + (-dv if d < -dv else (dv if d > dv else d))
+        d = a2 * self._wmax - self._om
+        om = self._om + (-dw if d < -dw else (dw if d > dw else d))
+        lo, hi = self._xlim
+        xn = x + vx * dt
+        xn = lo if xn < lo else (hi if xn > hi else xn)
+        lo, hi = self._zlim
+        zn = z + vz * dt
+        zn = lo if zn < lo else (hi if zn > hi else zn)
+        lo, hi = self._alim
+        thn = th + om * dt
+        thn = lo if thn < lo else (hi if thn > hi else thn)
+        vx, vz, om = (xn - x) / dt, (zn - z) / dt, (thn - th) / dt
+        # --- carve (keep what is needed to undo a stalled step)
+        sp, x0 = carver.spacing, carver.x0
+        j0 = max(0, int(math.floor((min(x, xn) - x0) / sp)) - 1)
+        j1 = int(math.ceil((max(x, xn) - x0) / sp)) + 2
+        saved = carver.heights[j0:j1].copy()
+        fill0, spilled0, removed0 = float(carver.fill), carver.spilled, carver.removed
+        carver.cut_segment(x, z, xn, zn)
+        fill = float(carver.fill)
+        # --- forces at the new pose (shared model) + truth beyond the model
+        depth, rho, alpha, lt = contact_single(self._start_pile, xn, zn, thn, bucket.floor_length, cfg.slope_window)
+        w_load = soil.gamma * GRAVITY * fill
+        f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, lt, w_load, bucket, DEFAULT_OPTIONS,
+                                                   self._beta)
+        self._k += 1
+        k = self._k
+        j = k % NOISE_CHUNK
+        if j == 0:
+            self._noise_n, self._noise_u = draw_noise_chunk(self.np_random)
+        dist = math.hypot(xn - x, zn - z)
+        if self._truth_active:
+            f_t, f_n = self._truth_forces(f_t, f_n, depth, dist / dt, dist, j)
+        stalled = f_t > self._fpush or f_n > self._flift
+        if stalled:
+            carver.heights[j0:j1] = saved
+            carver.fill, carver.spilled, carver.removed = fill0, spilled0, removed0
+            fill = fill0
+            xn, zn, thn = x, z, th
+            vx = vz = om = 0.0
+            depth, rho, alpha, lt = contact_single(self._start_pile, x, z, th, bucket.floor_length, cfg.slope_window)
+            w_load = soil.gamma * GRAVITY * fill
+            f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, lt, w_load, bucket, DEFAULT_OPTIONS,
+                                                       self._beta)
+            if self._truth_active:
+                f_t, f_n = self._truth_forces(f_t, f_n, depth, 0.0, 0.0, -1)
+            self._stall_count += 1
+        else:
+            self._stall_count = 0
+        if depth > 0.0:
+            self._beta = beta
+        # --- energy: work on the soil (along/across the blade) and lifting work on the payload
+        ddx, ddz = xn - x, zn - z
+        c, s = math.cos(thn), math.sin(thn)
+        work = f_t * (ddx * c + ddz * s) + f_n * (ddz * c - ddx * s)
+        e_soil = work if work > 0.0 else 0.0
+        lift = w_load * ddz
+        e_pay = lift if lift > 0.0 else 0.0
+        self._energy_soil += e_soil
+        self._energy_payload += e_pay
+        # --- measurement
+        m_t = self._measure(f_t, self._noise_n[j, 0])
+        m_n = self._measure(f_n, self._noise_n[j, 1])
+        # --- state update and log
+        self._x, self._z, self._th, self._vx, self._vz, self._om = xn, zn, thn, vx, vz, om
+        self._depth, self._rho, self._alpha = depth, rho, alpha
+        self._mt, self._mn = m_t, m_n
+        self._cycle_t += 1
+        self._log_sample(m_t, m_n, f_t, f_n, flags)
+        # --- reward
+        rw = cfg.reward
+        cap = bucket.capacity
+        r_fill = rw.fill * (fill - fill0) / cap
+        r_energy = -rw.energy * (e_soil + e_pay)
+        in_soil = depth > 0.0
+        r_valid = -rw.validity if (in_soil and (flags & ~FLAG_OUT_OF_SOIL)) else 0.0
+        r_stall = -rw.stall if stalled else 0.0
+        soft = rw.force_soft_limit
+        ex_t = f_t / self._fpush - soft
+        ex_n = f_n / self._flift - soft
+        excess = (ex_t if ex_t > 0.0 else 0.0) + (ex_n if ex_n > 0.0 else 0.0)
+        r_force = -rw.force * excess
+        reward = r_fill + r_energy + r_valid + r_stall + r_force
+        # --- episode end
+        if in_soil:
+            self._entered = True
+        clearance = zn - self._start_pile._height_scalar(xn)
+        cycle_done = self._entered and clearance > cfg.exit_clearance
+        stall_end = self._stall_count >= cfg.stall_patience
+        terminated = stall_end
+        info = {
+            "reward_fill": r_fill, "reward_energy": r_energy, "reward_validity": r_valid,
+            "reward_stall": r_stall, "reward_force": r_force,
+            "fill_volume": fill, "fill_fraction": fill / cap, "spilled": float(carver.spilled),
+            "force_tangential": f_t, "force_normal": f_n, "measured_tangential": m_t, "measured_normal": m_n,
+            "energy_soil": self._energy_soil, "energy_payload": self._energy_payload,
+            "depth": depth, "flags": flags, "stalled": stalled, "cycle_done": cycle_done,
+            "cycle": self._cycle_count,
+        }
+        if stall_end:
+            self._finish_cycle("stall")
+        elif cycle_done:
+            self._finish_cycle("exit")
+            self._cycle_count += 1
+            if self._cycle_count >= cfg.cycles_per_episode:
+                terminated = True
+            else:
+                carved = carver.pile()
+                self._soil = choose_soil(cfg, self._soil, "keep", self.np_random)
+                self._start_cycle(next_pile(cfg, carved, True, cfg.relax, self._soil), new_episode=False)
+                m_t, m_n = self._initial_forces(k)
+        obs = self._observation(m_t, m_n)
+        if self.render_mode == "human":
+            self.render()
+        return obs, reward, terminated, False, info
+
+    def _truth_forces(self, f_t: float, f_n: float, depth: float, speed: float, dist: float,
+                      j: int) -> tuple[float, float]:
+        """Add the beyond-model effects of :mod:`wheelloader.envs.truth` (j < 0: no new stone)."""
+        tr = self._truth
+        if depth > 0.0:
+            factor = 1.0 + tr.compaction * depth
+            f_t *= factor
+            f_n *= factor
+            f_t += tr.rate_resistance * self.cfg.bucket.width * depth * speed
+        if j >= 0:
+            self._stone *= self._decay
+            if depth > 0.0 and tr.stone_rate > 0.0 and self._noise_u[j, 0] < tr.stone_rate * dist:
+                self._stone += -tr.stone_force * math.log1p(-float(self._noise_u[j, 1]))
+        return f_t + self._stone, f_n + 0.5 * self._stone
+
+    # ------------------------------------------------------------------ observation
+    def _observation(self, m_t: float, m_n: float) -> np.ndarray:
+        x, z = self._x, self._z
+        heights = self._carver.heights
+        x0, sp = self._carver.x0, self._carver.spacing
+        last = heights.shape[0] - 1
+        vals = [x, z, self._th, self._vx, self._vz, self._om, self._depth, self._rho, self._alpha,
+                self._carver.fill / self.cfg.bucket.capacity, m_t * 1e-3, m_n * 1e-3]
+        for dx in self.cfg.lookahead:
+            u = (x + dx - x0) / sp
+            if u <= 0.0:
+                h = heights[0]
+            elif u >= last:
+                h = heights[last]
+            else:
+                i = int(u)
+                h = heights[i] + (u - i) * (heights[i + 1] - heights[i])
+            vals.append(float(h) - z)
+        out = [lo if v < lo else (hi if v > hi else v) for v, lo, hi in zip(vals, self._low, self._high, strict=True)]
+        return np.array(out, dtype=np.float32)
+
+    # ------------------------------------------------------------------ cycle logs
+    def _finish_cycle(self, reason: str) -> None:
+        rec = self._record
+        self._record = None
+        if rec is None or len(rec["t"]) < 2:
+            return
+        entry = {
+            "record": {k: np.asarray(v, dtype=np.int64 if k == "flags" else float) for k, v in rec.items()},
+            "pile": self._start_pile, "pile_after": self._carver.pile(), "soil": self._soil,
+            "reason": reason, "seed": self._seed, "cycle": self._cycle_count,
+            "energy_soil": self._energy_soil, "energy_payload": self._energy_payload,
+        }
+        self._cycles.append(entry)
+        del self._cycles[:-self.max_logged_cycles]
+
+    def episode_record(self, index: int = -1, current: bool = False) -> dict[str, Any]:
+        """Raw arrays of a finished cycle (``index`` into the kept cycles) or of the current one.
+
+        Keys: ``t, x, z, blade_angle`` (path), ``F_T, F_N`` (measured), ``true_F_T, true_F_N``
+        (noise-free plant forces), ``fill`` [m^3], ``flags``.
+        """
+        if current:
+            if self._record is None:
+                raise ParameterError("no cycle in progress")
+            return {k: np.asarray(v) for k, v in self._record.items()}
+        if not self._cycles:
+            raise ParameterError("no finished cycle yet")
+        return dict(self._cycles[index]["record"])
+
+    def _to_cycle_log(self, entry: dict[str, Any]):
+        from wheelloader.estimator.cyclelog import CycleLog  # lazy: written by the estimator package
+        from wheelloader.estimator.paths import BucketPath
+
+        rec = entry["record"]
+        path = BucketPath(rec["t"], rec["x"], rec["z"], rec["blade_angle"], name=f"env cycle {entry['cycle']}")
+        metadata = {
+            "source": "wheelloader.envs.BucketLoadingEnv", "true_soil": entry["soil"].to_dict(),
+            "seed": entry["seed"], "cycle": entry["cycle"], "end": entry["reason"],
+            "energy_soil": entry["energy_soil"], "energy_payload": entry["energy_payload"],
+            "env": self.cfg.to_dict(),
+        }
+        return CycleLog(path=path, tangential=rec["F_T"], normal=rec["F_N"], pile=entry["pile"],
+                        bucket=self.cfg.bucket, fill_volume=rec["fill"], pile_after=entry["pile_after"],
+                        metadata=metadata)
+
+    def last_cycle_log(self):
+        """The most recent finished cycle as a :class:`~wheelloader.estimator.cyclelog.CycleLog`.
+
+        Forces are the measured (noisy) ones; ``pile`` is the surface at the
+        start of the cycle, ``pile_after`` the carved one, ``fill_volume`` the
+        bucket fill per sample; ``metadata`` holds the true soil, the seed,
+        why the cycle ended and the env settings.
+        """
+        if not self._cycles:
+            raise ParameterError("no finished cycle yet: step until termination (or reset) first")
+        return self._to_cycle_log(self._cycles[-1])
+
+    def cycle_logs(self) -> list:
+        """All kept finished cycles (at most ``max_logged_cycles``), oldest first, as CycleLogs."""
+        return [self._to_cycle_log(e) for e in self._cycles]
+
+    # ------------------------------------------------------------------ twin
+    def make_twin(self, soil: SoilParams | str | dict | None = None) -> BucketLoadingEnv:
+        """A copy of this env as digital twin: simulator soil ``soil`` (default: the current one),
+        no sensor noise, no beyond-model effects, same pile state. Call ``reset(options={"keep_pile": True})``
+        on it to start a cycle on the current carved pile."""
+        twin = copy.deepcopy(self)
+        twin.cfg = dataclasses.replace(twin.cfg, sensor_noise=0.0, truth=as_truth(None))
+        twin._cache_settings()
+        if soil is not None:
+            from wheelloader.estimator import as_soil
+
+            twin._soil = as_soil(soil)
+            twin.cfg = dataclasses.replace(twin.cfg, soil=twin._soil)
+        twin.render_mode = None
+        return twin
+
+    # ------------------------------------------------------------------ render
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array' to gym.make")
+            return None
+        from .rendering import EnvRenderer
+
+        if self._renderer is None:
+            self._renderer = EnvRenderer(self.render_mode, self.cfg)
+        return self._renderer.draw(self.render_state())
+
+    def render_state(self) -> dict[str, Any]:
+        """What the renderer draws (plain data)."""
+        return {
+            "pile": self.cfg.pile, "start_pile": self._start_pile, "carved": self._carver.pile(),
+            "x": self._x, "z": self._z, "blade_angle": self._th, "fill": self._carver.fill,
+            "capacity": self.cfg.bucket.capacity, "F_T": self._mt, "F_N": self._mn,
+            "floor_length": self.cfg.bucket.floor_length, "time": self._cycle_t * self._dt,
+            "limits": (self._fpush, self._flift),
+        }
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_renderer"] = None
+        return state

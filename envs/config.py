@@ -1,0 +1,441 @@
+"""Configuration shared by the single and the batched bucket-loading envs.
+
+Both envs parse their keyword arguments here and draw their random numbers
+through the helpers below in the same order, so that the same seed gives the
+same trajectory in :class:`~wheelloader.envs.bucket_loading.BucketLoadingEnv`
+and in :class:`~wheelloader.envs.vector.BucketLoadingVectorEnv`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+from wheelloader.estimator import (
+    PAPER_BOUNDS,
+    PARAMETER_NAMES,
+    PRESET_NAMES,
+    Bucket,
+    Loader,
+    Pile,
+    SoilParams,
+    as_soil,
+)
+from wheelloader.estimator.errors import ParameterError
+
+from .truth import TruthOptions, as_truth
+
+#: Noise values are drawn in chunks of this many steps (one RNG call per chunk).
+NOISE_CHUNK = 256
+
+#: Names of the observation entries, in order (see the env docstring for units).
+BASE_OBS_NAMES: tuple[str, ...] = (
+    "x", "z", "blade_angle", "vx", "vz", "tilt_rate", "depth", "rho", "alpha", "fill_fraction",
+    "force_tangential", "force_normal",
+)
+#: Units of the base observation entries.
+BASE_OBS_UNITS: tuple[str, ...] = ("m", "m", "rad", "m/s", "m/s", "rad/s", "m", "rad", "rad", "-", "kN", "kN")
+
+#: Keys of the reward terms in ``info``; the reward is their sum in this order.
+REWARD_TERMS: tuple[str, ...] = ("reward_fill", "reward_energy", "reward_validity", "reward_stall", "reward_force")
+
+
+@dataclass(frozen=True)
+class RewardWeights:
+    """Weights of the reward terms (all >= 0).
+
+    Parameters
+    ----------
+    fill : float
+        Reward per bucket capacity of fill gained [1/capacity]. Default 1.0: a
+        full bucket is worth 1.
+    energy : float
+        Cost per joule of mechanical work on soil and payload [1/J]. Default
+        1e-5 (a default cycle costs about 0.2-0.3).
+    validity : float
+        Cost per step with the tip in soil outside the force model's validity
+        domain (clamped rho or alpha, tension). Default 0.01.
+    stall : float
+        Cost per stalled step. Default 1.0.
+    force : float
+        Cost per step and per unit of force above ``force_soft_limit`` of the
+        loader's limits (F_T / max_push_force and F_N / max_lift_force). Default 0.1.
+    force_soft_limit : float
+        Fraction of the loader's force limits where the excess-force cost
+        starts. Default 0.8.
+    """
+
+    fill: float = 1.0
+    energy: float = 1e-5
+    validity: float = 0.01
+    stall: float = 1.0
+    force: float = 0.1
+    force_soft_limit: float = 0.8
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+                raise ParameterError(f"RewardWeights.{f.name} must be a finite number >= 0, got {value!r}")
+            object.__setattr__(self, f.name, float(value))
+
+
+def as_reward_weights(value: RewardWeights | Mapping[str, float] | None) -> RewardWeights:
+    """Coerce ``None``, a mapping or :class:`RewardWeights`."""
+    if value is None:
+        return RewardWeights()
+    if isinstance(value, RewardWeights):
+        return value
+    if isinstance(value, Mapping):
+        unknown = sorted(set(value) - {f.name for f in fields(RewardWeights)})
+        if unknown:
+            raise ParameterError(f"reward_weights: unknown key(s) {unknown}")
+        return RewardWeights(**value)
+    raise ParameterError(f"reward_weights must be a RewardWeights or a dict, got {type(value).__name__}")
+
+
+# ------------------------------------------------------------------ soil
+@dataclass(frozen=True)
+class SoilRandomization:
+    """A distribution of hidden soils for domain randomisation.
+
+    Parameters
+    ----------
+    base : SoilParams or str
+        Soil whose parameters are used where ``ranges`` says nothing.
+    ranges : dict
+        ``name -> (low, high)`` in SI units: the parameter is drawn uniformly.
+    choices : tuple of str or SoilParams
+        If given, each reset first picks one of these soils uniformly as the
+        base (then ``ranges`` apply).
+    """
+
+    base: SoilParams | str = "gravel"
+    ranges: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    choices: tuple[SoilParams | str, ...] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "base", as_soil(self.base))
+        object.__setattr__(self, "choices", tuple(as_soil(c) for c in self.choices))
+        clean: dict[str, tuple[float, float]] = {}
+        for name, pair in dict(self.ranges).items():
+            if name not in PARAMETER_NAMES:
+                raise ParameterError(f"soil range: unknown parameter {name!r}; expected one of {list(PARAMETER_NAMES)}")
+            try:
+                lo, hi = (float(v) for v in pair)
+            except (TypeError, ValueError):
+                raise ParameterError(f"soil range {name!r} must be a pair (low, high), got {pair!r}") from None
+            if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
+                raise ParameterError(f"soil range {name!r} must be finite with low <= high, got {(lo, hi)!r}")
+            clean[name] = (lo, hi)
+        object.__setattr__(self, "ranges", clean)
+        # Validate the corners now rather than at the first reset.
+        self.base.replace(**{k: v[0] for k, v in clean.items()})
+        self.base.replace(**{k: v[1] for k, v in clean.items()})
+
+    def sample(self, rng: np.random.Generator) -> SoilParams:
+        """Draw one soil (uses ``rng`` in a fixed order: choice, then ranges in parameter order)."""
+        base = self.base
+        if self.choices:
+            base = self.choices[int(rng.integers(len(self.choices)))]
+        if not self.ranges:
+            return base
+        names = [n for n in PARAMETER_NAMES if n in self.ranges]
+        u = rng.random(len(names))
+        values = {}
+        for n, ui in zip(names, u, strict=True):
+            lo, hi = self.ranges[n]
+            values[n] = lo + float(ui) * (hi - lo)
+        return base.replace(**values)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able description."""
+        return {"base": self.base.to_dict(), "ranges": {k: list(v) for k, v in self.ranges.items()},
+                "choices": [c.to_dict() for c in self.choices]}
+
+
+SoilSpec = SoilParams | SoilRandomization
+
+
+def parse_soil(soil: Any) -> SoilSpec:
+    """Parse the ``soil`` argument of the envs.
+
+    Accepted: a preset name; ``"random"`` (uniform over the presets); a
+    :class:`SoilParams`; a dict of the eight parameters; a dict
+    ``{name: (low, high), ...}`` of ranges (optionally with a ``"base"`` key);
+    a list of presets / soils (uniform choice); a :class:`SoilRandomization`.
+    """
+    if isinstance(soil, (SoilParams, SoilRandomization)):
+        return soil
+    if isinstance(soil, str):
+        if soil.strip().lower() == "random":
+            return SoilRandomization(base=PRESET_NAMES[0], choices=PRESET_NAMES)
+        return as_soil(soil)
+    if isinstance(soil, Mapping):
+        data = dict(soil)
+        if any(isinstance(v, (tuple, list)) for v in data.values()):
+            base = data.pop("base", "gravel")
+            choices = data.pop("choices", ())
+            return SoilRandomization(base=base, ranges=data, choices=tuple(choices))
+        return as_soil(data)
+    if isinstance(soil, Sequence) and soil and all(isinstance(s, (str, SoilParams)) for s in soil):
+        return SoilRandomization(base=as_soil(soil[0]), choices=tuple(soil))
+    raise ParameterError(
+        f"soil must be a preset name, 'random', SoilParams, a parameter dict, a range dict or a list of soils; "
+        f"got {soil!r}"
+    )
+
+
+def drift_soil(soil: SoilParams, drift: float, rng: np.random.Generator) -> SoilParams:
+    """Random-walk drift of every parameter by a factor ``exp(drift * N(0, 1))``, clipped to the paper bounds."""
+    z = rng.standard_normal(len(PARAMETER_NAMES))
+    values = {}
+    for name, zi in zip(PARAMETER_NAMES, z, strict=True):
+        lo, hi = PAPER_BOUNDS[name]
+        values[name] = min(max(getattr(soil, name) * math.exp(drift * float(zi)), lo), hi)
+    return SoilParams(**values)
+
+
+# ------------------------------------------------------------------ pile
+def parse_pile(pile: Any) -> Pile:
+    """Parse the ``pile`` argument: ``None`` (default trapezoid), a :class:`Pile`, or a dict
+    ``{"shape": "trapezoid" | "ideal_slope", **builder_kwargs}`` (angles in radians)."""
+    if pile is None:
+        return Pile.trapezoid()
+    if isinstance(pile, Pile):
+        return pile
+    if isinstance(pile, Mapping):
+        kwargs = dict(pile)
+        shape = kwargs.pop("shape", "trapezoid")
+        builders = {"trapezoid": Pile.trapezoid, "ideal_slope": Pile.ideal_slope}
+        if shape not in builders:
+            raise ParameterError(f"pile shape must be one of {sorted(builders)}, got {shape!r}")
+        try:
+            return builders[shape](**kwargs)
+        except TypeError as exc:
+            raise ParameterError(f"pile: bad arguments for {shape!r}: {exc}") from None
+    raise ParameterError(f"pile must be None, a Pile or a dict, got {type(pile).__name__}")
+
+
+def pile_toe(pile: Pile) -> float:
+    """x of the pile toe: the last node before the surface first rises above its minimum [m]."""
+    z = pile.heights
+    rising = np.nonzero(z > z.min() + 1e-9)[0]
+    first = int(rising[0]) if rising.size else 0
+    return pile.x0 + pile.spacing * max(first - 1, 0)
+
+
+def _as_obj(value: Any, cls: type, name: str):
+    if value is None:
+        return cls()
+    if isinstance(value, cls):
+        return value
+    if isinstance(value, Mapping):
+        return cls.from_dict(dict(value))
+    raise ParameterError(f"{name} must be a {cls.__name__} or a dict, got {type(value).__name__}")
+
+
+def _positive(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise ParameterError(f"{name} must be a finite number > 0, got {value!r}")
+    return float(value)
+
+
+def _non_negative(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+        raise ParameterError(f"{name} must be a finite number >= 0, got {value!r}")
+    return float(value)
+
+
+# ------------------------------------------------------------------ config
+@dataclass(frozen=True, eq=False)
+class EnvConfig:
+    """All settings of a bucket-loading env, validated (see the env docstring for meanings)."""
+
+    soil: SoilSpec
+    pile: Pile
+    loader: Loader
+    bucket: Bucket
+    control_rate: float
+    sensor_noise: float
+    sensor_range: float
+    reward: RewardWeights
+    truth: TruthOptions
+    start_pose: tuple[float, float, float]
+    start_noise: tuple[float, float, float]
+    blade_angle_limits: tuple[float, float]
+    lift_headroom: float
+    max_tilt_acceleration: float
+    stall_patience: int
+    exit_clearance: float
+    lookahead: tuple[float, ...]
+    slope_window: float
+    keep_pile: bool
+    relax: bool | float
+    relax_iterations: int
+    cycles_per_episode: int
+
+    @property
+    def dt(self) -> float:
+        """Control period [s]."""
+        return 1.0 / self.control_rate
+
+    @property
+    def x_limits(self) -> tuple[float, float]:
+        """Workspace of the tip along x [m]: the pile grid."""
+        return self.pile.x0, self.pile.x_end
+
+    @property
+    def z_limits(self) -> tuple[float, float]:
+        """Workspace of the tip along z [m]: ground (lowest pile node) to crest + headroom."""
+        return float(self.pile.heights.min()), float(self.pile.heights.max()) + self.lift_headroom
+
+    def obs_names(self) -> tuple[str, ...]:
+        """Names of all observation entries."""
+        return BASE_OBS_NAMES + tuple(f"surface_ahead_{i + 1}" for i in range(len(self.lookahead)))
+
+    def obs_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(low, high) of the observation as float32 arrays."""
+        x0, x1 = self.x_limits
+        z0, z1 = self.z_limits
+        a0, a1 = self.blade_angle_limits
+        v, w = self.loader.max_speed, self.loader.max_tilt_rate
+        half = 0.5 * math.pi
+        f = self.sensor_range / 1000.0
+        h0, h1 = float(self.pile.heights.min()), float(self.pile.heights.max())
+        low = [x0, z0, a0, -v, -v, -w, 0.0, -half - a1, -half, 0.0, -f, -f] + [h0 - z1] * len(self.lookahead)
+        high = [x1, z1, a1, v, v, w, z1 - z0, half - a0, half, 1.0, f, f] + [h1 - z0] * len(self.lookahead)
+        return np.array(low, dtype=np.float32), np.array(high, dtype=np.float32)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able summary (for cycle-log metadata)."""
+        soil = self.soil.to_dict()
+        return {
+            "soil": soil, "loader": self.loader.to_dict(), "bucket": self.bucket.to_dict(),
+            "control_rate": self.control_rate, "sensor_noise": self.sensor_noise, "sensor_range": self.sensor_range,
+            "reward": asdict(self.reward), "truth": self.truth.to_dict(), "stall_patience": self.stall_patience,
+            "exit_clearance": self.exit_clearance, "keep_pile": self.keep_pile, "relax": self.relax,
+            "relax_iterations": self.relax_iterations,
+            "cycles_per_episode": self.cycles_per_episode,
+        }
+
+
+def make_config(
+    *,
+    soil: Any = "gravel",
+    pile: Any = None,
+    loader: Any = None,
+    bucket: Any = None,
+    control_rate: float = 60.0,
+    sensor_noise: float = 150.0,
+    sensor_range: float = 100_000.0,
+    reward_weights: Any = None,
+    truth: Any = None,
+    start_pose: Sequence[float] | None = None,
+    start_noise: Sequence[float] = (0.03, 0.01, math.radians(2.0)),
+    blade_angle_limits: Sequence[float] = (math.radians(-45.0), math.radians(75.0)),
+    lift_headroom: float = 1.0,
+    max_tilt_acceleration: float = 4.0,
+    stall_patience: int = 1,
+    exit_clearance: float = 0.02,
+    lookahead: Sequence[float] = (0.1, 0.2, 0.3, 0.4, 0.5),
+    slope_window: float = 0.1,
+    keep_pile: bool = False,
+    relax: bool | float = False,
+    relax_iterations: int = 500,
+    cycles_per_episode: int = 1,
+) -> EnvConfig:
+    """Validate the env keyword arguments (shared by the single and the vector env)."""
+    pile_obj = parse_pile(pile)
+    rate = _positive("control_rate", control_rate)
+    angles = tuple(float(a) for a in blade_angle_limits)
+    if len(angles) != 2 or not (-0.5 * math.pi < angles[0] < angles[1] < 0.5 * math.pi):
+        raise ParameterError(f"blade_angle_limits must be (low, high) inside (-pi/2, pi/2), got {blade_angle_limits!r}")
+    if start_pose is None:
+        toe = pile_toe(pile_obj)
+        ground = float(pile_obj.heights.min())
+        start_pose = (toe - 0.10, ground + 0.03, math.radians(-5.0))
+    pose = tuple(float(v) for v in start_pose)
+    noise = tuple(_non_negative("start_noise", float(v)) for v in start_noise)
+    if len(pose) != 3 or len(noise) != 3 or not all(math.isfinite(v) for v in pose):
+        raise ParameterError("start_pose and start_noise must be (x [m], z [m], blade_angle [rad]) triples")
+    look = tuple(float(v) for v in lookahead)
+    if not all(math.isfinite(v) for v in look):
+        raise ParameterError(f"lookahead distances must be finite, got {lookahead!r}")
+    if isinstance(stall_patience, bool) or not isinstance(stall_patience, int) or stall_patience < 1:
+        raise ParameterError(f"stall_patience must be an int >= 1, got {stall_patience!r}")
+    if isinstance(relax_iterations, bool) or not isinstance(relax_iterations, int) or relax_iterations < 1:
+        raise ParameterError(f"relax_iterations must be an int >= 1, got {relax_iterations!r}")
+    if isinstance(cycles_per_episode, bool) or not isinstance(cycles_per_episode, int) or cycles_per_episode < 1:
+        raise ParameterError(f"cycles_per_episode must be an int >= 1, got {cycles_per_episode!r}")
+    if not isinstance(relax, bool):
+        relax = _positive("relax (repose angle)", relax)
+        if relax >= 0.5 * math.pi:
+            raise ParameterError(f"relax repose angle must be < pi/2 rad, got {relax!r}")
+    return EnvConfig(
+        soil=parse_soil(soil), pile=pile_obj, loader=_as_obj(loader, Loader, "loader"),
+        bucket=_as_obj(bucket, Bucket, "bucket"), control_rate=rate,
+        sensor_noise=_non_negative("sensor_noise", sensor_noise),
+        sensor_range=_positive("sensor_range", sensor_range), reward=as_reward_weights(reward_weights),
+        truth=as_truth(truth), start_pose=pose, start_noise=noise, blade_angle_limits=angles,
+        lift_headroom=_non_negative("lift_headroom", lift_headroom),
+        max_tilt_acceleration=_positive("max_tilt_acceleration", max_tilt_acceleration),
+        stall_patience=stall_patience, exit_clearance=_non_negative("exit_clearance", exit_clearance),
+        lookahead=look, slope_window=_positive("slope_window", slope_window), keep_pile=bool(keep_pile),
+        relax=relax, relax_iterations=relax_iterations, cycles_per_episode=cycles_per_episode,
+    )
+
+
+# ------------------------------------------------------------------ random draws (shared order)
+def draw_start_pose(cfg: EnvConfig, rng: np.random.Generator) -> tuple[float, float, float]:
+    """Start pose = ``start_pose`` + uniform noise of ``start_noise`` half-widths, clipped to the workspace."""
+    u = rng.uniform(-1.0, 1.0, size=3)
+    x0, x1 = cfg.x_limits
+    z0, z1 = cfg.z_limits
+    a0, a1 = cfg.blade_angle_limits
+    x = min(max(cfg.start_pose[0] + cfg.start_noise[0] * float(u[0]), x0), x1)
+    z = min(max(cfg.start_pose[1] + cfg.start_noise[1] * float(u[1]), z0), z1)
+    a = min(max(cfg.start_pose[2] + cfg.start_noise[2] * float(u[2]), a0), a1)
+    return x, z, a
+
+
+def draw_noise_chunk(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Standard normals (sensor noise F_T, F_N) and uniforms (stone event, stone size) for NOISE_CHUNK steps."""
+    return rng.standard_normal((NOISE_CHUNK, 2)), rng.random((NOISE_CHUNK, 2))
+
+
+def choose_soil(cfg: EnvConfig, current: SoilParams | None, request: Any, rng: np.random.Generator) -> SoilParams:
+    """The soil of a new cycle.
+
+    ``request``: ``None`` (default: resample a distribution, keep a fixed soil
+    with drift when ``truth.drift > 0``), ``"keep"`` (keep, with drift),
+    ``"resample"`` (draw from the configured soil) or a soil spec (use it).
+    """
+    if request is None:
+        request = "resample" if isinstance(cfg.soil, SoilRandomization) or current is None else "keep"
+    if isinstance(request, str) and request in ("keep", "resample"):
+        if request == "resample" or current is None:
+            return cfg.soil.sample(rng) if isinstance(cfg.soil, SoilRandomization) else cfg.soil
+        if cfg.truth.drift > 0.0:
+            return drift_soil(current, cfg.truth.drift, rng)
+        return current
+    return as_soil(request)
+
+
+def next_pile(cfg: EnvConfig, carved: Pile | None, keep: bool, relax: bool | float, soil: SoilParams) -> Pile:
+    """Start surface of a new cycle: the configured pile, or the carved one (optionally relaxed).
+
+    Relaxation runs at most ``cfg.relax_iterations`` sweeps of :meth:`Pile.relaxed` (area-conserving):
+    steep carved walls slump toward the repose angle without paying for full convergence at every reset.
+    """
+    if not keep or carved is None:
+        return cfg.pile
+    if relax is False:
+        return carved
+    angle = soil.phi if relax is True else float(relax)
+    angle = min(max(angle, math.radians(5.0)), math.radians(85.0))
+    return carved.relaxed(angle, iterations=cfg.relax_iterations)

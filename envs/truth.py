@@ -1,0 +1,108 @@
+"""Truth beyond the force model: effects the FEE model cannot represent.
+
+When the env plays the plant (the "true" soil the estimator must discover),
+these options make its forces differ from anything the calibrated model can
+produce, so adaptation benchmarks are not circular. All are off by default.
+
+Effects, applied in this order to the model forces ``F_T, F_N`` of a step
+with the tip in soil (depth ``d`` > 0):
+
+1. compaction: both forces are multiplied by ``1 + compaction * d``
+   (density and strength that grow with depth below the start surface);
+2. rate-dependent resistance: ``F_T += rate_resistance * w * d * |v|`` with
+   bucket width ``w`` and tip speed ``|v|`` (a viscous term the quasi-static
+   FEE lacks);
+3. stones: per metre travelled in soil a stone is hit with probability
+   ``stone_rate``; it adds a spike of exponentially distributed size (mean
+   ``stone_force``) to ``F_T`` and half of it to ``F_N``, decaying with time
+   constant ``stone_duration`` (also out of soil);
+4. drift (between cycles): each soil parameter is multiplied by
+   ``exp(drift * N(0, 1))`` at every new cycle when the soil is kept
+   (clipped to the paper's bounds).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, fields
+from typing import Any
+
+from wheelloader.estimator.errors import ParameterError
+
+
+@dataclass(frozen=True)
+class TruthOptions:
+    """Beyond-model effects of the simulated plant (all off by default).
+
+    Parameters
+    ----------
+    compaction : float
+        Relative force increase per metre of depth [1/m]. Default 0.
+    rate_resistance : float
+        Viscous resistance coefficient [N s/m^3]: ``dF_T = c w d |v|``. Default 0.
+        About 2e4 gives a few kN at 0.5 m/s and 0.3 m depth.
+    stone_rate : float
+        Stones per metre of tip travel in soil [1/m]. Default 0.
+    stone_force : float
+        Mean stone force spike [N]. Default 5000.
+    stone_duration : float
+        Decay time constant of a spike [s]. Default 0.05.
+    drift : float
+        Log-normal drift scale of every soil parameter between cycles [-]. Default 0.
+    """
+
+    compaction: float = 0.0
+    rate_resistance: float = 0.0
+    stone_rate: float = 0.0
+    stone_force: float = 5000.0
+    stone_duration: float = 0.05
+    drift: float = 0.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
+                raise ParameterError(f"TruthOptions.{f.name} must be a finite number >= 0, got {value!r}")
+            object.__setattr__(self, f.name, float(value))
+        if self.stone_duration <= 0.0:
+            raise ParameterError(f"TruthOptions.stone_duration must be > 0 s, got {self.stone_duration!r}")
+
+    @property
+    def active(self) -> bool:
+        """True when any in-cycle effect (compaction, rate, stones) is on."""
+        return self.compaction > 0.0 or self.rate_resistance > 0.0 or self.stone_rate > 0.0
+
+    def to_dict(self) -> dict[str, float]:
+        """JSON-able mapping."""
+        return asdict(self)
+
+
+def as_truth(value: TruthOptions | Mapping[str, float] | None) -> TruthOptions:
+    """Coerce ``None`` (all off), a mapping or :class:`TruthOptions`."""
+    if value is None:
+        return TruthOptions()
+    if isinstance(value, TruthOptions):
+        return value
+    if isinstance(value, Mapping):
+        unknown = sorted(set(value) - {f.name for f in fields(TruthOptions)})
+        if unknown:
+            raise ParameterError(f"truth: unknown option(s) {unknown}; expected some of "
+                                 f"{[f.name for f in fields(TruthOptions)]}")
+        return TruthOptions(**value)
+    raise ParameterError(f"truth must be a TruthOptions, a dict or None, got {type(value).__name__}")
+
+
+def stone_decay(options: TruthOptions, dt: float) -> float:
+    """Per-step decay factor of a stone spike."""
+    return math.exp(-dt / options.stone_duration)
+
+
+def stone_size(options: TruthOptions, u: float) -> float:
+    """Exponentially distributed spike size [N] from a uniform ``u`` in [0, 1)."""
+    return -options.stone_force * math.log1p(-u)
+
+
+def describe(options: TruthOptions) -> dict[str, Any]:
+    """Only the options that are on (for logs)."""
+    return {k: v for k, v in options.to_dict().items() if v and k not in ("stone_force", "stone_duration")}

@@ -1,0 +1,104 @@
+"""The NumPy-batched vector env reproduces the single env (same seeds and actions)."""
+
+from __future__ import annotations
+
+import pickle
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import wheelloader.envs  # noqa: F401  (registers the ids)
+from wheelloader.envs.vector import BucketLoadingVectorEnv
+from wheelloader.estimator.errors import ParameterError
+
+MAIN_ID = "wheelloader/BucketLoading-v0"
+
+_CONFIGS = [
+    {},
+    {"soil": "random", "truth": {"compaction": 0.5, "rate_resistance": 1e4, "stone_rate": 3.0, "drift": 0.05},
+     "keep_pile": True, "relax": True, "relax_iterations": 50},
+    {"soil": {"phi": (0.4, 0.7), "base": "dirt"}, "loader": {"max_push_force": 1500.0}, "stall_patience": 3},
+]
+
+
+def _compare(config: dict, num_envs: int = 4, steps: int = 300, seed: int = 5, max_steps: int = 100) -> dict:
+    vec = BucketLoadingVectorEnv(num_envs=num_envs, max_episode_steps=max_steps, **config)
+    singles = [gym.make(MAIN_ID, max_episode_steps=max_steps, **config) for _ in range(num_envs)]
+    rng = np.random.default_rng(seed)
+    acts = rng.uniform(-1, 1, (steps, num_envs, 3)).astype(np.float32)
+    acts[:, :, 0] = np.abs(acts[:, :, 0])
+    lift = (np.arange(steps) % 60) >= 30  # dig, then lift out: episodes end by exit, stall and time limit
+    acts[lift, :, 1] = np.abs(acts[lift, :, 1])
+    obs_v, _ = vec.reset(seed=seed)
+    for i, env in enumerate(singles):
+        np.testing.assert_allclose(env.reset(seed=seed + i)[0], obs_v[i], rtol=1e-6, atol=1e-6)
+    done = [False] * num_envs
+    counts = {"resets": 0, "stalls": 0, "terminations": 0, "truncations": 0}
+    for t in range(steps):
+        obs_v, rew_v, term_v, trunc_v, info_v = vec.step(acts[t])
+        for i, env in enumerate(singles):
+            if done[i]:
+                obs, _ = env.reset()
+                reward, term, trunc = 0.0, False, False
+                counts["resets"] += 1
+            else:
+                obs, reward, term, trunc, info = env.step(acts[t, i])
+                counts["stalls"] += int(info["stalled"])
+                for key in ("reward_fill", "reward_energy", "reward_force"):
+                    assert info[key] == pytest.approx(info_v[key][i], rel=1e-7, abs=1e-9)
+            done[i] = term or trunc
+            counts["terminations"] += int(term)
+            counts["truncations"] += int(trunc)
+            np.testing.assert_allclose(obs, obs_v[i], rtol=1e-6, atol=1e-6, err_msg=f"step {t} env {i}")
+            assert reward == pytest.approx(rew_v[i], rel=1e-7, abs=1e-9)
+            assert (term, trunc) == (bool(term_v[i]), bool(trunc_v[i]))
+    return counts
+
+
+@pytest.mark.parametrize("config", _CONFIGS)
+def test_vector_env_matches_single_envs(config):
+    counts = _compare(config)
+    assert counts["resets"] > 0 and counts["terminations"] > 0
+    if "loader" in config:
+        assert counts["stalls"] > 0
+
+
+def test_vector_env_truncates_like_time_limit():
+    counts = _compare({"start_pose": (0.5, 1.5, 0.0)}, num_envs=2, steps=60, max_steps=20)
+    assert counts["truncations"] > 0
+
+
+def test_make_vec_uses_the_batched_env():
+    envs = gym.make_vec(MAIN_ID, num_envs=8)
+    assert isinstance(envs.unwrapped, BucketLoadingVectorEnv)
+    assert envs.unwrapped.max_episode_steps == 600
+    obs, _ = envs.reset(seed=0)
+    assert envs.observation_space.contains(obs)
+    for _ in range(50):
+        obs, reward, term, trunc, info = envs.step(envs.action_space.sample())
+        assert envs.observation_space.contains(obs) and np.all(np.isfinite(reward))
+        assert np.array_equal(reward, sum(info[k] for k in wheelloader.envs.REWARD_TERMS))
+    clone = pickle.loads(pickle.dumps(envs.unwrapped))
+    a = envs.action_space.sample()
+    np.testing.assert_array_equal(clone.step(a)[0], envs.step(a)[0])
+    envs.close()
+
+
+def test_multi_cycle_variant_falls_back_to_sync_vectorisation():
+    envs = gym.make_vec("wheelloader/BucketLoadingMultiCycle-v0", num_envs=2)
+    assert not isinstance(envs.unwrapped, BucketLoadingVectorEnv)
+    envs.reset(seed=0)
+    envs.close()
+    with pytest.raises(ParameterError, match="cycles_per_episode"):
+        BucketLoadingVectorEnv(num_envs=2, cycles_per_episode=3)
+
+
+def test_vector_reset_accepts_seed_lists_and_renders():
+    vec = BucketLoadingVectorEnv(num_envs=3, render_mode="rgb_array")
+    obs_a, _ = vec.reset(seed=[4, 5, 6])
+    obs_b, _ = vec.reset(seed=4)
+    np.testing.assert_array_equal(obs_a, obs_b)
+    frame = vec.render()
+    assert frame.dtype == np.uint8 and frame.ndim == 3
+    vec.close()
