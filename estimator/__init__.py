@@ -6,6 +6,7 @@ kinematics, the force model and cycle logs.
 """
 
 from .calibration import METHODS, Calibration, FitQuality, StageResult, calibrate, load_params
+from .cyclelog import CycleLog, load_path_csv, save_path_csv
 from .errors import CalibrationError, CycleLogError, ParameterError, PlanningError, WheelloaderError
 from .force_model import (
     DEFAULT_OPTIONS,
@@ -28,6 +29,7 @@ from .synthetic import random_bezier_path, random_soil, synthetic_cycle
 from .uncertainty import Uncertainty
 
 __all__ = [
+    "CycleLog", "load_path_csv", "save_path_csv",
     "METHODS", "Calibration", "FitQuality", "Prediction", "StageResult", "Uncertainty", "calibrate", "load_params",
     "predict", "random_bezier_path", "random_soil", "synthetic_cycle",
     "Bucket", "BucketPath", "CalibrationError", "CarveResult", "ContactState", "CycleLogError",

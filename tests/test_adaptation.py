@@ -1,0 +1,80 @@
+"""The cycle-to-cycle loop: metrics, warm-started calibration, and failures reported, not hidden."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import wheelloader.envs  # noqa: F401
+from wheelloader.adaptation import (
+    NOMINAL_SOIL,
+    Calibrating,
+    FixedBezier,
+    Oracle,
+    PlanOutcome,
+    bezier_on_face,
+    format_table,
+    hidden_default_soil,
+    run_loop,
+)
+from wheelloader.estimator import CalibrationError, Pile, default_path, preset
+
+
+def _env():
+    return gym.make("wheelloader/BucketLoading-v0", soil=hidden_default_soil(), relax=True)
+
+
+def test_calibrating_loop_learns_the_plant():
+    records, logs = run_loop(_env(), Calibrating(preset(NOMINAL_SOIL)), cycles=3, seed=1)
+    assert [r.cycle for r in records] == [1, 2, 3] and len(logs) == 3
+    assert all(r.calibration_ok for r in records)
+    # nominal parameters predict cycle 1 badly; calibrated ones predict later cycles near the noise floor
+    assert records[0].prediction_rmse_percent > 20.0
+    assert records[1].prediction_rmse_percent < 6.0 and records[2].prediction_rmse_percent < 6.0
+    assert records[1].calibration_s > 0.0
+    # each cycle starts on the surface the previous one left
+    assert np.all(logs[1].pile.heights <= logs[0].pile.heights + 1e-12)
+    assert "cycle" in format_table(records)
+
+
+def test_fixed_and_oracle_strategies_run():
+    fixed, _ = run_loop(_env(), FixedBezier(preset(NOMINAL_SOIL)), cycles=2, seed=1)
+    oracle, _ = run_loop(_env(), Oracle(), cycles=2, seed=1)
+    assert fixed[1].params == preset(NOMINAL_SOIL).to_dict()
+    assert oracle[1].params == hidden_default_soil().to_dict()
+    assert oracle[1].prediction_rmse_percent < fixed[1].prediction_rmse_percent
+
+
+def test_failed_calibration_keeps_previous_parameters(monkeypatch):
+    import wheelloader.adaptation as adaptation
+
+    def broken(*args, **kwargs):
+        raise CalibrationError("forced failure")
+
+    monkeypatch.setattr(adaptation, "calibrate", broken)
+    records, _ = run_loop(_env(), Calibrating(preset(NOMINAL_SOIL)), cycles=2, seed=0)
+    assert not records[1].calibration_ok and "forced failure" in records[1].calibration_message
+    assert records[1].params == preset(NOMINAL_SOIL).to_dict()
+    assert "forced failure" in format_table(records)
+
+
+def test_failed_plan_falls_back_and_is_reported():
+    def failing_planner(params, pile):
+        return PlanOutcome(None, False, "solver status Infeasible_Problem_Detected", 0.0)
+
+    records, _ = run_loop(_env(), Calibrating(preset(NOMINAL_SOIL), planner=failing_planner), cycles=2, seed=0)
+    assert not records[0].plan_ok and "Infeasible" in records[0].plan_message
+    assert "fell back" in records[0].plan_message and records[0].fill_fraction > 0.5
+
+
+def test_bezier_is_placed_where_it_fills():
+    pile = Pile.trapezoid()
+    assert bezier_on_face(pile).x[0] == pytest.approx(default_path().x[0])
+    carved = pile.carve(default_path().x, default_path().z, 1.0, 0.2).pile
+    moved = bezier_on_face(carved)
+    assert moved.x[0] > default_path().x[0]
+    assert carved.carve(moved.x, moved.z, 1.0, 0.2).in_bucket > 0.15
+
+
+def test_bad_cycle_count():
+    with pytest.raises(Exception, match="positive integer"):
+        run_loop(_env(), FixedBezier(preset(NOMINAL_SOIL)), cycles=0)
