@@ -212,6 +212,23 @@ class Oracle(Calibrating):
         return 0.0, True, "true soil"
 
 
+class PolicyStrategy(Strategy):
+    """Baseline (e): a trained policy (e.g. stable-baselines3 PPO) digs every cycle; no calibration."""
+
+    name = "rl"
+
+    def __init__(self, policy: Any, nominal: SoilParams | None = None) -> None:
+        super().__init__(nominal or preset(NOMINAL_SOIL))
+        self.policy = policy
+
+    def plan(self, pile: Pile) -> PlanOutcome:
+        def act(obs: np.ndarray) -> np.ndarray:
+            action, _ = self.policy.predict(obs, deterministic=True)
+            return action
+
+        return PlanOutcome(None, True, "policy", 0.0, controller=act)
+
+
 def run_loop(env: Any, strategy: Strategy, cycles: int = 5, seed: int = 0,
              progress: Callable[[str], None] | None = None) -> tuple[list[CycleRecord], list[CycleLog]]:
     """Run ``cycles`` digging cycles of ``strategy`` on ``env`` (a ``BucketLoadingEnv``).
