@@ -1,0 +1,110 @@
+"""Smoke tests of the SB3 training and evaluation scripts in train/ (tiny budgets, no learning asserted).
+
+The scripts are not a package: they run as subprocesses, and ``train/common.py`` is loaded with runpy.
+"""
+
+from __future__ import annotations
+
+import json
+import runpy
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+pytest.importorskip("torch")
+
+TRAIN = Path(__file__).resolve().parents[1] / "train"
+
+
+def _run(script: str, *args: str) -> subprocess.CompletedProcess:
+    cmd = [sys.executable, str(TRAIN / script), *args]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, f"{' '.join(cmd)} failed:\n{proc.stdout}\n{proc.stderr}"
+    return proc
+
+
+@pytest.fixture(scope="module")
+def common() -> dict:
+    return runpy.run_path(str(TRAIN / "common.py"))
+
+
+def test_batched_adapter_matches_dummy_vec_env(common):
+    """Same seeds and actions: the batched adapter and SB3's DummyVecEnv of single envs agree step by step,
+    including same-step auto-reset, terminal observations and the time-limit flag."""
+    kwargs = {"soil": "random", "max_episode_steps": 40}
+    batched = common["make_train_env"](kwargs, 3, 11, "batched")
+    dummy = common["make_train_env"](kwargs, 3, 11, "dummy")
+    rng = np.random.default_rng(0)
+    ob, od = batched.reset(), dummy.reset()
+    np.testing.assert_allclose(ob, od, atol=1e-5)
+    ends = 0
+    for _ in range(150):
+        act = rng.uniform(-1, 1, (3, 3)).astype(np.float32)
+        act[:, 0] = np.abs(act[:, 0])
+        ob, rb, db, ib = batched.step(act)
+        od, rd, dd, id_ = dummy.step(act)
+        np.testing.assert_array_equal(db, dd)
+        np.testing.assert_allclose(rb, rd, rtol=1e-5, atol=1e-7)
+        np.testing.assert_allclose(ob, od, atol=1e-4)
+        for i in np.nonzero(db)[0]:
+            ends += 1
+            np.testing.assert_allclose(ib[i]["terminal_observation"], id_[i]["terminal_observation"], atol=1e-4)
+            assert ib[i]["TimeLimit.truncated"] == id_[i]["TimeLimit.truncated"]
+            assert ib[i]["episode"]["l"] == id_[i]["episode"]["l"]
+    assert ends >= 3
+    batched.close()
+    dummy.close()
+
+
+def test_run_episode_metrics(common):
+    """A fixed Bezier path fills the bucket on gravel; the random policy is reproducible per seed."""
+    ep = common["run_episode"](common["PathPolicy"](0), "gravel", 3)
+    assert ep["fill_fraction"] > 0.5
+    assert ep["energy_J"] > 0.0
+    assert ep["energy_per_m3_J"] == pytest.approx(ep["energy_J"] / ep["fill_volume_m3"])
+    a = common["run_episode"](common["RandomPolicy"](), "sand", 4)
+    b = common["run_episode"](common["RandomPolicy"](), "sand", 4)
+    assert a == b
+    s = common["summarize"]([ep, a])
+    assert s["episodes"] == 2 and 0.0 <= s["stall_rate"] <= 1.0
+
+
+def test_train_and_evaluate_smoke(tmp_path):
+    """PPO and SAC train for a tiny budget, save loadable models, and the evaluation compares them with the
+    baselines (JSON, Markdown table, learning-curve PNG)."""
+    common_args = ["--no-progress-bar", "--n-envs", "2", "--eval-soils", "gravel", "--eval-seeds", "1000",
+                   "--eval-freq", "32", "--checkpoint-freq", "32"]
+    _run("ppo.py", "--total-timesteps", "64", "--n-steps", "16", "--batch-size", "16", "--out",
+         str(tmp_path / "ppo"), *common_args)
+    _run("sac.py", "--total-timesteps", "64", "--learning-starts", "32", "--batch-size", "16", "--out",
+         str(tmp_path / "sac"), "--vec", "dummy", *common_args)
+    for algo in ("ppo", "sac"):
+        out = tmp_path / algo
+        assert (out / "model.zip").exists() and (out / "checkpoints").is_dir()
+        curve = json.loads((out / "learning_curve.json").read_text())
+        assert curve["records"][0]["timesteps"] == 0 and curve["records"][-1]["timesteps"] >= 64
+        summary = json.loads((out / "train_summary.json").read_text())
+        assert summary["timesteps"] >= 64 and summary["env_steps_per_s"] > 0
+    from stable_baselines3 import PPO, SAC
+
+    model = PPO.load(tmp_path / "ppo" / "model.zip", device="cpu")
+    action, _ = model.predict(np.zeros(model.observation_space.shape, np.float32), deterministic=True)
+    assert action.shape == (3,)
+    assert SAC.load(tmp_path / "sac" / "model.zip", device="cpu").action_space.shape == (3,)
+
+    _run("evaluate.py", "--ppo", str(tmp_path / "ppo" / "model.zip"), "--sac", str(tmp_path / "sac" / "model.zip"),
+         "--soils", "gravel", "--seeds", "7", "--bezier", "1,2", "--out", str(tmp_path / "eval"))
+    report = json.loads((tmp_path / "eval" / "evaluation.json").read_text())
+    names = set(report["results"])
+    assert {"ppo_randomized", "sac_randomized", "bezier_path1", "bezier_path2", "random"} <= names
+    for res in report["results"].values():
+        for key in ("fill_fraction", "energy_J", "energy_per_m3_J", "stall_rate", "validity_violations",
+                    "force_limit_violations"):
+            assert key in res["overall"]
+        assert res["per_soil"]["gravel"]["episodes"] == 1
+    assert (tmp_path / "eval" / "learning_curve.png").stat().st_size > 0
+    assert "bezier_path1" in (tmp_path / "eval" / "evaluation.md").read_text()
