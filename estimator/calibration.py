@@ -253,9 +253,9 @@ def load_params(source: str | Path | dict | Calibration | SoilParams) -> SoilPar
         if not path.exists():
             raise FileNotFoundError(2, "No such file", str(path))
         try:
-            data = json.loads(path.read_text())
-        except json.JSONDecodeError as exc:
-            raise ParameterError(f"{path}: not valid JSON ({exc})") from None
+            data = json.loads(path.read_text(encoding="utf-8-sig"))
+        except (json.JSONDecodeError, UnicodeDecodeError, IsADirectoryError) as exc:
+            raise ParameterError(f"{path}: not a valid JSON file ({exc})") from None
         if not isinstance(data, dict):
             raise ParameterError(f"{path}: expected a JSON object with the soil parameters")
         try:
@@ -354,6 +354,13 @@ def calibrate(
         raise CalibrationError(f"sigma must be a finite number of samples >= 0, got {sigma!r}")
     if max_iter is not None and not (isinstance(max_iter, int) and max_iter >= 1):
         raise CalibrationError(f"max_iter must be a positive integer, got {max_iter!r}")
+    if not (isinstance(grid, (tuple, list)) and len(grid) == 3
+            and all(isinstance(g, (int, np.integer)) and not isinstance(g, bool) and g >= 1 for g in grid)):
+        raise CalibrationError(f"grid must be three positive integers (points over phi, delta, n), got {grid!r}")
+    if not (isinstance(n_starts, int) and not isinstance(n_starts, bool) and n_starts >= 1):
+        raise CalibrationError(f"n_starts must be a positive integer, got {n_starts!r}")
+    if not (isinstance(min_samples, int) and not isinstance(min_samples, bool) and min_samples >= 1):
+        raise CalibrationError(f"min_samples must be a positive integer, got {min_samples!r}")
     prior = _coerce_initial(initial)
     bucket = cycle.bucket
     b = bucket.edge_thickness
@@ -368,7 +375,7 @@ def calibrate(
     if method == "default":
         settings.update(grid=list(grid), n_starts=n_starts, max_nfev=max_iter or 100)
         x0 = None if prior is None else soil_to_fit(prior, b)
-        fit = fit_default(data, lo, hi, lam, x0, tuple(grid), n_starts, max_iter or 100)
+        fit = fit_default(data, lo, hi, lam, x0, tuple(int(g) for g in grid), n_starts, max_iter or 100)
         x = fit.x
         nfev, njev = fit.evaluations.nfev, fit.evaluations.njev
         success = fit.success and fit.status > 0

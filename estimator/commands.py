@@ -53,8 +53,15 @@ def register(subparsers: Any) -> None:
 def _check_output(path: str | None, overwrite: bool) -> None:
     from wheelloader.estimator.errors import ParameterError
 
-    if path is not None and Path(path).exists() and not overwrite:
+    if path is None:
+        return
+    if Path(path).is_dir():
+        raise ParameterError(f"output {path} is a directory; give a file name")
+    if Path(path).exists() and not overwrite:
         raise ParameterError(f"output {path} exists; pass --overwrite to replace it")
+    parent = Path(path).parent
+    if not parent.is_dir():
+        raise ParameterError(f"output directory {parent} does not exist")
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
@@ -100,9 +107,9 @@ def load_pile(spec: str | None):
     if not path.exists():
         raise ParameterError(f"--pile {spec!r} is neither a file nor a preset ({', '.join(PILE_PRESETS)})")
     try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise ParameterError(f"{path}: not valid JSON ({exc})") from None
+        data = json.loads(path.read_text(encoding="utf-8-sig"))
+    except (json.JSONDecodeError, UnicodeDecodeError, IsADirectoryError) as exc:
+        raise ParameterError(f"{path}: not a valid JSON file ({exc})") from None
     if isinstance(data, dict) and isinstance(data.get("pile"), dict):
         data = data["pile"]  # a cycle-log sidecar
     try:
@@ -112,13 +119,16 @@ def load_pile(spec: str | None):
 
 
 def _is_cycle_log(path: Path) -> bool:
-    if not path.with_suffix(".json").exists() or not path.exists():
+    if not path.with_suffix(".json").exists() or not path.is_file():
         return False
-    with open(path) as fh:
-        for line in fh:
-            if line.strip() and not line.lstrip().startswith("#"):
-                header = [h.strip() for h in line.split(",")]
-                return "F_T" in header and "F_N" in header
+    try:
+        with open(path, encoding="utf-8-sig") as fh:
+            for line in fh:
+                if line.strip() and not line.lstrip().startswith("#"):
+                    header = [h.strip() for h in line.split(",")]
+                    return "F_T" in header and "F_N" in header
+    except UnicodeDecodeError:
+        return False  # reading it as a path CSV then reports the problem
     return False
 
 

@@ -163,9 +163,13 @@ class CycleLog:
         if not sidecar.exists():
             raise CycleLogError(f"{csv_path}: JSON sidecar {sidecar.name} not found (it holds the pile and bucket)")
         try:
-            meta = json.loads(sidecar.read_text())
+            meta = json.loads(sidecar.read_text(encoding="utf-8-sig"))
         except json.JSONDecodeError as exc:
             raise CycleLogError(f"{sidecar}: not valid JSON ({exc})") from None
+        except UnicodeDecodeError as exc:
+            raise CycleLogError(f"{sidecar}: not a UTF-8 JSON file ({exc.reason} at byte {exc.start})") from None
+        except IsADirectoryError:
+            raise CycleLogError(f"{sidecar}: is a directory, expected the JSON sidecar") from None
         if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
             raise CycleLogError(f'{sidecar}: "format" must be "{FORMAT_NAME}"')
         if meta.get("version") != FORMAT_VERSION:
@@ -221,8 +225,14 @@ def _write_columns(csv_path: Path, columns: dict[str, np.ndarray]) -> None:
 def _read_columns(csv_path: Path, required: tuple[str, ...]) -> dict[str, np.ndarray]:
     if not csv_path.exists():
         raise FileNotFoundError(2, "No such file", str(csv_path))
-    with open(csv_path, newline="") as fh:
-        rows = [row for row in csv.reader(line for line in fh if line.strip() and not line.lstrip().startswith("#"))]
+    if csv_path.is_dir():
+        raise CycleLogError(f"{csv_path}: is a directory, expected a CSV file")
+    try:  # utf-8-sig: a byte-order mark (spreadsheet exports) is not part of the first column name
+        with open(csv_path, newline="", encoding="utf-8-sig") as fh:
+            rows = [row for row in csv.reader(line for line in fh
+                                              if line.strip() and not line.lstrip().startswith("#"))]
+    except UnicodeDecodeError as exc:
+        raise CycleLogError(f"{csv_path}: not a UTF-8 text CSV file ({exc.reason} at byte {exc.start})") from None
     if not rows:
         raise CycleLogError(f"{csv_path}: empty file (expected a header row with {', '.join(required)})")
     header = [h.strip() for h in rows[0]]
@@ -259,7 +269,7 @@ def _path_from_columns(csv_path: Path, columns: dict[str, np.ndarray], name: str
     if np.any(steps <= 0.0):
         i = int(np.flatnonzero(steps <= 0.0)[0])
         raise CycleLogError(
-            f"{csv_path}: time is not strictly increasing at row {i + 3} (t={t[i + 1]!r} after {t[i]!r})")
+            f"{csv_path}: time is not strictly increasing at row {i + 3} (t={float(t[i + 1])!r} after {float(t[i])!r})")
     angle = columns["blade_angle"]
     if np.max(np.abs(angle)) > math.pi:
         raise CycleLogError(

@@ -221,8 +221,22 @@ def validate_bounds(bounds: dict[str, tuple[float, float]]) -> dict[str, tuple[f
             raise ParameterError(f"bounds[{name!r}] must be finite, got {(lo, hi)!r}")
         if lo > hi:
             raise ParameterError(f"bounds[{name!r}] are inverted: lower {lo!r} > upper {hi!r}")
+        _check_physical_bounds(name, lo, hi)
         out[name] = (lo, hi)
     return out
+
+
+def _check_physical_bounds(name: str, lo: float, hi: float) -> None:
+    """Bounds must lie in the domain :class:`SoilParams` accepts (else the fit would leave it)."""
+    if name in ("phi", "delta"):
+        if lo < 0.0 or hi >= math.pi / 2:
+            hint = " (they look like degrees; angles are in radians)" if hi >= math.pi / 2 else ""
+            raise ParameterError(f"bounds[{name!r}] must lie in [0, pi/2) rad, got {(lo, hi)!r}{hint}")
+    elif name in ("gamma", "n"):
+        if lo <= 0.0:
+            raise ParameterError(f"bounds[{name!r}] must be > 0, got {(lo, hi)!r}")
+    elif lo < 0.0:
+        raise ParameterError(f"bounds[{name!r}] must be >= 0, got {(lo, hi)!r}")
 
 
 def _deg(value: float) -> float:

@@ -278,3 +278,9 @@ def test_inverted_bounds_and_unknown_method():
         calibrate(cycle, method="newton")
     with pytest.raises(CalibrationError, match="lam"):
         calibrate(cycle, lam=1.5)
+    with pytest.raises(CalibrationError, match="degrees"):
+        calibrate(cycle, bounds={"phi": (0.0, 45.0)})
+    with pytest.raises(CalibrationError, match="grid"):
+        calibrate(cycle, grid=(0, 9, 8))
+    with pytest.raises(CalibrationError, match="n_starts"):
+        calibrate(cycle, n_starts=0)

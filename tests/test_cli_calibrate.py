@@ -78,3 +78,28 @@ def test_paper_method_and_errors(tmp_path, log_csv, capsys):
     assert main(["predict", str(params), str(log_csv), "-o", str(tmp_path / "x.csv"), "--pile", "nope"]) == 2
     with pytest.raises(SystemExit):
         main(["calibrate", str(log_csv), "--method", "newton"])
+
+
+def test_broken_files_give_clear_errors_not_tracebacks(tmp_path, log_csv, capsys):
+    """A new user's broken inputs: exit code 2 and one 'wheelloader: error:' line, never a traceback."""
+    binary = tmp_path / "binary.csv"
+    binary.write_bytes(bytes(range(128, 256)) * 8)
+    binary.with_suffix(".json").write_text(log_csv.with_suffix(".json").read_text())
+    params = tmp_path / "params.json"
+    params.write_text(json.dumps(preset("dirt").to_dict()))
+    bad_json = tmp_path / "bad.json"
+    bad_json.write_bytes(b"\xff\xfe garbage")
+    cases = [
+        (["calibrate", str(binary), "-o", str(tmp_path / "a.json")], "not a UTF-8 text CSV"),
+        (["calibrate", str(tmp_path), "-o", str(tmp_path / "b.json")], "is a directory"),
+        (["calibrate", str(log_csv), "-o", str(tmp_path / "no" / "dir.json")], "does not exist"),
+        (["predict", str(params), str(binary), "-o", str(tmp_path / "c.csv")], "not a UTF-8 text CSV"),
+        (["predict", str(params), str(tmp_path), "-o", str(tmp_path / "d.csv")], "is a directory"),
+        (["predict", str(bad_json), str(log_csv), "-o", str(tmp_path / "e.csv")], "not a valid JSON file"),
+        (["predict", str(params), str(log_csv), "-o", str(tmp_path / "f.csv"), "--pile", str(bad_json)],
+         "not a valid JSON file"),
+    ]
+    for argv, match in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.startswith("wheelloader: error:") and match in err, (argv, err)

@@ -63,6 +63,24 @@ def test_bad_files_get_clear_errors(tmp_path, body, match):
         CycleLog.load(_write(tmp_path, body))
 
 
+def test_binary_file_directory_and_byte_order_mark(tmp_path):
+    target = tmp_path / "bin.csv"
+    target.write_bytes(bytes(range(128, 256)) * 8)
+    with pytest.raises(CycleLogError, match="not a UTF-8 text CSV"):
+        CycleLog.load(target)
+    with pytest.raises(CycleLogError, match="is a directory"):
+        load_path_csv(tmp_path)
+    # a spreadsheet export starts with a byte-order mark: the first column is still 't'
+    bom = tmp_path / "bom.csv"
+    bom.write_text("\ufeff" + GOOD_HEADER + "0,0,0,0,1,1\n0.1,0.1,0,0,1,1\n", encoding="utf-8")
+    assert len(load_path_csv(bom)) == 2
+
+
+def test_repeated_time_message_is_plain(tmp_path):
+    with pytest.raises(CycleLogError, match=r"\(t=0\.5 after 0\.5\)"):
+        CycleLog.load(_write(tmp_path, GOOD_HEADER + "0.5,0,0,0,1,1\n0.5,0,0,0,1,1\n"))
+
+
 def test_missing_sidecar_and_comments(tmp_path):
     target = _write(tmp_path, "# a comment\n" + GOOD_HEADER + "0,0,0,0,1,1\n0.1,0.1,0,0,1,1\n", sidecar=False)
     with pytest.raises(CycleLogError, match="sidecar"):

@@ -76,5 +76,13 @@ def test_bounds_validation():
         validate_bounds({"density": (1, 2)})
     with pytest.raises(ParameterError, match="finite"):
         validate_bounds({"n": (0.1, np.inf)})
+    # bounds outside the domain SoilParams accepts are rejected up front
+    with pytest.raises(ParameterError, match="look like degrees"):
+        validate_bounds({"phi": (0.0, 45.0)})
+    with pytest.raises(ParameterError, match="> 0"):
+        validate_bounds({"gamma": (0.0, 3000.0)})
+    with pytest.raises(ParameterError, match=">= 0"):
+        validate_bounds({"cohesion": (-1.0, 10.0)})
+    assert validate_bounds({"delta": (0.0, 1.5)})["delta"] == (0.0, 1.5)
     with pytest.raises(ParameterError, match="outside bounds"):
         preset("gravel").check_bounds({"gamma": (1500.0, 1600.0)})
