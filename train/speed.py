@@ -23,19 +23,41 @@ from common import machine_info, make_train_env, set_torch_threads, write_json
 TARGET = 1000.0
 
 
-def measure(vec: str, n_envs: int, steps: int, seed: int, use_sde: bool) -> dict:
-    """One PPO run; env-steps/s of ``model.learn`` (rollouts plus updates)."""
+def measure(vec: str, n_envs: int, steps: int, seed: int, use_sde: bool, n_epochs: int = 10) -> dict:
+    """One PPO run; env-steps/s of ``model.learn`` (rollouts plus updates).
+
+    Parameters
+    ----------
+    vec : str
+        ``"batched"`` or ``"dummy"`` (see :func:`common.make_train_env`).
+    n_envs : int
+        Sub-envs.
+    steps : int
+        Env-steps to train.
+    seed : int
+        Seed of the envs and the policy.
+    use_sde : bool
+        gSDE exploration.
+    n_epochs : int
+        PPO epochs per update (``train/ppo.py``'s default is 10).
+
+    Returns
+    -------
+    dict
+        Settings, wall time, env-steps/s and the load average before and after.
+    """
     from stable_baselines3 import PPO
 
     env = make_train_env({"soil": "random"}, n_envs, seed, vec)
-    model = PPO("MlpPolicy", env, n_steps=256, batch_size=512, n_epochs=5, gamma=0.995, use_sde=use_sde,
+    model = PPO("MlpPolicy", env, n_steps=256, batch_size=512, n_epochs=n_epochs, gamma=0.995, use_sde=use_sde,
                 policy_kwargs={"net_arch": [64, 64]}, seed=seed, device="cpu")
     load0 = os.getloadavg()
     t0 = time.perf_counter()
     model.learn(total_timesteps=steps)
     wall = time.perf_counter() - t0
     env.close()
-    return {"vec": vec, "n_envs": n_envs, "use_sde": use_sde, "timesteps": int(model.num_timesteps), "wall_s": wall,
+    return {"vec": vec, "n_envs": n_envs, "use_sde": use_sde, "n_epochs": n_epochs,
+            "timesteps": int(model.num_timesteps), "wall_s": wall,
             "env_steps_per_s": model.num_timesteps / wall, "loadavg_before": list(load0),
             "loadavg_after": list(os.getloadavg())}
 
@@ -47,6 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--n-envs", type=int, default=16)
     parser.add_argument("--vec", nargs="+", default=["batched", "dummy"], choices=("batched", "dummy"))
     parser.add_argument("--sde", nargs="+", default=["on"], choices=("on", "off"), help="gSDE settings to measure")
+    parser.add_argument("--n-epochs", type=int, default=10, help="PPO epochs per update (train/ppo.py's default)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--torch-threads", type=int, default=1)
     parser.add_argument("--out", type=Path, default=Path("results/train_speed"))
@@ -55,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     runs = []
     for sde in args.sde:
         for vec in args.vec:
-            r = measure(vec, args.n_envs, args.total_timesteps, args.seed, sde == "on")
+            r = measure(vec, args.n_envs, args.total_timesteps, args.seed, sde == "on", args.n_epochs)
             runs.append(r)
             print(f"PPO {vec:>7} n_envs={args.n_envs} gSDE={sde}: {r['env_steps_per_s']:.0f} env-steps/s "
                   f"({r['timesteps']} steps in {r['wall_s']:.1f} s; load {r['loadavg_before'][0]:.2f} -> "
