@@ -468,7 +468,12 @@ def reference_cases() -> list[ReferenceCase]:
         if soil == "gravel":
             cases.append(ReferenceCase("gravel_dual", DemConfig(soil="gravel"), ("dual1", "dual2")))
     cases.append(ReferenceCase("gravel_dense_path1", DemConfig(soil="gravel", bulk_density=1874.5), ("path1",)))
-    cases.append(ReferenceCase("gravel_path1_seed2", DemConfig(soil="gravel", seed=2), ("path1",)))
+    # seed replicates (other depositions of the same soil): the spread of the reference itself and a
+    # seed-averaged gravel reference (benchmarks/paper_experiments.py)
+    for seed in (2, 3):
+        for k in range(1, 5):
+            cases.append(ReferenceCase(f"gravel_path{k}_seed{seed}", DemConfig(soil="gravel", seed=seed),
+                                       (f"path{k}",)))
     for k in range(1, 5):
         cases.append(ReferenceCase(f"sand_path{k}", DemConfig(soil="sand"), (f"path{k}",)))
     return cases
