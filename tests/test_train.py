@@ -114,3 +114,32 @@ def test_train_and_evaluate_smoke(tmp_path):
         assert res["per_soil"]["gravel"]["episodes"] == 1
     assert (tmp_path / "eval" / "learning_curve.png").stat().st_size > 0
     assert "bezier_path1" in (tmp_path / "eval" / "evaluation.md").read_text()
+
+
+def test_mpc_policy_uses_planner_make_env_policy(common, monkeypatch):
+    """When ``wheelloader.planner.make_env_policy(env)`` exists, the evaluation wraps its controller
+    (``reset()`` at every episode, ``__call__(obs) -> action``); without it the MPC is skipped."""
+    import wheelloader.planner as planner
+
+    calls = {"made": 0, "reset": 0, "act": 0}
+
+    class Controller:
+        def __init__(self, env) -> None:
+            assert hasattr(env, "cfg")
+            calls["made"] += 1
+
+        def reset(self) -> None:
+            calls["reset"] += 1
+
+        def __call__(self, obs: np.ndarray) -> np.ndarray:
+            calls["act"] += 1
+            return np.array([0.5, 0.0, 0.0], dtype=np.float32)
+
+    monkeypatch.setattr(planner, "make_env_policy", Controller, raising=False)
+    policy = common["mpc_policy"]()
+    assert policy is not None and policy.name == "mpc"
+    ep = common["run_episode"](policy, "gravel", 1, {"max_episode_steps": 30})
+    assert calls["made"] == 1 and calls["reset"] == 1 and calls["act"] == ep["steps"] > 0
+    monkeypatch.delattr(planner, "make_env_policy")
+    if not hasattr(planner, "MPCPolicy"):
+        assert common["mpc_policy"]() is None
