@@ -1,0 +1,131 @@
+"""The modified FEE force model (paper eqs 1, 10-17) as CasADi expressions.
+
+The same equations as :func:`wheelloader.estimator.soil_forces`, written so
+that IPOPT can differentiate them twice:
+
+* The failure angle beta* (eq 14: minimise N_gamma with ``beta >= eps1`` and
+  ``|rho + delta + beta + phi - pi| >= eps2``) is not a closed-form function.
+  The planner unrolls :data:`NEWTON_STEPS` guarded Newton steps on
+  ``d ln N_gamma / d beta = 0`` from the middle of the valid branch, clipped
+  to the branch after each step (smooth clamps, 1e-3 rad wide), as the NumPy
+  solver does (without its bisection fallback). Where beta* lies on a bound the step runs past it and
+  the clip returns it there. On the operating range this reproduces beta*
+  closely; the gap in the forces is measured by ``tests/test_planner.py`` and
+  ``benchmarks/planner.py``.
+* The clamps of the validity domain become smooth: the blade angle rho is
+  clipped into ``[rho_min, rho_hi]`` with a smooth clamp before the factors
+  are evaluated, depth is a smooth positive part, and ``F >= 0`` and
+  ``L_t <= floor length`` are smooth max/min, and a tanh gate over the first
+  millimetre of depth switches every term off above the surface. Inside the validity domain
+  (where the planner's constraints keep the path) these agree with the
+  NumPy model to the smoothing widths below.
+"""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+import numpy as np
+
+from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, ModelOptions, SoilParams
+
+#: Guarded Newton steps from the middle of the valid branch.
+NEWTON_STEPS = 8
+#: Order of the soil parameter vector the CasADi model takes.
+SOIL_VECTOR = ("gamma", "cohesion", "adhesion", "phi", "delta", "sinkage_modulus", "n")
+#: Smoothing widths: depth [m], angle clamps [rad], force clamp [N], length clamp [m].
+SMOOTH_DEPTH = 1e-4
+#: Regularisation depth of d^n in eq 15 [m].
+BEKKER_D0 = 2e-3
+#: Width of the tanh gate that switches every term off above the surface [m].
+CONTACT_GATE = 1e-3
+SMOOTH_ANGLE = 1e-3
+SMOOTH_FORCE = 1.0
+SMOOTH_LENGTH = 1e-3
+
+
+def soil_vector(soil: SoilParams, bucket: Bucket) -> np.ndarray:
+    """The soil as the planner's parameter vector (order :data:`SOIL_VECTOR`); only ``k_c/b + k_phi`` enters."""
+    return np.array([soil.gamma, soil.cohesion, soil.adhesion, soil.phi, soil.delta,
+                     soil.sinkage_modulus(bucket.edge_thickness), soil.n])
+
+
+def smooth_pos(v, eps):
+    """Smooth ``max(v, 0)``: ``(v + sqrt(v^2 + eps^2)) / 2``."""
+    return 0.5 * (v + ca.sqrt(v * v + eps * eps))
+
+
+def smooth_max(a, b, eps):
+    """Smooth ``max(a, b)``."""
+    return b + smooth_pos(a - b, eps)
+
+
+def smooth_min(a, b, eps):
+    """Smooth ``min(a, b)``."""
+    return a - smooth_pos(a - b, eps)
+
+
+def casadi_forces(soil, vertical_depth, rho, alpha, load_weight, bucket: Bucket,
+                  options: ModelOptions = DEFAULT_OPTIONS) -> dict[str, ca.SX]:
+    """F_T and F_N (eqs 16-17) as CasADi expressions.
+
+    Parameters
+    ----------
+    soil : casadi.SX
+        Soil vector in the order :data:`SOIL_VECTOR` (symbolic or numeric).
+    vertical_depth : casadi.SX
+        Surface height minus tip height [m] (negative above the surface).
+    rho, alpha : casadi.SX
+        Blade angle relative to the surface and local slope [rad].
+    load_weight : casadi.SX
+        Soil weight in the bucket W_load [N].
+    bucket : Bucket
+        Width and edge thickness (constants of the solver).
+    options : ModelOptions
+        Validity-domain margins.
+
+    Returns
+    -------
+    dict
+        ``F_T``, ``F_N`` [N], ``depth`` [m], ``beta`` [rad], ``fee`` [N].
+    """
+    gamma, cohesion, adhesion, phi, delta, modulus, n = (soil[i] for i in range(7))
+    w, b = bucket.width, bucket.edge_thickness
+    alpha_c = smooth_min(smooth_max(alpha, -options.alpha_max, SMOOTH_ANGLE), options.alpha_max, SMOOTH_ANGLE)
+    rho_hi = math.pi - options.eps1 - options.eps2 - delta - phi
+    rho_c = smooth_min(smooth_max(rho, options.rho_min, SMOOTH_ANGLE), rho_hi, SMOOTH_ANGLE)
+    depth = smooth_pos(vertical_depth, SMOOTH_DEPTH) * ca.cos(alpha)
+    s = rho_c + delta + phi
+    lo = options.eps1
+    hi = smooth_min(math.pi - s - options.eps2, 0.5 * math.pi - alpha_c, SMOOTH_ANGLE)
+    beta = 0.5 * (lo + hi)
+    for _ in range(NEWTON_STEPS):
+        t1 = ca.tan(alpha_c + beta)
+        c2 = 1.0 / ca.tan(alpha_c + beta + phi)
+        c3 = 1.0 / ca.tan(beta)
+        c4 = 1.0 / ca.tan(beta + s)
+        g = -t1 + c2 - c3 - c4
+        dg = -t1 * t1 - c2 * c2 + c3 * c3 + c4 * c4
+        beta = smooth_min(smooth_max(beta - g / smooth_max(dg, 1.0, 0.1), lo, SMOOTH_ANGLE), hi, SMOOTH_ANGLE)
+    s_beta = ca.sin(s + beta)
+    sin_beta = ca.sin(beta)
+    sab = ca.sin(alpha_c + beta + phi)
+    n_gamma = smooth_pos(ca.cos(alpha_c + beta) * sab / (2.0 * ca.cos(alpha_c) * sin_beta * s_beta), 1e-6)  # eq 10
+    n_c = ca.cos(phi) / (sin_beta * s_beta)  # eq 11
+    n_a = -ca.cos(rho_c + beta + phi) / (ca.sin(rho_c) * s_beta)  # eq 12
+    n_q = sab / s_beta  # eq 13
+    ramp = smooth_min(depth / options.contact_depth, 1.0, 1e-3)
+    fee = (depth * depth * w * gamma * GRAVITY * n_gamma + cohesion * w * depth * n_c
+           + adhesion * w * depth * n_a + ramp * load_weight * n_q)  # eq 1
+    fee = smooth_pos(fee, SMOOTH_FORCE)
+    # eq 15 with d^n regularised as (d^2 + d0^2)^(n/2): d^n has an infinite slope at d = 0 when n < 1,
+    # which wrecks IPOPT's Hessian; the two differ by < 0.1 % beyond 3 cm of depth (d0 = 2 mm)
+    pressure = modulus * ca.exp(0.5 * n * ca.log(depth * depth + BEKKER_D0 * BEKKER_D0))
+    sin_rho = smooth_max(ca.sin(rho), math.sin(math.radians(10.0)), 1e-3)
+    blade_length = smooth_min(depth / sin_rho, bucket.floor_length, SMOOTH_LENGTH)
+    # out of soil the model's forces are 0; d^n with n < 1 is steep at d = 0, so gate every term
+    gate = 0.5 * (1.0 + ca.tanh(vertical_depth / CONTACT_GATE))
+    f_t = gate * (w * b * pressure + fee * ca.sin(delta) + adhesion * w * blade_length)  # eq 16
+    f_n = gate * fee * ca.cos(delta)  # eq 17
+    return {"F_T": f_t, "F_N": f_n, "depth": depth, "beta": beta, "fee": fee, "gate": gate}

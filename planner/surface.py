@@ -1,0 +1,109 @@
+"""A smooth stand-in for the pile surface, for the CasADi planner.
+
+The estimator's :class:`~wheelloader.estimator.Pile` is piecewise linear on a
+2 mm grid; a carved pile has kinks and near-vertical walls. IPOPT needs
+twice-differentiable expressions, so the planner sees the surface as the
+polyline through its heights at knots ``x_i = x0 + i * spacing`` (5 cm apart
+by default) with every kink rounded by a softplus over ``kappa`` (1 cm); see
+:meth:`SurfaceGrid.height`. Plain SX arithmetic: no look-up tables, whose
+parametric B-spline fits made each IPOPT iteration seconds long. The knot
+heights and ``x0`` are NLP *parameters*, so one solver serves every pile.
+The local slope follows the estimator's definition, the chord slope
+over ``x +- slope_window`` (:mod:`wheelloader.estimator.kinematics`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from wheelloader.estimator import Pile
+from wheelloader.estimator.errors import PlanningError
+from wheelloader.estimator.kinematics import DEFAULT_SLOPE_WINDOW
+
+
+@dataclass(frozen=True)
+class SurfaceGrid:
+    """Layout of the smooth surface: knot count, spacing and rounding width.
+
+    Parameters
+    ----------
+    knots : int
+        Number of knots (default 72).
+    spacing : float
+        Knot spacing [m] (default 0.05 m: 3.55 m of surface).
+    kappa : float
+        Width over which each kink of the knot polyline is rounded [m] (default 0.01 m).
+    behind : float
+        How far behind the path's start the first knot lies [m] (default 0.3 m).
+    """
+
+    knots: int = 72
+    spacing: float = 0.05
+    kappa: float = 0.01
+    behind: float = 0.3
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.knots, int) and self.knots >= 4):
+            raise PlanningError(f"SurfaceGrid.knots must be an integer >= 4, got {self.knots!r}")
+        for name in ("spacing", "kappa", "behind"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
+                raise PlanningError(f"SurfaceGrid.{name} must be a finite number >= 0, got {value!r}")
+        if self.spacing <= 0.0 or self.kappa <= 0.0:
+            raise PlanningError("SurfaceGrid.spacing and kappa must be > 0 m")
+
+    @property
+    def size(self) -> int:
+        """Number of NLP parameters the surface takes: ``x0`` and one height per knot."""
+        return 1 + self.knots
+
+    @property
+    def length(self) -> float:
+        """Span of the knots [m]."""
+        return self.spacing * (self.knots - 1)
+
+    def parameters(self, pile: Pile, x_start: float) -> np.ndarray:
+        """Surface parameters ``[x0, z_0, ..., z_{K-1}]`` sampling ``pile`` from ``x_start - behind``."""
+        if not isinstance(pile, Pile):
+            raise PlanningError(f"pile must be a Pile, got {type(pile).__name__}")
+        x0 = float(x_start) - self.behind
+        xs = x0 + self.spacing * np.arange(self.knots)
+        return np.concatenate([[x0], np.asarray(pile.surface_height(xs), dtype=float)])
+
+    def height(self, x, params):
+        """Smooth surface height at ``x`` [m] from :meth:`parameters` (CasADi symbols or NumPy values).
+
+        The piecewise-linear interpolant of the knot heights with each kink rounded by a softplus of
+        width ``kappa``: ``z(x) = z_0 + s_0 (x - x_0) + sum_i (s_i - s_{i-1}) kappa softplus((x - x_i) / kappa)``.
+        """
+        x0, z = params[0], params[1:]
+        k, dx = self.kappa, self.spacing
+        symbolic = isinstance(x, (ca.SX, ca.MX)) or isinstance(params, (ca.SX, ca.MX))
+        softplus = _softplus_casadi if symbolic else _softplus_numpy
+        slope_prev = (z[1] - z[0]) / dx
+        out = z[0] + slope_prev * (x - x0)
+        for i in range(1, self.knots - 1):
+            slope = (z[i + 1] - z[i]) / dx
+            out = out + (slope - slope_prev) * k * softplus((x - x0 - i * dx) / k)
+            slope_prev = slope
+        return out
+
+    def slope_angle(self, x, params, window: float = DEFAULT_SLOPE_WINDOW):
+        """Chord slope angle over ``x +- window`` [rad], as :meth:`Pile.slope_angle`."""
+        rise = self.height(x + window, params) - self.height(x - window, params)
+        if isinstance(rise, (ca.SX, ca.MX)):
+            return ca.atan(rise / (2.0 * window))
+        return np.arctan(rise / (2.0 * window))
+
+
+def _softplus_casadi(y):
+    return ca.fmax(y, 0.0) + ca.log1p(ca.exp(-ca.fabs(y)))
+
+
+def _softplus_numpy(y):
+    y = np.asarray(y, dtype=float)
+    return np.maximum(y, 0.0) + np.log1p(np.exp(-np.abs(y)))
