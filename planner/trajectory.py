@@ -10,7 +10,7 @@ acceleration ramps).
 
 * Fill: the tip moves forward only (``v_x >= 0``), so the soil it removes
   over an interval is the area between the start-of-cycle surface and the
-  segment, ``w * dx * max(z_s - z, 0)`` at the segment midpoint (the
+  segment, ``w * dx * max(z_s - z, 0)`` averaged over its end nodes (the
   carving of :meth:`Pile.carve` for a forward path), and the bucket holds at
   most its capacity.
 * Forces: :func:`~wheelloader.planner.casadi_model.casadi_forces` (eqs 1,
@@ -24,7 +24,7 @@ acceleration ramps).
   blade-angle and workspace limits; ``F_T <= margin * max_push_force`` and
   ``F_N <= margin * max_lift_force``; the validity domain where the tip is in
   soil, ``rho_min + rho_margin <= rho <= pi - eps1 - eps2 - delta - phi -
-  rho_margin`` (relaxed by :data:`VALIDITY_RELAX` times the height above the
+  rho_margin`` and ``|alpha| <= alpha_max - rho_margin`` (relaxed by :data:`VALIDITY_RELAX` times the height above the
   surface, so it binds only in soil); the start pose and velocity; and the end out of the pile,
   ``z_N >= z_s(x_N) + end_clearance``.
 
@@ -83,10 +83,14 @@ class PlannerOptions:
         Blade-angle range [rad] (default -45 to 75 deg, the env's).
     lift_headroom : float
         How far above the highest surface point the tip may go [m] (default 1 m).
+    fill_limit : float
+        Largest planned fill as a fraction of the bucket capacity (default 0.97: the
+        planner's fill model is the midpoint rule on a smoothed surface; the margin keeps
+        the real carving from spilling).
     max_iter : int
         IPOPT iteration limit (default 300).
     tolerance : float
-        IPOPT tolerance (default 1e-6).
+        IPOPT tolerance (default 1e-4; the objective is O(1)).
     surface : SurfaceGrid
         Layout of the smooth surface.
     """
@@ -100,8 +104,9 @@ class PlannerOptions:
     max_tilt_acceleration: float = 4.0
     blade_angle_limits: tuple[float, float] = (math.radians(-45.0), math.radians(75.0))
     lift_headroom: float = 1.0
+    fill_limit: float = 0.97
     max_iter: int = 300
-    tolerance: float = 1e-6
+    tolerance: float = 1e-4
     surface: SurfaceGrid = field(default_factory=SurfaceGrid)
 
     def __post_init__(self) -> None:
@@ -111,6 +116,8 @@ class PlannerOptions:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
                 raise PlanningError(f"PlannerOptions.{name} must be a finite number >= 0, got {value!r}")
+        if not (0.0 < self.fill_limit <= 1.0):
+            raise PlanningError(f"PlannerOptions.fill_limit must be in (0, 1], got {self.fill_limit!r}")
         if not (0.0 < self.force_margin <= 1.0):
             raise PlanningError(f"PlannerOptions.force_margin must be in (0, 1], got {self.force_margin!r}")
         if not self.max_tilt_acceleration > 0.0:
@@ -265,7 +272,7 @@ class TrajectoryOptimizer:
 
     def solve(self, soil: SoilParams | str | dict, pile: Pile, start: StartState, duration: float, *,
               energy_weight: float | None = None, min_fill: float = 0.0, initial_guess: Plan | BucketPath | None = None,
-              warm: bool = False) -> Plan:
+              warm: bool = False, reference: BucketPath | None = None, reference_weight: float = 0.0) -> Plan:
         """Plan a path from ``start`` on ``pile`` lasting ``duration`` seconds.
 
         Parameters
@@ -287,6 +294,9 @@ class TrajectoryOptimizer:
             else a straight dig along the surface.
         warm : bool
             Start from the previous solution (and its multipliers) if there is one.
+        reference : BucketPath, optional
+            A path to stay close to (MPC: the plan being executed), weighted by
+            ``reference_weight`` [1/m^2] on the mean squared tip-position distance.
 
         Returns
         -------
@@ -308,7 +318,16 @@ class TrajectoryOptimizer:
             raise PlanningError(f"start fill {start.fill} m^3 exceeds the bucket capacity {cap} m^3")
         n = self.intervals
         h = float(duration) / n
-        p = self._parameters(soil, pile, start, h, lam)
+        if not (math.isfinite(reference_weight) and reference_weight >= 0.0):
+            raise PlanningError(f"reference_weight must be a finite number >= 0, got {reference_weight!r}")
+        ref = np.zeros((n + 1, 2))
+        if reference is not None and reference_weight > 0.0:
+            ts = np.arange(n + 1) * h
+            rt = reference.t - reference.t[0]
+            ref = np.column_stack([np.interp(ts, rt, reference.x), np.interp(ts, rt, reference.z)])
+        else:
+            reference_weight = 0.0
+        p = np.concatenate([self._parameters(soil, pile, start, h, lam), ref.ravel(), [reference_weight]])
         lbx, ubx = self._bounds(pile, start)
         lbg, ubg = self._constraint_bounds(soil, min_fill)
         args: dict[str, Any] = {"p": p, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
@@ -359,12 +378,13 @@ class TrajectoryOptimizer:
         a_lo, a_hi = min(a_lo, start.blade_angle), max(a_hi, start.blade_angle)
         x_lo = start.x - 1e-6
         x_hi = start.x + ld.max_speed * 60.0
-        cap = self.bucket.capacity
+        cap = self.bucket.capacity * opt.fill_limit
         lo_state = np.array([x_lo, z_lo, a_lo, 0.0])
         hi_state = np.array([x_hi, z_hi, a_hi, cap])
         lbx = np.concatenate([np.tile(lo_state, n + 1), np.tile([0.0, -ld.max_speed, -ld.max_tilt_rate], n)])
         ubx = np.concatenate([np.tile(hi_state, n + 1), np.tile([ld.max_speed, ld.max_speed, ld.max_tilt_rate], n)])
-        first = np.array([start.x, start.z, start.blade_angle, min(start.fill, cap)])
+        first = np.array([start.x, start.z, start.blade_angle, start.fill])
+        ubx[4 * 1 + 3::4][: n] = np.maximum(cap, start.fill)
         lbx[:4] = first
         ubx[:4] = first
         return lbx, ubx
@@ -471,7 +491,9 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     p_lam = ca.SX.sym("lam")
     p_soil = ca.SX.sym("soil", 7)
     p_surf = ca.SX.sym("surf", grid.size)
-    p = ca.vertcat(p_start, p_vel0, p_h, p_lam, p_soil, p_surf)
+    p_ref = ca.SX.sym("ref", 2, n + 1)
+    p_wref = ca.SX.sym("wref")
+    p = ca.vertcat(p_start, p_vel0, p_h, p_lam, p_soil, p_surf, ca.vec(p_ref), p_wref)
     # single-node force function (also used by predict)
     xs, zs, ths, vs = ca.SX.sym("x"), ca.SX.sym("z"), ca.SX.sym("th"), ca.SX.sym("V")
     alpha = grid.slope_angle(xs, p_surf)
@@ -480,7 +502,7 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     out = casadi_forces(p_soil, vertical, alpha - ths, alpha, w_load, bucket, DEFAULT_OPTIONS)
     rho = alpha - ths
     forces = ca.Function("forces", [xs, zs, ths, vs, p_soil, p_surf], [out["F_T"], out["F_N"]])
-    node = ca.Function("node", [xs, zs, ths, vs, p_soil, p_surf], [out["F_T"], out["F_N"], rho, vertical])
+    node = ca.Function("node", [xs, zs, ths, vs, p_soil, p_surf], [out["F_T"], out["F_N"], rho, vertical, alpha])
     # decision variables
     X = ca.SX.sym("X", 4, n + 1)
     U = ca.SX.sym("U", 3, n)
@@ -490,12 +512,13 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     energy = 0.0
     smooth = 0.0
     ft_all, fn_all = [], []
-    ft0, fn0, *_ = node(X[0, 0], X[1, 0], X[2, 0], X[3, 0], p_soil, p_surf)
+    ft0, fn0, _, vertical_prev, _ = node(X[0, 0], X[1, 0], X[2, 0], X[3, 0], p_soil, p_surf)
     ft_all.append(ft0)
     fn_all.append(fn0)
     phi, delta = p_soil[3], p_soil[4]
     rho_lo = DEFAULT_OPTIONS.rho_min + options.rho_margin
     rho_hi = math.pi - DEFAULT_OPTIONS.eps1 - DEFAULT_OPTIONS.eps2 - delta - phi - options.rho_margin
+    alpha_hi = DEFAULT_OPTIONS.alpha_max - options.rho_margin
     f_push = options.force_margin * loader.max_push_force
     f_lift = options.force_margin * loader.max_lift_force
     acc = loader.max_acceleration
@@ -508,9 +531,12 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
         dx, dz = h * u[0], h * u[1]
         # kinematics (exact for piecewise-constant velocity)
         g_eq += [xn - xk - dx, zn - zk - dz, tn - tk - h * u[2]]
-        # fill: area between the start surface and the segment (midpoint rule), capped by the bounds on V
-        xm, zm = 0.5 * (xk + xn), 0.5 * (zk + zn)
-        removed = bucket.width * dx * smooth_pos(grid.height(xm, p_surf) - zm, 1e-3)
+        # forces at the new node (and its depth below the surface)
+        f_t, f_n, rho_n, vertical, alpha_n = node(xn, zn, tn, vn, p_soil, p_surf)
+        # fill: area between the start surface and the segment (trapezoid rule on the node depths),
+        # capped by the bounds on V
+        removed = bucket.width * dx * smooth_pos(0.5 * (vertical_prev + vertical), 1e-3)
+        vertical_prev = vertical
         g_eq.append(vn - vk - removed)
         # acceleration limits
         du = u - prev_u
@@ -518,12 +544,12 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
                    tilt_acc * h - du[2], tilt_acc * h + du[2]]
         smooth = smooth + ca.sumsqr(du / ca.vertcat(acc, acc, tilt_acc))
         prev_u = u
-        # forces at the new node, limits and validity domain
-        f_t, f_n, rho_n, vertical = node(xn, zn, tn, vn, p_soil, p_surf)
+        # force limits and validity domain at the new node
         ft_all.append(f_t)
         fn_all.append(f_n)
         slack = VALIDITY_RELAX * smooth_pos(-vertical, 1e-3)
-        g_ineq += [1.0 - f_t / f_push, 1.0 - f_n / f_lift, rho_n - rho_lo + slack, rho_hi - rho_n + slack]
+        g_ineq += [1.0 - f_t / f_push, 1.0 - f_n / f_lift, rho_n - rho_lo + slack, rho_hi - rho_n + slack,
+                   alpha_hi - alpha_n + slack, alpha_n + alpha_hi + slack]
         # energy (the env's bookkeeping)
         c, s = ca.cos(tn), ca.sin(tn)
         work = f_t * (dx * c + dz * s) + f_n * (dz * c - dx * s)
@@ -534,13 +560,14 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     fill_end = X[3, n]
     g = ca.vertcat(*g_eq, *g_ineq, fill_end)
     n_eq, n_ineq = len(g_eq), len(g_ineq)
+    tracking = ca.sumsqr(X[0:2, 1:] - p_ref[:, 1:]) / n
     objective = (-X[3, n] / bucket.capacity + p_lam * energy / 1000.0
-                 + options.smoothing_weight * smooth / n)
+                 + options.smoothing_weight * smooth / n + p_wref * tracking)
     nlp = {"x": w, "p": p, "f": objective, "g": g}
     solver_opts = {
         "ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
         "ipopt.max_iter": options.max_iter, "ipopt.tol": options.tolerance,
-        "ipopt.acceptable_tol": 1e-4, "ipopt.acceptable_iter": 5,
+        "ipopt.acceptable_tol": 1e-3, "ipopt.acceptable_iter": 5,
         "ipopt.mu_strategy": "adaptive", "error_on_fail": False,
     }
     solver = ca.nlpsol("bucket_path", "ipopt", nlp, solver_opts)

@@ -14,7 +14,7 @@ cycles, which soil parameters to believe and which path to dig next:
 
 Nothing hides a failure: a calibration that raises or reports
 ``success=False`` keeps the previous parameters, a plan that fails falls back
-to the last good path (or the Bezier path), and both are reported in the
+to the Bezier path moved to the current face, and both are reported in the
 cycle's record.
 """
 
@@ -193,10 +193,11 @@ class Calibrating(Strategy):
             outcome = PlanOutcome(None, False, f"planner raised: {exc}", 0.0)
         outcome.seconds = time.perf_counter() - start
         if outcome.path is None or not outcome.success:
-            fallback = self.last_good_path.shifted(0.0, 0.0) if self.last_good_path is not None else None
-            if fallback is None:
-                fallback = bezier_on_face(pile, self.rate)
-            return PlanOutcome(fallback, False, f"{outcome.message}; fell back to {fallback.name}", outcome.seconds)
+            # the last good path was planned for another (uncarved) surface: the safe fallback is the
+            # baseline Bezier path moved to the current face
+            fallback = bezier_on_face(pile, self.rate)
+            return PlanOutcome(fallback, False, f"{outcome.message}; fell back to the {fallback.name} path",
+                               outcome.seconds)
         self.last_good_path = outcome.path
         return outcome
 

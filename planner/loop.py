@@ -1,0 +1,99 @@
+"""Planning between cycles: the next cycle's plan and the MPC that executes it.
+
+:func:`plan_next_cycle` is what the cycle-to-cycle loop
+(:mod:`wheelloader.adaptation`) calls after each calibration: a full-cycle
+trajectory optimisation on the carved pile with the calibrated parameters,
+checked against the NumPy model, handed over with an
+:class:`~wheelloader.planner.mpc.MPCController` that re-plans during the cycle.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+from wheelloader.estimator import Bucket, Loader, Pile, SoilParams, as_soil
+from wheelloader.estimator.errors import PlanningError
+
+from .mpc import ACCEPTED_STATUSES, MPCController
+from .trajectory import PlannerOptions, StartState, TrajectoryOptimizer
+from .verify import verify_plan
+
+#: Duration of the digging motion once the tip is at the face [s] (the paper's 4.67 s cycle).
+DIG_DURATION = 4.67
+#: Speed assumed for the approach through the air to a carved face [m/s].
+APPROACH_SPEED = 0.6
+
+_OPTIMIZERS: dict[tuple, TrajectoryOptimizer] = {}
+
+
+def optimizer_for(bucket: Bucket | None = None, loader: Loader | None = None,
+                  options: PlannerOptions | None = None) -> TrajectoryOptimizer:
+    """A cached :class:`TrajectoryOptimizer` (the NLP is built once per settings)."""
+    key = (bucket or Bucket(), loader or Loader(), options or PlannerOptions())
+    if key not in _OPTIMIZERS:
+        _OPTIMIZERS[key] = TrajectoryOptimizer(*key)
+    return _OPTIMIZERS[key]
+
+
+def default_start(pile: Pile, cfg: Any = None) -> StartState:
+    """The env's nominal start pose: 0.10 m before the toe, 0.03 m above the ground, blade at -5 deg.
+
+    With an env config ``cfg`` its ``start_pose`` is used instead.
+    """
+    if cfg is not None:
+        x, z, th = cfg.start_pose
+        return StartState(x, z, th)
+    from wheelloader.envs.config import pile_toe
+
+    return StartState(pile_toe(pile) - 0.10, float(pile.heights.min()) + 0.03, math.radians(-5.0))
+
+
+def cycle_duration(pile: Pile, start: StartState) -> float:
+    """:data:`DIG_DURATION` plus the time to cross the air between ``start`` and the (carved) face [s]."""
+    import numpy as np
+
+    xs = start.x + np.arange(0.0, 4.0, 0.01)
+    rising = np.nonzero(np.asarray(pile.surface_height(xs)) > start.z + 0.05)[0]
+    gap = float(xs[rising[0]] - start.x) if rising.size else 0.0
+    return DIG_DURATION + max(0.0, gap - 0.3) / APPROACH_SPEED
+
+
+def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: StartState | None = None,
+                    bucket: Bucket | None = None, loader: Loader | None = None,
+                    options: PlannerOptions | None = None, control_rate: float = 60.0, mpc: bool = True,
+                    replan_every: int = 6) -> Any:
+    """Plan the next cycle on ``pile`` with ``params``; return a ``PlanOutcome`` for the adaptation loop.
+
+    The plan is accepted only when IPOPT reports success and the NumPy
+    re-simulation (:func:`verify_plan`) passes every check; otherwise the
+    outcome says why (``success=False``) and the loop falls back. With
+    ``mpc`` the outcome carries an :class:`MPCController` (warm-started with
+    the plan) that re-plans every ``replan_every`` steps during the cycle.
+    """
+    from wheelloader.adaptation import PlanOutcome
+
+    tic = time.perf_counter()
+    params = as_soil(params)
+    opt = optimizer_for(bucket, loader, options)
+    start = start or default_start(pile)
+    duration = cycle_duration(pile, start)
+    try:
+        plan = opt.solve(params, pile, start, duration)
+    except PlanningError as exc:
+        return PlanOutcome(None, False, f"planning failed: {exc}", time.perf_counter() - tic)
+    check = verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate)
+    seconds = time.perf_counter() - tic
+    if plan.status not in ACCEPTED_STATUSES:
+        return PlanOutcome(None, False, f"IPOPT: {plan.status}", seconds)
+    if not check.ok:
+        return PlanOutcome(None, False, "plan fails the NumPy check: " + "; ".join(check.failures), seconds)
+    controller = None
+    if mpc:
+        controller = MPCController(params, pile, duration, bucket=opt.bucket, loader=opt.loader,
+                                   control_rate=control_rate, replan_every=replan_every, initial_plan=plan,
+                                   options=opt.options)
+    path = plan.path(control_rate, name="planned")
+    return PlanOutcome(path, True, f"IPOPT {plan.status} in {plan.iterations} it.; predicted fill "
+                       f"{check.fill / opt.bucket.capacity:.0%}, {check.energy / 1e3:.1f} kJ", seconds, controller)

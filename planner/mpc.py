@@ -1,0 +1,210 @@
+"""Receding-horizon MPC in the env: re-plan the rest of the cycle from the measured state.
+
+Every ``replan_every`` control steps the controller reads the tip pose,
+velocity and fill from the observation, solves the trajectory optimisation
+for the remaining time of the cycle (shrinking horizon: the same ``N``
+intervals over less time; the end-out-of-the-pile constraint stays), warm
+started from the previous plan's remaining part, and tracks the new plan
+with feed-forward velocity plus proportional feedback
+(:class:`~wheelloader.envs.scripted.PathTracker`). The solver status is
+checked every time: a failed or non-finite solve keeps the last feasible
+plan; with none, a retreat (lift the bucket out of the pile) is tracked.
+Every solve is recorded in :attr:`MPCController.history`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from wheelloader.estimator import Bucket, BucketPath, Loader, Pile, SoilParams, as_soil
+from wheelloader.estimator.errors import PlanningError
+
+from .trajectory import Plan, PlannerOptions, StartState, TrajectoryOptimizer
+
+#: Statuses of IPOPT the controller accepts as a usable plan.
+ACCEPTED_STATUSES = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+
+
+@dataclass
+class SolveRecord:
+    """One MPC solve: when, how long, what IPOPT said and what the controller did with it."""
+
+    step: int
+    remaining: float
+    seconds: float
+    status: str
+    iterations: int
+    accepted: bool
+    action: str
+
+
+class MPCController:
+    """Shrinking-horizon MPC for one digging cycle of ``BucketLoadingEnv``.
+
+    Parameters
+    ----------
+    soil : SoilParams, preset name or dict
+        Parameters the controller plans with (calibrated, nominal or true).
+    pile : Pile
+        Surface at the start of the cycle.
+    duration : float
+        Cycle duration the controller aims for [s].
+    bucket, loader : optional
+        Must match the env's.
+    control_rate : float
+        Env control rate [Hz].
+    replan_every : int
+        Control steps between re-plans (default 6: 10 Hz at 60 Hz).
+    intervals : int
+        Intervals of the MPC's optimisation (default 24).
+    min_remaining : float
+        Below this remaining time [s] the controller stops re-planning and tracks the last plan.
+    initial_plan : Plan, optional
+        A full-cycle plan to start from (warm start of the first solve; tracked if that solve fails).
+    options : PlannerOptions, optional
+        Weights and margins (``intervals`` is overridden).
+    reference_weight : float
+        Weight [1/m^2] of staying near the plan being executed (keeps successive
+        re-plans from jumping between local optima).
+    """
+
+    def __init__(self, soil: SoilParams | str | dict, pile: Pile, duration: float, *, bucket: Bucket | None = None,
+                 loader: Loader | None = None, control_rate: float = 60.0, replan_every: int = 6,
+                 intervals: int = 24, min_remaining: float = 0.4, initial_plan: Plan | None = None,
+                 options: PlannerOptions | None = None, reference_weight: float = 20.0) -> None:
+        if not (isinstance(replan_every, int) and replan_every >= 1):
+            raise PlanningError(f"replan_every must be a positive integer, got {replan_every!r}")
+        if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0.0):
+            raise PlanningError(f"duration must be > 0 s, got {duration!r}")
+        if not control_rate > 0.0:
+            raise PlanningError(f"control_rate must be > 0 Hz, got {control_rate!r}")
+        from dataclasses import replace
+
+        self.soil = as_soil(soil)
+        self.pile = pile
+        self.duration = float(duration)
+        self.bucket = bucket or Bucket()
+        self.loader = loader or Loader()
+        self.rate = float(control_rate)
+        self.replan_every = replan_every
+        self.min_remaining = float(min_remaining)
+        base = options or PlannerOptions()
+        self.optimizer = TrajectoryOptimizer(self.bucket, self.loader, replace(base, intervals=intervals))
+        self.initial_plan = initial_plan
+        self.reference_weight = float(reference_weight)
+        self.history: list[SolveRecord] = []
+        self.reset()
+
+    def reset(self) -> None:
+        """Start a new cycle (clears the plan, the tracker and the history)."""
+        from wheelloader.envs.scripted import PathTracker
+
+        self.step_index = 0
+        self.history = []
+        self.plan: Plan | None = self.initial_plan
+        self._plan_start = 0.0
+        self._tracker = (PathTracker(self.initial_plan.path(self.rate), self.loader, self.rate)
+                         if self.initial_plan is not None else None)
+        self.optimizer.reset_warm_start()
+
+    @property
+    def failures(self) -> int:
+        """Solves that were not accepted."""
+        return sum(not r.accepted for r in self.history)
+
+    def solve_times(self) -> np.ndarray:
+        """Wall time of every solve so far [s]."""
+        return np.array([r.seconds for r in self.history])
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        """Action for ``obs``; re-plans every ``replan_every`` steps."""
+        k = self.step_index
+        now = k / self.rate
+        remaining = self.duration - now
+        if k % self.replan_every == 0 and remaining >= self.min_remaining:
+            self._replan(obs, k, remaining)
+        if self._tracker is None:
+            self._tracker = self._retreat(obs)
+        self.step_index += 1
+        return self._tracker(obs)
+
+    # ------------------------------------------------------------------ internals
+    def _replan(self, obs: np.ndarray, k: int, remaining: float) -> None:
+        from wheelloader.envs.scripted import PathTracker
+
+        start = StartState.from_observation(obs, self.bucket.capacity)
+        guess = self._remaining_guess(k / self.rate)
+        tic = time.perf_counter()
+        try:
+            plan = self.optimizer.solve(self.soil, self.pile, start, remaining, initial_guess=guess, reference=guess,
+                                        reference_weight=self.reference_weight)
+        except PlanningError as exc:
+            self.history.append(SolveRecord(k, remaining, time.perf_counter() - tic, f"error: {exc}", 0, False,
+                                            self._fallback_name()))
+            return
+        seconds = time.perf_counter() - tic
+        usable = plan.status in ACCEPTED_STATUSES and _finite(plan)
+        if usable:
+            self.plan = plan
+            self._plan_start = k / self.rate
+            self._tracker = PathTracker(plan.path(self.rate), self.loader, self.rate)
+            action = "new plan"
+        else:
+            action = self._fallback_name()
+        self.history.append(SolveRecord(k, remaining, seconds, plan.status, plan.iterations, usable, action))
+
+    def _fallback_name(self) -> str:
+        return "kept the last feasible plan" if self._tracker is not None else "retreat"
+
+    def _remaining_guess(self, now: float) -> BucketPath | None:
+        plan = self.plan
+        if plan is None:
+            return None
+        t = plan.t - plan.t[0]
+        elapsed = now - self._plan_start
+        if elapsed <= 0.0:
+            return plan.path(self.rate)
+        if elapsed >= t[-1] - 1e-6:
+            return None
+        tt = np.concatenate([[elapsed], t[t > elapsed + 1e-9]])
+        return BucketPath(tt - elapsed, np.interp(tt, t, plan.x), np.interp(tt, t, plan.z),
+                          np.interp(tt, t, plan.blade_angle), "remaining plan")
+
+    def _retreat(self, obs: np.ndarray):
+        """Lift the bucket straight up 0.5 m over one second, blade curled (the safe fallback)."""
+        from wheelloader.envs.scripted import PathTracker
+
+        x, z, th = float(obs[0]), float(obs[1]), float(obs[2])
+        t = np.linspace(0.0, 1.0, 61)
+        path = BucketPath(t, np.full_like(t, x), z + 0.5 * t, th + (math.radians(40.0) - th) * t, "retreat")
+        return PathTracker(path, self.loader, self.rate)
+
+
+def _finite(plan: Plan) -> bool:
+    arrays = (plan.x, plan.z, plan.blade_angle, plan.vx, plan.vz, plan.omega)
+    return all(bool(np.all(np.isfinite(a))) for a in arrays) and math.isfinite(plan.energy)
+
+
+def make_env_policy(env: Any, soil: SoilParams | str | dict | None = None, **kwargs: Any) -> MPCController:
+    """An MPC controller for ``env`` (a ``BucketLoadingEnv`` or a wrapper of one).
+
+    Plans with ``soil`` (default: the env's current simulator soil, i.e. an
+    oracle on the plant or the calibrated soil on a twin) on the env's start
+    pile; call it after ``env.reset()``. The controller re-plans from the
+    env's current pile when :meth:`MPCController.reset` is called after a new
+    ``env.reset()`` only if you build a new one: use one controller per cycle.
+    """
+    from .loop import cycle_duration, default_start
+
+    base = env.unwrapped
+    cfg = base.cfg
+    pile = base._start_pile
+    params = base.soil if soil is None else as_soil(soil)
+    start = default_start(pile, cfg)
+    return MPCController(params, pile, cycle_duration(pile, start), bucket=cfg.bucket, loader=cfg.loader,
+                         control_rate=cfg.control_rate, **kwargs)

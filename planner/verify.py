@@ -1,0 +1,157 @@
+"""Re-simulate a planned path with the NumPy force model and check every constraint.
+
+The planner optimises a smooth CasADi copy of the model on a coarse time
+grid; :func:`verify_plan` samples the plan at the control rate and checks it
+against the estimator's own :func:`~wheelloader.estimator.soil_forces` on the
+true (unsmoothed) pile, so a plan that passes is feasible for the model the
+env simulates, not only for the planner's approximation of it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from wheelloader.estimator import Bucket, BucketPath, Loader, Pile, SoilParams, as_soil, contact_state, soil_forces
+from wheelloader.estimator.errors import PlanningError
+from wheelloader.estimator.force_model import FLAG_OUT_OF_SOIL
+
+from .trajectory import Plan, PlannerOptions
+
+
+@dataclass(frozen=True)
+class PlanCheck:
+    """Outcome of :func:`verify_plan` (forces in N, speeds in m/s, angles in rad).
+
+    ``ok`` is true when every check passed; ``failures`` names those that did not.
+    """
+
+    ok: bool
+    failures: tuple[str, ...]
+    max_tangential: float
+    max_normal: float
+    max_speed: float
+    max_tilt_rate: float
+    max_acceleration: float
+    validity_violations: int
+    min_rho_in_soil: float
+    fill: float
+    spilled: float
+    energy: float
+    end_clearance: float
+    backward_steps: int
+    details: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serialisable mapping."""
+        out = asdict(self)
+        out["failures"] = list(self.failures)
+        return out
+
+
+def path_energy(path: BucketPath, soil: SoilParams, pile: Pile, bucket: Bucket) -> dict[str, np.ndarray | float]:
+    """Forces, fill and the env's energy bookkeeping along ``path`` with the NumPy model.
+
+    Energy per step: ``max(0, F_T ds_t + F_N ds_n)`` on the soil plus ``max(0, W_load dz)`` on the
+    payload, with the forces and blade angle at the step's end (as ``BucketLoadingEnv.step``).
+    """
+    state = contact_state(path.x, path.z, path.blade_angle, pile, bucket)
+    forces = soil_forces(soil, state, bucket)
+    dx, dz = np.diff(path.x), np.diff(path.z)
+    c, s = np.cos(path.blade_angle[1:]), np.sin(path.blade_angle[1:])
+    work = forces.tangential[1:] * (dx * c + dz * s) + forces.normal[1:] * (dz * c - dx * s)
+    lift = state.load_weight(soil.gamma)[1:] * dz
+    energy = float(np.sum(np.maximum(work, 0.0)) + np.sum(np.maximum(lift, 0.0)))
+    return {"state": state, "forces": forces, "energy": energy, "fill": float(state.fill_volume[-1]),
+            "spilled": float(state.carve.spilled) if state.carve is not None else 0.0}
+
+
+def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pile, bucket: Bucket | None = None,
+                loader: Loader | None = None, options: PlannerOptions | None = None, rate: float = 60.0,
+                tolerance: float = 0.02) -> PlanCheck:
+    """Check a plan against the NumPy model and the machine's limits.
+
+    Checks: forces within the loader's limits (the plan's ``force_margin`` is
+    the planner's own safety factor; the check uses the hard limits), speed
+    and tilt-rate limits, acceleration between the plan's intervals, every
+    in-soil sample inside the model's validity domain (no flag but "tip out of
+    soil"), the bucket not over its capacity (nothing spilled), forward motion
+    only, and the end pose at least ``end_clearance / 2`` above the surface.
+    ``tolerance`` is the relative slack on the rate limits (numerical rounding
+    of the solver).
+
+    Parameters
+    ----------
+    plan : Plan or BucketPath
+        What to check (a :class:`Plan` is sampled at ``rate``).
+    soil : SoilParams, preset name or dict
+        Soil the forces are computed with.
+    pile : Pile
+        Surface at the start of the cycle.
+    bucket, loader, options : optional
+        Machine and planner settings (defaults as the planner's).
+    rate : float
+        Sampling rate of the re-simulation [Hz].
+    tolerance : float
+        Relative slack on speed and acceleration limits.
+
+    Returns
+    -------
+    PlanCheck
+    """
+    soil = as_soil(soil)
+    bucket = bucket or Bucket()
+    loader = loader or Loader()
+    options = options or PlannerOptions()
+    if isinstance(plan, Plan):
+        path = plan.path(rate)
+        accel = _interval_acceleration(plan)
+    elif isinstance(plan, BucketPath):
+        path = plan
+        vx, vz, _ = path.velocity()
+        accel = float(np.max(np.abs(np.diff(np.column_stack([vx, vz]), axis=0)) / np.diff(path.t)[:, None]))
+    else:
+        raise PlanningError(f"plan must be a Plan or a BucketPath, got {type(plan).__name__}")
+    sim = path_energy(path, soil, pile, bucket)
+    forces, state = sim["forces"], sim["state"]
+    dt = np.diff(path.t)
+    vx, vz, om = np.diff(path.x) / dt, np.diff(path.z) / dt, np.diff(path.blade_angle) / dt
+    in_soil = state.depth > 0.0
+    bad = in_soil & ((forces.flags & ~FLAG_OUT_OF_SOIL) != 0)
+    end_clear = float(path.z[-1] - pile.surface_height(float(path.x[-1])))
+    slack = 1.0 + tolerance
+    checks = {
+        "tangential force above the loader's push limit": float(forces.tangential.max()) > loader.max_push_force,
+        "normal force above the loader's lift limit": float(forces.normal.max()) > loader.max_lift_force,
+        "speed above the loader's limit": float(np.max(np.abs(np.concatenate([vx, vz])))) > loader.max_speed * slack,
+        "tilt rate above the loader's limit": float(np.max(np.abs(om))) > loader.max_tilt_rate * slack,
+        "acceleration above the loader's limit": accel > loader.max_acceleration * slack,
+        "tip in soil outside the model's validity domain": bool(np.any(bad)),
+        "bucket over capacity (soil spilled)": sim["spilled"] > 1e-3 * bucket.capacity,
+        "tip moves backwards": bool(np.any(vx < -1e-6)),
+        "path does not end out of the pile": end_clear < 0.5 * options.end_clearance,
+    }
+    failures = tuple(name for name, failed in checks.items() if failed)
+    rho_in = state.rho[in_soil]
+    return PlanCheck(
+        ok=not failures, failures=failures,
+        max_tangential=float(forces.tangential.max()), max_normal=float(forces.normal.max()),
+        max_speed=float(np.max(np.abs(np.concatenate([vx, vz])))), max_tilt_rate=float(np.max(np.abs(om))),
+        max_acceleration=accel, validity_violations=int(np.count_nonzero(bad)),
+        min_rho_in_soil=float(rho_in.min()) if rho_in.size else math.nan,
+        fill=sim["fill"], spilled=sim["spilled"], energy=sim["energy"], end_clearance=end_clear,
+        backward_steps=int(np.count_nonzero(vx < -1e-6)),
+        details={"flags": forces.flag_summary(), "samples": len(path)},
+    )
+
+
+def _interval_acceleration(plan: Plan) -> float:
+    """Largest change of the interval velocities per interval length [m/s^2] (from rest at the start)."""
+    h = float(plan.t[1] - plan.t[0])
+    start = plan.raw.get("start")
+    v0 = np.array([[start.vx, start.vz]]) if start is not None else np.zeros((1, 2))
+    v = np.vstack([v0, np.column_stack([plan.vx, plan.vz])])
+    return float(np.max(np.abs(np.diff(v, axis=0))) / h)
