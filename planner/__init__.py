@@ -11,9 +11,10 @@
 
 from .loop import cycle_duration, default_start, optimizer_for, plan_next_cycle
 from .mpc import MPCController, make_env_policy
+from .pareto import DEFAULT_WEIGHTS, ParetoPoint, mark_pareto_optimal, pareto_sweep
 from .trajectory import Plan, PlannerOptions, StartState, TrajectoryOptimizer
 from .verify import PlanCheck, path_energy, verify_plan
 
-__all__ = ["MPCController", "Plan", "PlanCheck", "PlannerOptions", "StartState", "TrajectoryOptimizer",
-           "cycle_duration", "default_start", "make_env_policy", "optimizer_for", "path_energy",
-           "plan_next_cycle", "verify_plan"]
+__all__ = ["DEFAULT_WEIGHTS", "MPCController", "ParetoPoint", "Plan", "PlanCheck", "PlannerOptions", "StartState",
+           "TrajectoryOptimizer", "cycle_duration", "default_start", "make_env_policy", "mark_pareto_optimal",
+           "optimizer_for", "pareto_sweep", "path_energy", "plan_next_cycle", "verify_plan"]

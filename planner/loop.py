@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 from typing import Any
 
 from wheelloader.estimator import Bucket, Loader, Pile, SoilParams, as_soil
@@ -35,6 +36,12 @@ def optimizer_for(bucket: Bucket | None = None, loader: Loader | None = None,
     if key not in _OPTIMIZERS:
         _OPTIMIZERS[key] = TrajectoryOptimizer(*key)
     return _OPTIMIZERS[key]
+
+
+def cautious_options(options: PlannerOptions) -> PlannerOptions:
+    """Wider safety margins for a second attempt: angle margin x1.6, fill limit and force margin lowered."""
+    return replace(options, rho_margin=1.6 * options.rho_margin, fill_limit=0.9 * options.fill_limit,
+                   force_margin=0.9 * options.force_margin)
 
 
 def default_start(pile: Pile, cfg: Any = None) -> StartState:
@@ -66,9 +73,11 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
                     replan_every: int = 6) -> Any:
     """Plan the next cycle on ``pile`` with ``params``; return a ``PlanOutcome`` for the adaptation loop.
 
-    The plan is accepted only when IPOPT reports success and the NumPy
-    re-simulation (:func:`verify_plan`) passes every check; otherwise the
-    outcome says why (``success=False``) and the loop falls back. With
+    The plan is accepted only when the NumPy re-simulation
+    (:func:`verify_plan`) passes every check (when IPOPT stopped without
+    success, e.g. at its iteration limit, the message says the plan is feasible
+    but not proven optimal); otherwise the outcome says why
+    (``success=False``) and the loop falls back. With
     ``mpc`` the outcome carries an :class:`MPCController` (warm-started with
     the plan) that re-plans every ``replan_every`` steps during the cycle.
     """
@@ -79,21 +88,32 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     opt = optimizer_for(bucket, loader, options)
     start = start or default_start(pile)
     duration = cycle_duration(pile, start)
+    retried = ""
     try:
         plan = opt.solve(params, pile, start, duration)
+        check = verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate)
+        if not check.ok:
+            # the smooth CasADi surface can differ from a freshly carved pile near its kinks: re-plan once
+            # with wider margins, starting from the plan that failed
+            first = "; ".join(check.failures)
+            opt = optimizer_for(opt.bucket, opt.loader, cautious_options(opt.options))
+            plan = opt.solve(params, pile, start, duration, initial_guess=plan)
+            check = verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate)
+            retried = f" (re-planned with wider margins after: {first})"
     except PlanningError as exc:
         return PlanOutcome(None, False, f"planning failed: {exc}", time.perf_counter() - tic)
-    check = verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate)
     seconds = time.perf_counter() - tic
-    if plan.status not in ACCEPTED_STATUSES:
-        return PlanOutcome(None, False, f"IPOPT: {plan.status}", seconds)
     if not check.ok:
-        return PlanOutcome(None, False, "plan fails the NumPy check: " + "; ".join(check.failures), seconds)
+        return PlanOutcome(None, False, f"IPOPT: {plan.status}; plan fails the NumPy check: "
+                           + "; ".join(check.failures) + f" {check.details['flags']}{retried}", seconds)
+    # a plan that passes every check of the NumPy re-simulation is feasible even when IPOPT stopped at its
+    # iteration limit (then it is not proven optimal): use it and say so
+    note = "" if plan.status in ACCEPTED_STATUSES else " (not proven optimal; feasible by the NumPy check)"
     controller = None
     if mpc:
         controller = MPCController(params, pile, duration, bucket=opt.bucket, loader=opt.loader,
                                    control_rate=control_rate, replan_every=replan_every, initial_plan=plan,
                                    options=opt.options)
     path = plan.path(control_rate, name="planned")
-    return PlanOutcome(path, True, f"IPOPT {plan.status} in {plan.iterations} it.; predicted fill "
+    return PlanOutcome(path, True, f"IPOPT {plan.status} in {plan.iterations} it.{note}{retried}; predicted fill "
                        f"{check.fill / opt.bucket.capacity:.0%}, {check.energy / 1e3:.1f} kJ", seconds, controller)

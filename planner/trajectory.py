@@ -74,7 +74,8 @@ class PlannerOptions:
     force_margin : float
         Fraction of the loader's force limits the plan may use (default 0.85).
     rho_margin : float
-        Margin kept from the validity domain's blade-angle limits [rad] (default 3 deg).
+        Margin kept from the validity domain's angle limits [rad] (default 5 deg: the smooth surface's
+        chord slope differs from the pile's by up to ~3 deg next to carved kinks).
     end_clearance : float
         Height of the final tip pose above the surface [m] (default 0.05 m).
     max_tilt_acceleration : float
@@ -84,7 +85,7 @@ class PlannerOptions:
     lift_headroom : float
         How far above the highest surface point the tip may go [m] (default 1 m).
     fill_limit : float
-        Largest planned fill as a fraction of the bucket capacity (default 0.97: the
+        Largest planned fill as a fraction of the bucket capacity (default 0.95: the
         planner's fill model is the midpoint rule on a smoothed surface; the margin keeps
         the real carving from spilling).
     max_iter : int
@@ -99,12 +100,12 @@ class PlannerOptions:
     energy_weight: float = 0.02
     smoothing_weight: float = 1e-3
     force_margin: float = 0.85
-    rho_margin: float = math.radians(3.0)
+    rho_margin: float = math.radians(5.0)
     end_clearance: float = 0.05
     max_tilt_acceleration: float = 4.0
     blade_angle_limits: tuple[float, float] = (math.radians(-45.0), math.radians(75.0))
     lift_headroom: float = 1.0
-    fill_limit: float = 0.97
+    fill_limit: float = 0.95
     max_iter: int = 300
     tolerance: float = 1e-4
     surface: SurfaceGrid = field(default_factory=SurfaceGrid)
