@@ -26,7 +26,8 @@ acceleration ramps).
   soil, ``rho_min + rho_margin <= rho <= pi - eps1 - eps2 - delta - phi -
   rho_margin`` and ``|alpha| <= alpha_max - rho_margin`` (relaxed by :data:`VALIDITY_RELAX` times the height above the
   surface, so it binds only in soil); the start pose and velocity; and the end out of the pile,
-  ``z_N >= z_s(x_N) + end_clearance``.
+  ``z_N >= z_s(x_N) + end_clearance``, while past the face every earlier node
+  stays at most ``stay_clearance`` above the surface (no hop out and back in).
 
 The NLP is built once per (intervals, bucket, loader, options) and cached;
 each call only passes new parameters, bounds and the initial guess.
@@ -88,6 +89,9 @@ class PlannerOptions:
         Largest planned fill as a fraction of the bucket capacity (default 0.95: the
         planner's fill model is the midpoint rule on a smoothed surface; the margin keeps
         the real carving from spilling).
+    stay_clearance : float
+        Past the face, the tip stays at most this high above the surface until the last
+        interval [m] (default 0.01 m; the env ends a cycle at 0.02 m).
     max_iter : int
         IPOPT iteration limit (default 300).
     tolerance : float
@@ -106,6 +110,7 @@ class PlannerOptions:
     blade_angle_limits: tuple[float, float] = (math.radians(-45.0), math.radians(75.0))
     lift_headroom: float = 1.0
     fill_limit: float = 0.95
+    stay_clearance: float = 0.01
     max_iter: int = 300
     tolerance: float = 1e-4
     surface: SurfaceGrid = field(default_factory=SurfaceGrid)
@@ -328,7 +333,8 @@ class TrajectoryOptimizer:
             ref = np.column_stack([np.interp(ts, rt, reference.x), np.interp(ts, rt, reference.z)])
         else:
             reference_weight = 0.0
-        p = np.concatenate([self._parameters(soil, pile, start, h, lam), ref.ravel(), [reference_weight]])
+        p = np.concatenate([self._parameters(soil, pile, start, h, lam), ref.ravel(), [reference_weight],
+                            [face_position(pile, start)]])
         lbx, ubx = self._bounds(pile, start)
         lbg, ubg = self._constraint_bounds(soil, min_fill)
         args: dict[str, Any] = {"p": p, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
@@ -438,6 +444,13 @@ class TrajectoryOptimizer:
                     raw={"start": start, "h": h})
 
 
+def face_position(pile: Pile, start: StartState) -> float:
+    """x where the surface first rises 3 cm above the start height ahead of ``start`` [m] (the face)."""
+    xs = start.x + np.arange(0.0, 4.0, 0.005)
+    rising = np.nonzero(np.asarray(pile.surface_height(xs)) > start.z + 0.03)[0]
+    return float(xs[rising[0]]) if rising.size else start.x
+
+
 def straight_dig(pile: Pile, start: StartState, duration: float, bucket: Bucket) -> BucketPath:
     """A simple initial guess: approach the face at ground level, dig ~15 cm under the surface, rise out.
 
@@ -494,7 +507,8 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     p_surf = ca.SX.sym("surf", grid.size)
     p_ref = ca.SX.sym("ref", 2, n + 1)
     p_wref = ca.SX.sym("wref")
-    p = ca.vertcat(p_start, p_vel0, p_h, p_lam, p_soil, p_surf, ca.vec(p_ref), p_wref)
+    p_face = ca.SX.sym("face")
+    p = ca.vertcat(p_start, p_vel0, p_h, p_lam, p_soil, p_surf, ca.vec(p_ref), p_wref, p_face)
     # single-node force function (also used by predict)
     xs, zs, ths, vs = ca.SX.sym("x"), ca.SX.sym("z"), ca.SX.sym("th"), ca.SX.sym("V")
     alpha = grid.slope_angle(xs, p_surf)
@@ -549,6 +563,12 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
         ft_all.append(f_t)
         fn_all.append(f_n)
         slack = VALIDITY_RELAX * smooth_pos(-vertical, 1e-3)
+        if k < n - 1:
+            # once past the face the tip stays in or just above the soil until the last interval: the env
+            # ends a cycle as soon as the tip has been in soil and is more than its exit clearance above
+            # the surface; before the face (the approach over the ground) the constraint is off
+            before_face = 0.5 * (1.0 + ca.tanh((p_face - xn) / 0.02))
+            g_ineq.append(options.stay_clearance + vertical + 10.0 * before_face)
         g_ineq += [1.0 - f_t / f_push, 1.0 - f_n / f_lift, rho_n - rho_lo + slack, rho_hi - rho_n + slack,
                    alpha_hi - alpha_n + slack, alpha_n + alpha_hi + slack]
         # energy (the env's bookkeeping)
