@@ -9,8 +9,12 @@
   m^3 and the check result next to the paper's default Bezier path on the same
   face. ``--pareto`` adds a sweep over the energy weight (fill against energy).
 
-Exit status 0 when IPOPT succeeded and the plan passed the check, 1 when the
-plan was written but failed (the summary says why), 2 for bad input.
+As in the cycle-to-cycle loop (:func:`~wheelloader.planner.loop.plan_next_cycle`),
+a plan that fails the check is re-planned once with wider margins, and a plan
+that passes it is usable even when IPOPT stopped without success (then it is
+reported as feasible but not proven optimal). Exit status 0 when the plan
+passed the check, 1 when it was written but failed (the summary says why), 2
+for bad input.
 """
 
 from __future__ import annotations
@@ -143,7 +147,7 @@ def run_plan(args: argparse.Namespace) -> int:
     from wheelloader.estimator.commands import load_pile
     from wheelloader.estimator.errors import ParameterError
 
-    from .loop import cycle_duration, default_start, optimizer_for
+    from .loop import cautious_options, cycle_duration, default_start, optimizer_for
     from .mpc import ACCEPTED_STATUSES
     from .pareto import pareto_sweep
     from .verify import path_energy, verify_plan
@@ -176,11 +180,23 @@ def run_plan(args: argparse.Namespace) -> int:
     timing["solve_s"] = plan.solve_time
     tic = time.perf_counter()
     check = verify_plan(plan, soil, pile, opt.bucket, opt.loader, opt.options, rate=args.rate)
+    timing["verify_s"] = time.perf_counter() - tic
+    retried = None
+    if not check.ok:
+        # as plan_next_cycle: re-plan once with wider margins, starting from the plan that failed
+        retried = list(check.failures)
+        tic = time.perf_counter()
+        opt = optimizer_for(opt.bucket, opt.loader, cautious_options(opt.options))
+        timing["build_s"] += time.perf_counter() - tic
+        plan = opt.solve(soil, pile, start, duration, energy_weight=lam, initial_guess=plan)
+        timing["solve_s"] += plan.solve_time
+        check = verify_plan(plan, soil, pile, opt.bucket, opt.loader, opt.options, rate=args.rate)
     path = plan.path(args.rate)
     sim = path_energy(path, soil, pile, opt.bucket)
-    timing["verify_s"] = time.perf_counter() - tic
     solver_ok = plan.status in ACCEPTED_STATUSES
-    ok = solver_ok and check.ok
+    # as plan_next_cycle: a plan is usable when the NumPy check passes (if IPOPT stopped without success it
+    # is feasible but not proven optimal, and the output says so)
+    ok = check.ok
     cap = opt.bucket.capacity
 
     baseline = bezier_on_face(pile, args.rate, opt.bucket)
@@ -200,6 +216,8 @@ def run_plan(args: argparse.Namespace) -> int:
         "energy_weight_per_kJ": lam, "duration_s": duration,
         "start": {"x": start.x, "z": start.z, "blade_angle": start.blade_angle},
         "ok": ok,
+        "ok_definition": "the NumPy re-simulation passed every check; solver_ok false: feasible, not proven optimal",
+        "replanned_with_wider_margins_after": retried,
         "plan": {"status": plan.status, "solver_ok": solver_ok, "iterations": plan.iterations,
                  "solve_time_s": plan.solve_time, "objective": plan.objective,
                  "predicted_energy_J_casadi": plan.energy, "predicted_fill_m3_casadi": plan.final_fill,
@@ -222,18 +240,21 @@ def run_plan(args: argparse.Namespace) -> int:
     print(f"{args.params}: planned with lambda = {lam:g}/kJ on the {args.pile or 'trapezoid'} pile, "
           f"{duration:.2f} s cycle, {opt.intervals} intervals")
     print(f"timing: NLP build {timing['build_s'] * 1e3:.0f} ms (cached per settings), IPOPT "
-          f"{plan.solve_time * 1e3:.0f} ms ({plan.iterations} it., {plan.status}), NumPy check "
+          f"{timing['solve_s'] * 1e3:.0f} ms ({plan.iterations} it., {plan.status}), NumPy check "
           f"{timing['verify_s'] * 1e3:.0f} ms")
     print(f"plan (NumPy re-simulation): {_describe(check.fill, cap, check.energy)}; "
           f"peak F_T {check.max_tangential / 1e3:.1f} kN, peak F_N {check.max_normal / 1e3:.1f} kN")
     print(f"baseline ({baseline.name} path on this face): {_describe(base_check.fill, cap, base_check.energy)}"
           f"{'' if base_check.ok else '; fails: ' + '; '.join(base_check.failures)}")
+    if retried is not None:
+        print("first plan failed the NumPy check (" + "; ".join(retried) + "); re-planned once with wider margins")
     if check.ok:
         print("check: passed (forces, speeds, accelerations, validity domain, capacity, forward motion, end pose)")
     else:
         print("check: FAILED: " + "; ".join(check.failures))
     if not solver_ok:
-        print(f"IPOPT did not succeed: {plan.status}")
+        print(f"IPOPT did not succeed: {plan.status}"
+              + ("; the plan is feasible by the NumPy check but not proven optimal" if check.ok else ""))
     if points:
         print(f"Pareto sweep over {len(points)} weights in {timing['pareto_s']:.1f} s:")
         print("  lambda/kJ   fill m^3  fill %   energy kJ   kJ/m^3  IPOPT status                  check")
@@ -243,7 +264,7 @@ def run_plan(args: argparse.Namespace) -> int:
             star = " *" if pt.pareto_optimal else ""
             print(f"  {pt.energy_weight:9g}  {pt.fill:9.4f}  {pt.fill_fraction:5.0%}  {pt.energy / 1e3:10.2f}  "
                   f"{per}  {pt.status:<28}  {mark}{star}")
-        print("  (* = Pareto-optimal among the points that passed)")
+        print("  (* = Pareto-optimal among the points that passed the check)")
     print(f"path written to {output}; summary written to {summary_path}")
     if plot_path is not None:
         from .plotting import plot_plan
@@ -254,7 +275,7 @@ def run_plan(args: argparse.Namespace) -> int:
                   title=f"plan for {Path(str(args.params)).name}, lambda = {lam:g}/kJ")
         print(f"figure written to {plot_path}")
     if not ok:
-        print("the plan was written but is NOT usable (see above and the summary)")
+        print("the plan was written but is NOT usable: it fails the NumPy check (see above and the summary)")
     return 0 if ok else 1
 
 

@@ -6,8 +6,11 @@ the last accepted plan of the sweep, and re-simulates every plan with the
 NumPy model (:func:`~wheelloader.planner.verify.verify_plan`). Fill and
 energy of a point are those of the NumPy re-simulation, not the CasADi
 prediction (which is kept as ``predicted_energy`` for comparison). A point
-whose solve or check fails is kept and marked (``ok`` false, with the IPOPT
-status and the failed checks); it is never dropped.
+whose solve or check fails is kept and marked, never dropped: ``status`` and
+``solver_ok`` say what IPOPT reported, ``check_ok`` and ``failures`` what the
+re-simulation found. As in :func:`~wheelloader.planner.loop.plan_next_cycle`,
+a plan that passes the check is usable (``ok``) even when IPOPT stopped
+without success; it is then feasible but not proven optimal for its lambda.
 """
 
 from __future__ import annotations
@@ -63,7 +66,9 @@ class ParetoPoint:
         Whether the solve started from a previous plan of the sweep.
     pareto_optimal : bool
         Whether the point is ``ok`` and no other ``ok`` point has at least its
-        fill for at most its energy (and is better in one of them).
+        fill for at most its energy (and is better in one of them): the pairs
+        are those of the NumPy re-simulation, so a feasible plan counts even
+        when IPOPT did not prove it optimal.
     plan, check : Plan, PlanCheck
         The plan and its check (not serialised by :meth:`to_dict`).
     """
@@ -87,8 +92,11 @@ class ParetoPoint:
 
     @property
     def ok(self) -> bool:
-        """Whether IPOPT succeeded and the re-simulation passed every check."""
-        return self.solver_ok and self.check_ok
+        """Whether the plan is usable: the NumPy re-simulation passed every check.
+
+        With ``solver_ok`` false the plan is feasible but not proven optimal.
+        """
+        return self.check_ok
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable mapping (non-finite numbers as ``None``)."""
@@ -111,8 +119,8 @@ def pareto_sweep(soil: SoilParams | str | dict, pile: Pile, weights: Sequence[fl
     """Plan for each energy weight and re-simulate each plan with the NumPy model.
 
     The first weight is solved from the planner's default initial guess; each
-    later one starts from the last plan of the sweep that IPOPT accepted and
-    that passed the check (or the default guess if there is none yet).
+    later one starts from the last plan of the sweep that passed the check
+    (or the default guess if there is none yet).
 
     Parameters
     ----------
@@ -166,7 +174,7 @@ def pareto_sweep(soil: SoilParams | str | dict, pile: Pile, weights: Sequence[fl
             status=plan.status, solver_ok=solver_ok, check_ok=check.ok, failures=tuple(check.failures),
             solve_time=float(plan.solve_time), iterations=plan.iterations, warm_started=guess is not None,
             plan=plan, check=check))
-        if solver_ok and check.ok:
+        if check.ok:
             guess = plan
     return mark_pareto_optimal(points)
 

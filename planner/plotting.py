@@ -49,7 +49,8 @@ def plot_plan(path: BucketPath, forces: dict[str, np.ndarray], pile: Pile, loade
     baseline : BucketPath, optional
         A comparison path (the paper's default Bezier path) drawn dashed.
     pareto : sequence of ParetoPoint, optional
-        Adds a panel of fill [m^3] against energy [kJ]; failed points are drawn as crosses.
+        Adds a panel of fill [m^3] against energy [kJ]; points that failed the check are crosses,
+        feasible ones IPOPT did not converge on are open circles.
     chosen_weight : float, optional
         Energy weight of the plan [1/kJ] (for the legend).
     baseline_point : (fill, energy), optional
@@ -96,19 +97,24 @@ def plot_plan(path: BucketPath, forces: dict[str, np.ndarray], pile: Pile, loade
         ax = axes[2]
         good = [p for p in pareto if p.ok]
         bad = [p for p in pareto if not p.ok]
-        if good:
-            ax.plot([p.energy / 1e3 for p in good], [p.fill for p in good], "o", color="tab:blue",
+        optimal = [p for p in good if p.solver_ok]
+        unproven = [p for p in good if not p.solver_ok]
+        if optimal:
+            ax.plot([p.energy / 1e3 for p in optimal], [p.fill for p in optimal], "o", color="tab:blue",
                     label="plans (IPOPT ok, check ok)")
-            front = sorted((p for p in good if p.pareto_optimal), key=lambda p: p.energy)
-            if front:
-                ax.plot([p.energy / 1e3 for p in front], [p.fill for p in front], "-", color="tab:blue", lw=1,
-                        label="Pareto front")
-            for p in good:
-                ax.annotate(f"{p.energy_weight:g}", (p.energy / 1e3, p.fill), fontsize=7,
-                            textcoords="offset points", xytext=(3, 3))
+        if unproven:
+            ax.plot([p.energy / 1e3 for p in unproven], [p.fill for p in unproven], "o", mfc="none",
+                    mec="tab:orange", label="check ok, IPOPT not converged")
+        front = sorted((p for p in good if p.pareto_optimal), key=lambda p: p.energy)
+        if front:
+            ax.plot([p.energy / 1e3 for p in front], [p.fill for p in front], "-", color="tab:blue", lw=1,
+                    label="Pareto front")
+        for p in pareto:
+            ax.annotate(f"{p.energy_weight:g}", (p.energy / 1e3, p.fill), fontsize=7,
+                        textcoords="offset points", xytext=(3, 3))
         if bad:
             ax.plot([p.energy / 1e3 for p in bad], [p.fill for p in bad], "x", color="tab:red", ms=8,
-                    label="failed (IPOPT or check)")
+                    label="failed the NumPy check")
         if plan_point is not None:
             label = "this plan" if chosen_weight is None else f"this plan (lambda = {chosen_weight:g}/kJ)"
             ax.plot(plan_point[1] / 1e3, plan_point[0], "s", mfc="none", mec="k", ms=11, label=label)
