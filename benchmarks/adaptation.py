@@ -80,7 +80,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=3, help="seeds per soil and pile")
     parser.add_argument("--cycles", type=int, default=5, help="cycles per loop")
     parser.add_argument("--quick", action="store_true", help="1 seed, 1 soil, 1 pile, 3 cycles (smoke run)")
-    parser.add_argument("--no-planner", action="store_true", help="dig Bezier paths only (no MPC)")
+    parser.add_argument("--no-planner", action="store_true", help="dig Bezier paths only (no CasADi planning)")
+    parser.add_argument("--mpc", action="store_true", help="execute plans with the receding-horizon MPC")
     parser.add_argument("--rl-policy", help="a stable-baselines3 PPO .zip to include as strategy (e)")
     args = parser.parse_args(argv)
 
@@ -92,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
     soils, piles, seeds, cycles = SOILS, PILES, range(args.seeds), args.cycles
     if args.quick:
         soils, piles, seeds, cycles = SOILS[:1], dict(list(PILES.items())[:1]), range(1), 3
-    planner = None if args.no_planner else default_planner()
+    planner = None if args.no_planner else default_planner(mpc=args.mpc)
     makers = _strategies(args, planner)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -120,7 +121,8 @@ def main(argv: list[str] | None = None) -> int:
         "benchmark": "adaptation",
         "setup": {"soils": list(soils), "piles": list(piles), "seeds": len(seeds), "cycles": cycles,
                   "truth_beyond_model": TRUTH, "plant_soil": "preset with 10 % log-normal perturbation per seed",
-                  "planner": "CasADi MPC" if planner is not None else "none (Bezier paths)",
+                  "planner": ("none (Bezier paths)" if planner is None
+                              else "CasADi plan + MPC" if args.mpc else "CasADi plan, tracked"),
                   "sensor_noise_N": 150.0},
         "summary": summary,
         "rows": rows,

@@ -326,10 +326,18 @@ def default_bucket() -> Bucket:
     return Bucket()
 
 
-def default_planner() -> Any:
-    """The planner used between cycles (CasADi MPC), or None when the planner is not available."""
+def default_planner(mpc: bool = False) -> Any:
+    """The planner used between cycles, or None when the planner is not available.
+
+    A full-cycle CasADi plan, checked with the NumPy model, tracked in the env;
+    with ``mpc`` an MPC controller re-plans the rest of the cycle every 0.1 s
+    (slower, see the planner benchmark).
+    """
     try:
-        from wheelloader.planner.loop import plan_next_cycle
+        from wheelloader.planner.loop import optimizer_for, plan_next_cycle
     except ImportError:
         return None
-    return plan_next_cycle
+    import functools
+
+    optimizer_for()  # build the NLP once, before the loop's timings start
+    return functools.partial(plan_next_cycle, mpc=mpc)

@@ -30,6 +30,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--seed", type=int, default=0, help="random seed of the plant (default: %(default)s)")
     p.add_argument("--no-planner", action="store_true",
                    help="dig the Bezier path every cycle (calibration and prediction only)")
+    p.add_argument("--mpc", action="store_true",
+                   help="execute each plan with the receding-horizon MPC instead of tracking it (slower)")
     p.set_defaults(func=run)
 
 
@@ -42,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(f"--cycles must be between 1 and 50, got {args.cycles}")
     out = fresh_directory(args.out, args.overwrite)
     summary = run_demo(out, cycles=args.cycles, seed=args.seed, use_planner=not args.no_planner,
-                       progress=lambda line: print(line, flush=True))
+                       progress=lambda line: print(line, flush=True), mpc=args.mpc)
     print()
     print(summary["table"])
     print()
@@ -51,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner: bool = True,
-             progress: Any = None) -> dict[str, Any]:
+             progress: Any = None, mpc: bool = False) -> dict[str, Any]:
     """Run the loop (ours and the fixed baseline), write figures and ``summary.json`` into ``out``."""
     import gymnasium as gym
 
@@ -70,7 +72,9 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     say = progress or (lambda line: None)
     start = time.perf_counter()
     hidden = hidden_default_soil()
-    planner = default_planner() if use_planner else None
+    if use_planner:
+        say("building the planner's CasADi NLP (once) ...")
+    planner = default_planner(mpc=mpc) if use_planner else None
     results = {}
     for strategy in (Calibrating(preset(NOMINAL_SOIL), planner=planner), FixedBezier(preset(NOMINAL_SOIL))):
         say(f"running {cycles} cycles, strategy '{strategy.name}' ...")
@@ -84,7 +88,8 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     summary = {
         "plant": {"soil": hidden.to_dict(), "sensor_noise_N": 150.0, "pile": "trapezoid 30 deg, 1 m high"},
         "nominal_soil": NOMINAL_SOIL,
-        "planner": "CasADi MPC" if planner is not None else "none (Bezier path every cycle)",
+        "planner": ("none (Bezier path every cycle)" if planner is None
+                    else "CasADi plan + MPC" if mpc else "CasADi plan, tracked"),
         "cycles": {name: [r.to_dict() for r in recs] for name, (recs, _) in results.items()},
         "final_parameters_ours": ours[-1].params,
         "wall_time_s": time.perf_counter() - start,
