@@ -229,18 +229,23 @@ def factors(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS, der
     drho = np.where(rho_high, -1.0, 0.0)
     # d beta* / d phi and / d delta
     s_tot = rho_e + delta + phi
-    csc2_s = 1.0 / np.sin(beta + s_tot) ** 2
-    csc2_p = 1.0 / np.sin(alpha_e + beta + phi) ** 2
-    t1 = np.tan(alpha_e + beta)
-    c2 = A2c / A2
-    c4 = np.cos(beta + s_tot) / np.sin(beta + s_tot)
-    dg_db = -t1 * t1 - c2 * c2 + cot_b * cot_b + c4 * c4
-    dg_dp = -csc2_p + csc2_s
-    dg_dd = csc2_s
-    dg_dr = csc2_s
     with np.errstate(divide="ignore", invalid="ignore"):
+        # sin(alpha + beta + phi) = 0 (N_gamma = 0 on a down-slope) makes these infinite; see below
+        csc2_s = 1.0 / np.sin(beta + s_tot) ** 2
+        csc2_p = 1.0 / np.sin(alpha_e + beta + phi) ** 2
+        t1 = np.tan(alpha_e + beta)
+        c2 = A2c / A2
+        c4 = np.cos(beta + s_tot) / np.sin(beta + s_tot)
+        dg_db = -t1 * t1 - c2 * c2 + cot_b * cot_b + c4 * c4
+        dg_dp = -csc2_p + csc2_s
+        dg_dd = csc2_s
+        dg_dr = csc2_s
         db_dp_in = -(dg_dp + dg_dr * drho) / dg_db
         db_dd_in = -(dg_dd + dg_dr * drho) / dg_db
+    # where the implicit-function derivative is not finite (a pole of d ln N_gamma / d beta), hold beta*
+    # fixed: N_gamma is stationary in beta there (envelope theorem), so only N_c, N_a, N_q lose a term
+    db_dp_in = np.where(np.isfinite(db_dp_in), db_dp_in, 0.0)
+    db_dd_in = np.where(np.isfinite(db_dd_in), db_dd_in, 0.0)
     db_dp = np.select([where == 0, where == 2], [db_dp_in, -(1.0 + drho)], 0.0)
     db_dd = np.select([where == 0, where == 2], [db_dd_in, -(1.0 + drho)], 0.0)
 

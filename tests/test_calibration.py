@@ -284,3 +284,16 @@ def test_inverted_bounds_and_unknown_method():
         calibrate(cycle, grid=(0, 9, 8))
     with pytest.raises(CalibrationError, match="n_starts"):
         calibrate(cycle, n_starts=0)
+
+
+def test_factor_derivatives_finite_on_down_slopes():
+    """Regression: where sin(alpha + beta* + phi) = 0 (a down-slope of a carved pile) the analytic
+    Jacobian of the default method was NaN and crashed least_squares inside the adaptation loop."""
+    from wheelloader.estimator.fitmodel import factors
+
+    alpha = np.linspace(-1.05, 0.3, 4001)
+    for rho in np.linspace(0.2, 1.5, 14):
+        for phi in (0.05, 0.2, 0.4, 0.7):
+            f = factors(alpha, np.full_like(alpha, rho), phi, 0.6 * phi, derivatives=True)
+            for arr in f.d_phi + f.d_delta:
+                assert np.all(np.isfinite(arr))

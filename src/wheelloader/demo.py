@@ -119,7 +119,8 @@ def write_figures(out: Path, results: dict[str, Any]) -> list[str]:
     figures.save(fig, out / "forces.png")
 
     fig, ax = figures.new_figure(1, 1, (8, 4))
-    figures.plot_pile_and_paths(logs[0].pile, [log.path for log in logs], ax=ax,
+    paths = [log.path.shifted(name=f"cycle {k + 1}") for k, log in enumerate(logs)]
+    figures.plot_pile_and_paths(logs[0].pile, paths, ax=ax,
                                 carved=[log.pile_after for log in logs], x_range=(-0.5, 3.5))
     ax.set_title("pile, paths and the soil each cycle removed ('ours')")
     figures.save(fig, out / "piles.png")
