@@ -1,0 +1,71 @@
+"""Smoke test of ``benchmarks/planner.py``: a tiny configuration through its ``main(argv)``.
+
+The full benchmark (five soils, five repeats) takes minutes and is marked ``slow``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "planner.py"
+
+
+def _load_benchmark():
+    """Import ``benchmarks/planner.py`` as a module (it imports ``_machine`` from its own folder)."""
+    sys.path.insert(0, str(BENCH.parent))
+    spec = importlib.util.spec_from_file_location("wheelloader_benchmark_planner", BENCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _check_results(out: Path, soils: list[str]) -> dict:
+    results = json.loads((out / "results.json").read_text())
+    assert results["benchmark"] == "planner"
+    assert "casadi" in results["machine"]["versions"]
+    assert list(results["soils"]) == soils
+    for soil in soils:
+        strategies = results["soils"][soil]["strategies"]
+        assert {"plan (true soil)", "plan (nominal)", "MPC (true soil)", "MPC from plan"} <= set(strategies)
+        for row in strategies.values():
+            for view in ("numpy", "env"):
+                assert 0.0 <= row[view]["fill_fraction"] <= 1.0 + 1e-9
+                assert row[view]["energy"] >= 0.0
+        for variant in ("MPC (true soil)", "MPC from plan"):
+            mpc = strategies[variant]["mpc"]
+            assert mpc["solves"] == len(mpc["history"]) >= 1
+            assert all(r["seconds"] > 0.0 for r in mpc["history"])
+        timing = results["soils"][soil]["timing"]
+        assert timing["cold"]["count"] >= 1 and timing["warm"]["count"] >= 2
+    targets = results["targets"]
+    for key in ("mpc_warm_solve_median_met", "full_plan_cold_median_met", "full_plan_warm_median_met"):
+        assert targets[key] in (True, False, None)
+    assert results["timing"]["full_plan_cold"]["median"] > 0.0
+    return results
+
+
+def test_planner_benchmark_smoke(tmp_path):
+    """One soil, one repeat, two fixed paths, an MPC re-plan once a second: JSON and PNGs written."""
+    bench = _load_benchmark()
+    out = tmp_path / "planner"
+    rc = bench.main(["--out", str(out), "--soils", "sand", "--repeats", "1", "--paths", "1", "2",
+                     "--replan-every", "60"])
+    assert rc == 0
+    _check_results(out, ["sand"])
+    for name in ("planner_energy.png", "planner_timing.png", "planner_summary.png"):
+        assert (out / name).stat().st_size > 1000
+
+
+@pytest.mark.slow
+def test_planner_benchmark_quick(tmp_path):
+    bench = _load_benchmark()
+    out = tmp_path / "planner"
+    assert bench.main(["--quick", "--out", str(out)]) == 0
+    results = _check_results(out, ["gravel", "sand", "dirt"])
+    assert (out / "planner_summary.png").exists()
+    assert results["repeats"] == 2
