@@ -38,10 +38,11 @@ def optimizer_for(bucket: Bucket | None = None, loader: Loader | None = None,
     return _OPTIMIZERS[key]
 
 
-def cautious_options(options: PlannerOptions) -> PlannerOptions:
-    """Wider safety margins for a second attempt: angle margin x1.6, fill limit and force margin lowered."""
-    return replace(options, rho_margin=1.6 * options.rho_margin, fill_limit=0.9 * options.fill_limit,
-                   force_margin=0.9 * options.force_margin)
+def cautious_options(options: PlannerOptions, level: int = 1) -> PlannerOptions:
+    """Wider safety margins for a re-plan: per ``level``, angle margin x(1 + 0.6 level), fill limit and
+    force margin x0.9^level."""
+    return replace(options, rho_margin=(1.0 + 0.6 * level) * options.rho_margin,
+                   fill_limit=0.9**level * options.fill_limit, force_margin=0.9**level * options.force_margin)
 
 
 def default_start(pile: Pile, cfg: Any = None) -> StartState:
@@ -92,14 +93,16 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     try:
         plan = opt.solve(params, pile, start, duration)
         check = verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate)
-        if not check.ok:
-            # the smooth CasADi surface can differ from a freshly carved pile near its kinks: re-plan once
-            # with wider margins, starting from the plan that failed
-            first = "; ".join(check.failures)
-            opt = optimizer_for(opt.bucket, opt.loader, cautious_options(opt.options))
+        for level in (1, 2):
+            if check.ok:
+                break
+            # the smooth CasADi surface can differ from a (carved) pile near its kinks, and the path between
+            # the plan's nodes can graze a crest: re-plan with wider margins, from the plan that failed
+            failed = "; ".join(check.failures)
+            opt = optimizer_for(opt.bucket, opt.loader, cautious_options(options or PlannerOptions(), level))
             plan = opt.solve(params, pile, start, duration, initial_guess=plan)
             check = verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate)
-            retried = f" (re-planned with wider margins after: {first})"
+            retried += f" (re-planned with wider margins, level {level}, after: {failed})"
     except PlanningError as exc:
         return PlanOutcome(None, False, f"planning failed: {exc}", time.perf_counter() - tic)
     seconds = time.perf_counter() - tic
