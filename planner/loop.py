@@ -38,6 +38,12 @@ def optimizer_for(bucket: Bucket | None = None, loader: Loader | None = None,
     return _OPTIMIZERS[key]
 
 
+def _flag_note(flags: dict[str, int]) -> str:
+    """The validity flags that fired (samples per flag), without "tip out of soil"."""
+    fired = [f"{name}: {count}" for name, count in flags.items() if count and name != "tip out of soil"]
+    return f" [{', '.join(fired)}]" if fired else ""
+
+
 def cautious_options(options: PlannerOptions, level: int = 1) -> PlannerOptions:
     """Wider safety margins for a re-plan: per ``level``, angle margin x(1 + 0.6 level), fill limit and
     force margin x0.9^level."""
@@ -90,6 +96,7 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     start = start or default_start(pile)
     duration = cycle_duration(pile, start)
     retried = ""
+    first_failure = ""
     try:
         plan = opt.solve(params, pile, start, duration)
         check = verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate)
@@ -98,17 +105,17 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
                 break
             # the smooth CasADi surface can differ from a (carved) pile near its kinks, and the path between
             # the plan's nodes can graze a crest: re-plan with wider margins, from the plan that failed
-            failed = "; ".join(check.failures)
+            first_failure = first_failure or "; ".join(check.failures)
             opt = optimizer_for(opt.bucket, opt.loader, cautious_options(options or PlannerOptions(), level))
             plan = opt.solve(params, pile, start, duration, initial_guess=plan)
             check = verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate)
-            retried += f" (re-planned with wider margins, level {level}, after: {failed})"
+            retried = f" (re-planned {level}x with wider margins after: {first_failure})"
     except PlanningError as exc:
         return PlanOutcome(None, False, f"planning failed: {exc}", time.perf_counter() - tic)
     seconds = time.perf_counter() - tic
     if not check.ok:
         return PlanOutcome(None, False, f"IPOPT: {plan.status}; plan fails the NumPy check: "
-                           + "; ".join(check.failures) + f" {check.details['flags']}{retried}", seconds)
+                           + "; ".join(check.failures) + _flag_note(check.details["flags"]) + retried, seconds)
     # a plan that passes every check of the NumPy re-simulation is feasible even when IPOPT stopped at its
     # iteration limit (then it is not proven optimal): use it and say so
     note = "" if plan.status in ACCEPTED_STATUSES else " (not proven optimal; feasible by the NumPy check)"

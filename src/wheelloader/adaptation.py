@@ -334,10 +334,13 @@ def default_planner(mpc: bool = False) -> Any:
     (slower, see the planner benchmark).
     """
     try:
-        from wheelloader.planner.loop import optimizer_for, plan_next_cycle
+        from wheelloader.planner import PlannerOptions
+        from wheelloader.planner.loop import cautious_options, optimizer_for, plan_next_cycle
     except ImportError:
         return None
     import functools
 
-    optimizer_for()  # build the NLP once, before the loop's timings start
+    # build the NLPs once (the plan and its two wider-margin re-plans), before the loop's timings start
+    for level in (0, 1, 2):
+        optimizer_for(options=cautious_options(PlannerOptions(), level) if level else None)
     return functools.partial(plan_next_cycle, mpc=mpc)

@@ -73,7 +73,7 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     start = time.perf_counter()
     hidden = hidden_default_soil()
     if use_planner:
-        say("building the planner's CasADi NLP (once) ...")
+        say("building the planner's CasADi NLPs (once, ~10 s) ...")
     planner = default_planner(mpc=mpc) if use_planner else None
     results = {}
     for strategy in (Calibrating(preset(NOMINAL_SOIL), planner=planner), FixedBezier(preset(NOMINAL_SOIL))):
