@@ -4,7 +4,9 @@ Every ``replan_every`` control steps the controller reads the tip pose,
 velocity and fill from the observation, solves the trajectory optimisation
 for the remaining time of the cycle (shrinking horizon: the same ``N``
 intervals over less time; the end-out-of-the-pile constraint stays), warm
-started from the previous plan's remaining part, and tracks the new plan
+started with IPOPT's warm-start settings from the previous accepted solution
+(primal and dual; the first re-plan of a cycle from the remaining part of the
+plan being executed), and tracks the new plan
 with feed-forward velocity plus proportional feedback
 (:class:`~wheelloader.envs.scripted.PathTracker`). The solver status is
 checked every time: a failed or non-finite solve keeps the last feasible
@@ -61,7 +63,7 @@ class MPCController:
     replan_every : int
         Control steps between re-plans (default 6: 10 Hz at 60 Hz).
     intervals : int
-        Intervals of the MPC's optimisation (default 24).
+        Intervals of the MPC's optimisation (default 16).
     min_remaining : float
         Below this remaining time [s] the controller stops re-planning and tracks the last plan.
     initial_plan : Plan, optional
@@ -71,12 +73,15 @@ class MPCController:
     reference_weight : float
         Weight [1/m^2] of staying near the plan being executed (keeps successive
         re-plans from jumping between local optima).
+    max_iter : int
+        IPOPT iteration limit per re-plan (default 60): a re-plan that does not
+        converge by then is not used, the last accepted plan goes on.
     """
 
     def __init__(self, soil: SoilParams | str | dict, pile: Pile, duration: float, *, bucket: Bucket | None = None,
                  loader: Loader | None = None, control_rate: float = 60.0, replan_every: int = 6,
-                 intervals: int = 24, min_remaining: float = 0.4, initial_plan: Plan | None = None,
-                 options: PlannerOptions | None = None, reference_weight: float = 20.0) -> None:
+                 intervals: int = 16, min_remaining: float = 0.4, initial_plan: Plan | None = None,
+                 options: PlannerOptions | None = None, reference_weight: float = 20.0, max_iter: int = 60) -> None:
         if not (isinstance(replan_every, int) and replan_every >= 1):
             raise PlanningError(f"replan_every must be a positive integer, got {replan_every!r}")
         if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0.0):
@@ -94,7 +99,9 @@ class MPCController:
         self.replan_every = replan_every
         self.min_remaining = float(min_remaining)
         base = options or PlannerOptions()
-        self.optimizer = TrajectoryOptimizer(self.bucket, self.loader, replace(base, intervals=intervals))
+        self.optimizer = TrajectoryOptimizer(self.bucket, self.loader,
+                                             replace(base, intervals=intervals, ipopt_warm_start=True,
+                                                     max_iter=min(base.max_iter, max_iter)))
         self.initial_plan = initial_plan
         self.reference_weight = float(reference_weight)
         self.history: list[SolveRecord] = []
@@ -141,7 +148,11 @@ class MPCController:
         guess = self._remaining_guess(k / self.rate)
         tic = time.perf_counter()
         try:
-            plan = self.optimizer.solve(self.soil, self.pile, start, remaining, initial_guess=guess, reference=guess,
+            # after an accepted solve in this cycle, IPOPT restarts from that solution (primal and dual);
+            # otherwise from the remaining part of the plan being executed
+            warm = bool(self.history) and self.history[-1].accepted
+            plan = self.optimizer.solve(self.soil, self.pile, start, remaining,
+                                        initial_guess=None if warm else guess, warm=warm, reference=guess,
                                         reference_weight=self.reference_weight)
         except PlanningError as exc:
             self.history.append(SolveRecord(k, remaining, time.perf_counter() - tic, f"error: {exc}", 0, False,

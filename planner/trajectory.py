@@ -94,6 +94,10 @@ class PlannerOptions:
         interval [m] (default 0.01 m; the env ends a cycle at 0.02 m).
     max_iter : int
         IPOPT iteration limit (default 300).
+    ipopt_warm_start : bool
+        Build IPOPT with its warm-start settings (``warm_start_init_point``, ``mu_init`` 1e-4): a
+        ``solve(..., warm=True)`` then starts from the previous primal *and* dual solution. For MPC,
+        where successive problems differ little (default False).
     tolerance : float
         IPOPT tolerance (default 1e-4; the objective is O(1)).
     surface : SurfaceGrid
@@ -112,6 +116,7 @@ class PlannerOptions:
     fill_limit: float = 0.95
     stay_clearance: float = 0.01
     max_iter: int = 300
+    ipopt_warm_start: bool = False
     tolerance: float = 1e-4
     surface: SurfaceGrid = field(default_factory=SurfaceGrid)
 
@@ -591,6 +596,9 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
         "ipopt.acceptable_tol": 1e-3, "ipopt.acceptable_iter": 5,
         "ipopt.mu_strategy": "adaptive", "error_on_fail": False,
     }
+    if options.ipopt_warm_start:
+        solver_opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
+                            "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})
     solver = ca.nlpsol("bucket_path", "ipopt", nlp, solver_opts)
     outputs = ca.Function("outputs", [w, p], [ca.vertcat(*ft_all), ca.vertcat(*fn_all), energy])
     layout = {"ng": n_eq + n_ineq + 1, "ineq": slice(n_eq, n_eq + n_ineq), "fill_end": n_eq + n_ineq}
