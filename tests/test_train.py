@@ -103,17 +103,33 @@ def test_train_and_evaluate_smoke(tmp_path):
     assert SAC.load(tmp_path / "sac" / "model.zip", device="cpu").action_space.shape == (3,)
 
     _run("evaluate.py", "--ppo", str(tmp_path / "ppo" / "model.zip"), "--sac", str(tmp_path / "sac" / "model.zip"),
-         "--soils", "gravel", "--seeds", "7", "--bezier", "1,2", "--out", str(tmp_path / "eval"))
+         "--soils", "gravel", "--seeds", "7,8", "--mpc-seeds", "7", "--bezier", "1,2", "--out", str(tmp_path / "eval"))
     report = json.loads((tmp_path / "eval" / "evaluation.json").read_text())
     names = set(report["results"])
     assert {"ppo_randomized", "sac_randomized", "bezier_path1", "bezier_path2", "random"} <= names
-    for res in report["results"].values():
+    for name, res in report["results"].items():
         for key in ("fill_fraction", "energy_J", "energy_per_m3_J", "stall_rate", "validity_violations",
                     "force_limit_violations"):
             assert key in res["overall"]
-        assert res["per_soil"]["gravel"]["episodes"] == 1
+        assert res["per_soil"]["gravel"]["episodes"] == (1 if name == "mpc" else 2)
     assert (tmp_path / "eval" / "learning_curve.png").stat().st_size > 0
-    assert "bezier_path1" in (tmp_path / "eval" / "evaluation.md").read_text()
+    table = (tmp_path / "eval" / "evaluation.md").read_text()
+    assert "bezier_path1" in table
+    if "mpc" in names:  # the planner provides an env policy: one episode (--mpc-seeds), a matched table
+        assert report["seeds_by_policy"] == {"mpc": [7]}
+        assert "mpc (1 episode)" in table and "On the MPC planner's seeds only" in table
+
+
+def test_evaluate_seeds_by_policy(common):
+    """``seeds_by_policy`` gives one policy (the slow MPC in the full run) fewer seeds than the others."""
+    random = common["RandomPolicy"]()
+    fewer = common["RandomPolicy"]()
+    fewer.name = "mpc"
+    res = common["evaluate"]([random, fewer], ["sand"], [1, 2, 3], {"max_episode_steps": 20},
+                             seeds_by_policy={"mpc": [2]})
+    assert [e["seed"] for e in res["random"]["episodes"]] == [1, 2, 3]
+    assert [e["seed"] for e in res["mpc"]["episodes"]] == [2]
+    assert res["mpc"]["episodes"][0] == res["random"]["episodes"][1]
 
 
 def test_mpc_policy_uses_planner_make_env_policy(common, monkeypatch):

@@ -37,6 +37,7 @@ from common import (
     plot_learning_curves,
     set_torch_threads,
     str_list,
+    summarize,
     write_json,
 )
 
@@ -55,6 +56,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seeds", type=int_list, default="2000-2004", help="env seeds, e.g. 2000-2004 or 1,2,3")
     parser.add_argument("--mpc", action=argparse.BooleanOptionalAction, default=True,
                         help="include the MPC planner (skipped with a message if wheelloader.planner has none)")
+    parser.add_argument("--mpc-seeds", type=int_list, default=None,
+                        help="env seeds for the MPC planner only (default: --seeds); one MPC episode takes "
+                             "~5-50 s on a shared 2-core CPU, so the full run uses fewer")
     parser.add_argument("--bezier", type=int_list, default="1-4", help="fixed paper paths to include (1-4)")
     parser.add_argument("--random", action=argparse.BooleanOptionalAction, default=True,
                         help="include the random policy")
@@ -73,15 +77,25 @@ def _fmt(value, fmt) -> str:
     return fmt.format(value)
 
 
-def markdown_table(results: dict) -> str:
-    """Overall summary of every policy as a Markdown table."""
+def markdown_table(results: dict, summaries: dict | None = None) -> str:
+    """Overall summary of every policy as a Markdown table (``summaries``: name -> summary, default the
+    overall ones); a policy run on fewer episodes than the most has its episode count in its name."""
+    summaries = summaries or {name: res["overall"] for name, res in results.items()}
+    most = max((s.get("episodes", 0) for s in summaries.values()), default=0)
     head = "| policy | " + " | ".join(c[0] for c in _COLUMNS) + " |"
     rule = "|---" * (len(_COLUMNS) + 1) + "|"
     rows = [head, rule]
-    for name, res in results.items():
-        s = res["overall"]
-        rows.append(f"| {name} | " + " | ".join(_fmt(s.get(key), fmt) for _, key, fmt in _COLUMNS) + " |")
+    for name, s in summaries.items():
+        n = s.get("episodes", most)
+        label = name if n == most else f"{name} ({n} episode{'s' * (n != 1)})"
+        rows.append(f"| {label} | " + " | ".join(_fmt(s.get(key), fmt) for _, key, fmt in _COLUMNS) + " |")
     return "\n".join(rows) + "\n"
+
+
+def matched_summaries(results: dict, seeds: list[int]) -> dict:
+    """Every policy's overall summary restricted to the episodes with env seeds in ``seeds``."""
+    keep = set(seeds)
+    return {name: summarize([e for e in res["episodes"] if e["seed"] in keep]) for name, res in results.items()}
 
 
 def per_soil_table(results: dict, key: str = "fill_fraction", fmt: str = "{:.2f}") -> str:
@@ -100,6 +114,11 @@ def write_outputs(report: dict, out: Path) -> None:
     table = (f"Overall ({len(report['soils'])} soils x {len(report['seeds'])} seeds)\n\n" + markdown_table(results)
              + "\nFill per soil\n\n" + per_soil_table(results) + "\nReturn per soil\n\n"
              + per_soil_table(results, "return", "{:.3f}"))
+    mpc_seeds = report.get("seeds_by_policy", {}).get("mpc")
+    if mpc_seeds is not None and set(mpc_seeds) != set(report["seeds"]):
+        table += (f"\nOn the MPC planner's seeds only ({len(report['soils'])} soils x seeds "
+                  f"{', '.join(map(str, mpc_seeds))}: the same episodes for every policy)\n\n"
+                  + markdown_table(results, matched_summaries(results, mpc_seeds)))
     (out / "evaluation.md").write_text(table)
     print(table, flush=True)
     curves = {}
@@ -110,7 +129,10 @@ def write_outputs(report: dict, out: Path) -> None:
     if curves:
         base = {k: v["overall"] for k, v in results.items() if not k.startswith(("ppo", "sac"))}
         worst = min((k for k in base if k.startswith("bezier")), key=lambda k: base[k]["return"], default=None)
-        shown = {f"{k} (evaluation mean)": base[k] for k in ("random", "mpc") if k in base}
+        most = max(b["episodes"] for b in base.values())
+        shown = {(f"{k} (evaluation mean)" if base[k]["episodes"] == most
+                  else f"{k} (evaluation mean, {base[k]['episodes']} episodes)"): base[k]
+                 for k in ("random", "mpc") if k in base}
         if worst is not None:
             shown[f"{worst} (worst path, evaluation mean)"] = base[worst]
         plot_learning_curves(curves, out / "learning_curve.png", shown)
@@ -154,9 +176,12 @@ def main(argv: list[str] | None = None) -> int:
         policies.append(RandomPolicy())
     print(f"evaluating {len(policies)} policies on {len(args.soils)} soils x {len(args.seeds)} seeds", flush=True)
     t0 = time.perf_counter()
-    results = evaluate(policies, args.soils, args.seeds, progress=True)
+    seeds_by_policy = {"mpc": args.mpc_seeds} if args.mpc_seeds is not None else {}
+    if seeds_by_policy:
+        print(f"MPC planner on seeds {args.mpc_seeds} only", flush=True)
+    results = evaluate(policies, args.soils, args.seeds, progress=True, seeds_by_policy=seeds_by_policy)
     report = {"machine": machine_info(), "soils": args.soils, "seeds": args.seeds, "skipped": skipped,
-              "runs": runs,
+              "seeds_by_policy": seeds_by_policy, "runs": runs,
               "results": results, "wall_s": time.perf_counter() - t0}
     write_json(out / "evaluation.json", report)
     write_outputs(report, out)

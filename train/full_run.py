@@ -1,4 +1,4 @@
-"""The documented full run of the RL baseline (438 s measured on a shared 2-core CPU).
+"""The documented full run of the RL baseline (~16 min measured on a shared 2-core CPU, 11 of them the MPC).
 
 1. PPO on the plant with randomised soils (domain randomisation);
 2. PPO on the digital twin (one plant cycle with the Bezier path,
@@ -7,9 +7,10 @@
    (``ppo_twin_scratch``);
 3. SAC on the plant with randomised soils (small budget: SAC is ~7-10x slower
    per env-step than PPO on a CPU);
-4. evaluation of all of them against the MPC planner (if available), the
-   four fixed Bezier paths and a random policy on every soil preset and
-   the same seeds.
+4. evaluation of all of them against the MPC planner (if available; the
+   slowest part, ~18 s per MPC episode: ``--mpc-seeds`` gives it fewer
+   seeds), the four fixed Bezier paths and a random policy on every soil
+   preset and the same seeds.
 
 Writes into ``--out`` (default ``train/results``): one folder per training
 run (``model.zip``, ``config.json``, ``learning_curve.json``,
@@ -47,6 +48,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sac-steps", type=int, default=50_000, help="SAC domain-randomisation env-steps (0: skip)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--eval-seeds", default="2000-2004", help="evaluation env seeds")
+    parser.add_argument("--mpc-seeds", default="same",
+                        help="evaluation env seeds of the MPC planner only, e.g. 2000-2001 (default 'same': "
+                             "--eval-seeds); one MPC episode takes ~10-50 s on the shared 2-core CPU")
     parser.add_argument("--soils", default="all", help="evaluation soils")
     parser.add_argument("--torch-threads", type=int, default=1)
     parser.add_argument("--progress-bar", action=argparse.BooleanOptionalAction, default=False)
@@ -81,6 +85,8 @@ def main(argv: list[str] | None = None) -> int:
         stage("sac_randomized", sac.main, ["--setup", "randomized", "--total-timesteps", str(args.sac_steps),
                                            "--out", str(out / "sac_randomized"), *common])
         models += ["--sac", str(out / "sac_randomized" / "model.zip")]
+    if args.mpc_seeds != "same":
+        models += ["--mpc-seeds", args.mpc_seeds]
     stage("evaluate", evaluate.main, [*models, "--soils", args.soils, "--seeds", args.eval_seeds,
                                       "--torch-threads", str(args.torch_threads), "--out", str(out)])
     print(f"full run: {time.perf_counter() - t_all:.0f} s", flush=True)
