@@ -206,16 +206,26 @@ def make_env_policy(env: Any, soil: SoilParams | str | dict | None = None, **kwa
 
     Plans with ``soil`` (default: the env's current simulator soil, i.e. an
     oracle on the plant or the calibrated soil on a twin) on the env's start
-    pile; call it after ``env.reset()``. The controller re-plans from the
+    pile, starting from a full-cycle plan that passes the NumPy check (tracked
+    while re-plans fail); call it after ``env.reset()``. The controller re-plans from the
     env's current pile when :meth:`MPCController.reset` is called after a new
     ``env.reset()`` only if you build a new one: use one controller per cycle.
     """
-    from .loop import cycle_duration, default_start
+    from .loop import cycle_duration, default_start, optimizer_for
+    from .verify import verify_plan
 
     base = env.unwrapped
     cfg = base.cfg
     pile = base._start_pile
     params = base.soil if soil is None else as_soil(soil)
     start = default_start(pile, cfg)
-    return MPCController(params, pile, cycle_duration(pile, start), bucket=cfg.bucket, loader=cfg.loader,
+    duration = cycle_duration(pile, start)
+    if "initial_plan" not in kwargs:
+        # a full-cycle plan to start from: the first re-plan is warm-started from it, and it is tracked
+        # for as long as re-plans fail (only when the NumPy check accepts it)
+        opt = optimizer_for(cfg.bucket, cfg.loader, kwargs.get("options"))
+        plan = opt.solve(params, pile, start, duration)
+        if verify_plan(plan, params, pile, cfg.bucket, cfg.loader, opt.options, rate=cfg.control_rate).ok:
+            kwargs["initial_plan"] = plan
+    return MPCController(params, pile, duration, bucket=cfg.bucket, loader=cfg.loader,
                          control_rate=cfg.control_rate, **kwargs)
