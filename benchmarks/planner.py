@@ -9,8 +9,8 @@ and the env's nominal start pose, one run compares side by side:
 (c) ``plan (nominal)``: a plan made with the nominal, uncalibrated parameters
     (:data:`wheelloader.adaptation.NOMINAL_SOIL`), executed on the true soil;
 (d) ``MPC (true soil)``: the receding-horizon MPC in the env, planning with
-    the true soil, as :func:`~wheelloader.planner.make_env_policy` builds it (first
-    solve from the default guess); and ``MPC from plan``: the same, started from
+    the true soil, as :func:`~wheelloader.planner.make_env_policy` builds it (from
+    its own NumPy-checked full-cycle plan); and ``MPC from plan``: the same, started from
     plan (b) as :func:`~wheelloader.planner.plan_next_cycle` hands it over.
 
 Every strategy is scored twice: re-simulated with the NumPy force model on the
@@ -79,7 +79,7 @@ PLAN_TRUE = "plan (true soil)"
 PLAN_NOMINAL = "plan (nominal)"
 MPC_TRUE = "MPC (true soil)"
 MPC_FROM_PLAN = "MPC from plan"
-#: The MPC variants: make_env_policy as is (first solve from the default guess), and started from the
+#: The MPC variants: make_env_policy as is (it starts from its own NumPy-checked plan), and started from the
 #: true-soil plan as plan_next_cycle hands it over (the plan is tracked until the first re-plan is accepted).
 MPC_VARIANTS = (MPC_TRUE, MPC_FROM_PLAN)
 
@@ -221,6 +221,8 @@ def _mpc_policy(initial_plan, replan_every: int):
     from wheelloader.planner import make_env_policy
 
     def build(_obs, env):
+        if initial_plan is None:  # make_env_policy as is: it makes and checks its own full-cycle plan
+            return make_env_policy(env, replan_every=replan_every)
         return make_env_policy(env, initial_plan=initial_plan, replan_every=replan_every)
 
     return build
