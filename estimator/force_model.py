@@ -187,6 +187,9 @@ def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
         if guess is not None:
             g0 = np.broadcast_to(np.asarray(guess, dtype=float), alpha.shape)[inner]
             x = np.where((g0 > a) & (g0 < b), g0, x)
+        # iterate only on the samples that have not converged yet (a batch is as slow as its slowest sample)
+        out = np.empty_like(x)
+        active = np.arange(x.size)
         for _ in range(max_iter):
             g, dg = _log_ngamma_slope(x, al, ph, ss)
             pos = g > 0.0
@@ -196,11 +199,14 @@ def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
                 newton = x - g / dg
             ok = (dg > 0.0) & (newton > a) & (newton < b)
             x_new = np.where(ok, newton, 0.5 * (a + b))
-            step = np.max(np.abs(x_new - x))
-            x = x_new
-            if step < tol:
+            going = np.abs(x_new - x) >= tol
+            out[active] = x_new
+            if not going.any():
                 break
-        beta[inner] = x
+            if not going.all():
+                active, x_new, a, b, al, ph, ss = (v[going] for v in (active, x_new, a, b, al, ph, ss))
+            x = x_new
+        beta[inner] = out
     return beta
 
 
