@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import casadi as ca
@@ -413,14 +413,10 @@ class TrajectoryOptimizer:
     def _guess_vector(self, guess: Plan | BucketPath, pile: Pile, start: StartState, h: float) -> np.ndarray:
         n = self.intervals
         t_nodes = np.arange(n + 1) * h
-        if isinstance(guess, Plan):
-            src_t = guess.t - guess.t[0]
-            x, z, th = guess.x, guess.z, guess.blade_angle
-        elif isinstance(guess, BucketPath):
-            src_t = guess.t - guess.t[0]
-            x, z, th = guess.x, guess.z, guess.blade_angle
-        else:
+        if not isinstance(guess, (Plan, BucketPath)):
             raise PlanningError(f"initial_guess must be a Plan or a BucketPath, got {type(guess).__name__}")
+        src_t = guess.t - guess.t[0]
+        x, z, th = guess.x, guess.z, guess.blade_angle
         scale = src_t[-1] / t_nodes[-1] if t_nodes[-1] > 0 else 1.0
         ts = t_nodes * scale
         gx = np.maximum.accumulate(np.interp(ts, src_t, x))
@@ -603,8 +599,3 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     outputs = ca.Function("outputs", [w, p], [ca.vertcat(*ft_all), ca.vertcat(*fn_all), energy])
     layout = {"ng": n_eq + n_ineq + 1, "ineq": slice(n_eq, n_eq + n_ineq), "fill_end": n_eq + n_ineq}
     return solver, {"forces": forces, "outputs": outputs}, layout
-
-
-def with_options(optimizer: TrajectoryOptimizer, **changes: Any) -> TrajectoryOptimizer:
-    """A new optimiser with some options changed (the NLP is cached per option set)."""
-    return TrajectoryOptimizer(optimizer.bucket, optimizer.loader, replace(optimizer.options, **changes))
