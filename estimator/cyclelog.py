@@ -141,7 +141,7 @@ class CycleLog:
             columns["fill_volume"] = self.fill_volume
         if self.measured_load is not None:
             columns["W_load"] = self.measured_load
-        _write_columns(csv_path, columns)
+        write_columns(csv_path, columns)
         meta = {
             "format": FORMAT_NAME,
             "version": FORMAT_VERSION,
@@ -199,7 +199,7 @@ def save_path_csv(path: BucketPath, csv_path: str | Path, overwrite: bool = Fals
     csv_path = Path(csv_path)
     if csv_path.exists() and not overwrite:
         raise FileExistsError(f"{csv_path} exists; pass overwrite=True to replace it")
-    _write_columns(csv_path, {"t": path.t, "x": path.x, "z": path.z, "blade_angle": path.blade_angle})
+    write_columns(csv_path, {"t": path.t, "x": path.x, "z": path.z, "blade_angle": path.blade_angle})
     return csv_path
 
 
@@ -212,7 +212,8 @@ def _json_default(obj: Any) -> Any:
     raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
 
 
-def _write_columns(csv_path: Path, columns: dict[str, np.ndarray]) -> None:
+def write_columns(csv_path: Path, columns: dict[str, np.ndarray]) -> None:
+    """Write named columns as CSV with a header row, full float precision (``repr``)."""
     names = list(columns)
     data = np.column_stack([np.asarray(columns[k], dtype=float) for k in names])
     with open(csv_path, "w", newline="") as fh:

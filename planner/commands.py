@@ -20,7 +20,6 @@ for bad input.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 import time
@@ -123,16 +122,11 @@ def write_plan_csv(csv_path: str | Path, path: Any, depth: np.ndarray, fill: np.
     The first four columns are those of :func:`~wheelloader.estimator.cyclelog.save_path_csv` (same
     number format), so :func:`~wheelloader.estimator.cyclelog.load_path_csv` reads the file as a path.
     """
+    from wheelloader.estimator.cyclelog import write_columns
+
     csv_path = Path(csv_path)
-    cols = {"t": path.t, "x": path.x, "z": path.z, "blade_angle": path.blade_angle, "depth": depth,
-            "fill": fill, "F_T": tangential, "F_N": normal}
-    names = list(cols)
-    data = np.column_stack([np.asarray(cols[k], dtype=float) for k in names])
-    with open(csv_path, "w", newline="") as fh:
-        writer = csv.writer(fh)
-        writer.writerow(names)
-        for row in data:
-            writer.writerow([repr(float(v)) for v in row])
+    write_columns(csv_path, {"t": path.t, "x": path.x, "z": path.z, "blade_angle": path.blade_angle,
+                             "depth": depth, "fill": fill, "F_T": tangential, "F_N": normal})
     return csv_path
 
 

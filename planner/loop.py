@@ -18,7 +18,7 @@ from wheelloader.estimator import Bucket, Loader, Pile, SoilParams, as_soil
 from wheelloader.estimator.errors import PlanningError
 
 from .mpc import ACCEPTED_STATUSES, MPCController
-from .trajectory import PlannerOptions, StartState, TrajectoryOptimizer
+from .trajectory import PlannerOptions, StartState, TrajectoryOptimizer, first_rise
 from .verify import verify_plan
 
 #: Duration of the digging motion once the tip is at the face [s] (the paper's 4.67 s cycle).
@@ -66,11 +66,8 @@ def default_start(pile: Pile, cfg: Any = None) -> StartState:
 
 def cycle_duration(pile: Pile, start: StartState) -> float:
     """:data:`DIG_DURATION` plus the time to cross the air between ``start`` and the (carved) face [s]."""
-    import numpy as np
-
-    xs = start.x + np.arange(0.0, 4.0, 0.01)
-    rising = np.nonzero(np.asarray(pile.surface_height(xs)) > start.z + 0.05)[0]
-    gap = float(xs[rising[0]] - start.x) if rising.size else 0.0
+    x_face = first_rise(pile, start, 0.05, step=0.01)
+    gap = 0.0 if x_face is None else x_face - start.x
     return DIG_DURATION + max(0.0, gap - 0.3) / APPROACH_SPEED
 
 

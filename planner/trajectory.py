@@ -445,11 +445,18 @@ class TrajectoryOptimizer:
                     raw={"start": start, "h": h})
 
 
+def first_rise(pile: Pile, start: StartState, rise: float, step: float = 0.005, reach: float = 4.0) -> float | None:
+    """x where the surface first lies more than ``rise`` above the start height, searching ``reach`` metres
+    ahead of ``start`` in ``step`` increments [m]; None when it never does."""
+    xs = start.x + np.arange(0.0, reach, step)
+    rising = np.nonzero(np.asarray(pile.surface_height(xs)) > start.z + rise)[0]
+    return float(xs[rising[0]]) if rising.size else None
+
+
 def face_position(pile: Pile, start: StartState) -> float:
     """x where the surface first rises 3 cm above the start height ahead of ``start`` [m] (the face)."""
-    xs = start.x + np.arange(0.0, 4.0, 0.005)
-    rising = np.nonzero(np.asarray(pile.surface_height(xs)) > start.z + 0.03)[0]
-    return float(xs[rising[0]]) if rising.size else start.x
+    x_face = first_rise(pile, start, 0.03)
+    return start.x if x_face is None else x_face
 
 
 def straight_dig(pile: Pile, start: StartState, duration: float, bucket: Bucket) -> BucketPath:
@@ -458,10 +465,8 @@ def straight_dig(pile: Pile, start: StartState, duration: float, bucket: Bucket)
     The approach ends where the surface first rises 5 cm above the start height; the dig
     advances until the bucket would be full (by carving), then the tip rises out of the pile.
     """
-    xs = np.linspace(start.x, start.x + 4.0, 801)
-    zs = np.asarray(pile.surface_height(xs))
-    rising = np.nonzero(zs > start.z + 0.05)[0]
-    x_face = float(xs[rising[0]]) if rising.size else start.x + 0.5
+    x_face = first_rise(pile, start, 0.05)
+    x_face = start.x + 0.5 if x_face is None else x_face
     depth = 0.15
     x_dig = np.linspace(x_face, x_face + 3.0, 301)
     z_dig = np.maximum(np.asarray(pile.surface_height(x_dig)) - depth, start.z)
