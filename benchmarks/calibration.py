@@ -23,31 +23,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import sys
 import time
 from pathlib import Path
 
+from _machine import machine_info
+
 METHODS = ("default", "single-stage", "multi-stage")
 DEFAULT_SOILS = ("gravel", "dirt", "modified_sand", "lean_clay")
-
-
-def machine_info() -> dict:
-    """Platform, CPU count and library versions."""
-    import numpy
-    import scipy
-
-    info = {"platform": platform.platform(), "processor": platform.processor(), "cpu_count": os.cpu_count(),
-            "python": sys.version.split()[0], "numpy": numpy.__version__, "scipy": scipy.__version__,
-            "blas_threads_env": {k: os.environ.get(k) for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
-                                                                  "MKL_NUM_THREADS")}}
-    try:
-        import casadi
-
-        info["casadi"] = casadi.__version__
-    except ImportError:  # pragma: no cover
-        info["casadi"] = None
-    return info
 
 
 def floor_rmse(cycle, soil, percent: bool = False) -> float:

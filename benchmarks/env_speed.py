@@ -18,36 +18,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import statistics
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from _machine import machine_info
 
 TARGET_SINGLE = 20_000.0
 TARGET_BATCHED = 500_000.0
-
-
-def machine_info() -> dict[str, object]:
-    """Platform, CPU count and library versions."""
-    import gymnasium
-    import scipy
-
-    info: dict[str, object] = {
-        "platform": platform.platform(), "processor": platform.processor(), "cpu_count": os.cpu_count(),
-        "python": sys.version.split()[0], "numpy": np.__version__, "scipy": scipy.__version__,
-        "gymnasium": gymnasium.__version__,
-    }
-    try:
-        import casadi
-
-        info["casadi"] = casadi.__version__
-    except ImportError:  # pragma: no cover - casadi is a core dependency
-        info["casadi"] = None
-    return info
 
 
 def digging_actions(steps: int, num_envs: int, seed: int) -> np.ndarray:

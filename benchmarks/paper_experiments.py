@@ -23,12 +23,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import sys
 import time
 from dataclasses import replace
 from pathlib import Path
+
+from _machine import machine_info
 
 METHODS = ("default", "single-stage", "multi-stage")
 SOILS = ("gravel", "modified_sand", "dirt", "sand")
@@ -39,22 +39,6 @@ DEM_VALUES = {
     "dirt": {"gamma": 1474.0, "cohesion": 2100.0, "phi": 0.6978},
     "modified_sand": {"gamma": 1874.5, "cohesion": 0.0, "phi": 0.5934},
 }
-
-
-def machine_info() -> dict:
-    """Platform, CPU count and library versions."""
-    import numpy
-    import scipy
-
-    info = {"platform": platform.platform(), "processor": platform.processor(), "cpu_count": os.cpu_count(),
-            "python": sys.version.split()[0], "numpy": numpy.__version__, "scipy": scipy.__version__}
-    try:
-        import casadi
-
-        info["casadi"] = casadi.__version__
-    except ImportError:  # pragma: no cover
-        info["casadi"] = None
-    return info
 
 
 def rmse_pair(params, log_raw, log_filt, pile=None) -> dict:

@@ -27,12 +27,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
-import platform
-import sys
 import time
 from collections.abc import Callable, Sequence
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +39,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecMonitor
 
 import wheelloader.envs  # noqa: F401  (registers the env ids)
 from wheelloader.estimator import PRESET_NAMES, SoilParams, as_soil, paper_paths
+from wheelloader.provenance import machine_info
 
 #: The env trained and evaluated on (one digging cycle, 600 steps at 60 Hz).
 ENV_ID = "wheelloader/BucketLoading-v0"
@@ -61,31 +58,6 @@ def set_torch_threads(threads: int) -> int:
         raise ValueError(f"--torch-threads must be >= 1, got {threads!r}")
     torch.set_num_threads(threads)
     return torch.get_num_threads()
-
-
-def machine_info() -> dict[str, Any]:
-    """Platform, CPU, load and package versions of this run."""
-    versions: dict[str, str | None] = {}
-    for pkg in ("wheelloader", "numpy", "scipy", "gymnasium", "torch", "stable_baselines3", "casadi"):
-        try:
-            versions[pkg] = metadata.version(pkg)
-        except metadata.PackageNotFoundError:
-            versions[pkg] = None
-    cpu = platform.processor() or ""
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    try:
-        load = list(os.getloadavg())
-    except OSError:
-        load = None
-    return {"platform": platform.platform(), "python": sys.version.split()[0], "cpu": cpu,
-            "cpu_count": os.cpu_count(), "loadavg_1_5_15min": load, "versions": versions}
 
 
 def jsonable(value: Any) -> Any:

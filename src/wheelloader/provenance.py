@@ -1,0 +1,45 @@
+"""Where a result was measured: machine, load and package versions (stamped into benchmark and training JSON)."""
+
+from __future__ import annotations
+
+import os
+import platform
+import sys
+from importlib import metadata
+
+#: Packages whose versions every record names (None when not installed).
+PACKAGES = ("wheelloader", "numpy", "scipy", "casadi", "gymnasium", "matplotlib", "torch", "stable-baselines3")
+#: BLAS thread settings that change small-matrix timings.
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def machine_info() -> dict[str, object]:
+    """Platform, CPU model and count, load average, BLAS thread settings and package versions of this run."""
+    versions: dict[str, str | None] = {}
+    for pkg in PACKAGES:
+        try:
+            versions[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            versions[pkg] = None
+    cpu = platform.processor() or ""
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    try:
+        load: list[float] | None = list(os.getloadavg())
+    except OSError:
+        load = None
+    return {
+        "platform": platform.platform(),
+        "python": sys.version.split()[0],
+        "cpu": cpu,
+        "cpu_count": os.cpu_count(),
+        "loadavg_1_5_15min": load,
+        "blas_threads_env": {k: os.environ.get(k) for k in BLAS_THREAD_VARIABLES},
+        "versions": versions,
+    }
