@@ -120,8 +120,13 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Episode End
 
-    * Termination, cycle done: the tip has been in soil and is now more than
-      ``exit_clearance`` (0.02 m) above the start surface. In the multi-cycle
+    * Termination, cycle done: the tip has been in soil with at least
+      ``exit_min_fill`` (5 %) of the bucket's capacity loaded, and is now
+      more than ``exit_clearance`` (0.02 m) above the start surface (so
+      grazing the thin layer a carved pile leaves on the ground does not end
+      a cycle; ``exit_min_fill=0`` ends it at the first exit). A cycle that
+      touched soil but loaded less ends once the tip is more than
+      ``exit_clearance`` above the pile's crest. In the multi-cycle
       variant the next cycle starts instead (empty bucket, carved pile) until
       ``cycles_per_episode`` cycles are done.
     * Termination, stall: the force needed exceeds the loader's limit,
@@ -151,7 +156,8 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
       compaction, rate-dependent resistance, stones, soil drift (all off).
     * ``start_pose``, ``start_noise``, ``blade_angle_limits``,
       ``lift_headroom`` [m], ``max_tilt_acceleration`` [rad/s^2],
-      ``stall_patience`` [steps], ``exit_clearance`` [m], ``lookahead``
+      ``stall_patience`` [steps], ``exit_clearance`` [m], ``exit_min_fill``
+      [fraction of capacity], ``lookahead``
       distances [m], ``slope_window`` [m].
     * ``keep_pile`` (default False), ``relax`` (False, True = relax to the
       soil's friction angle, or a repose angle [rad]), ``relax_iterations``
@@ -167,7 +173,9 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Version History
 
-    * v0: initial version.
+    * v0: initial version. Before the first release the end-of-cycle rule
+      gained ``exit_min_fill`` (default 5 %); ``exit_min_fill=0`` restores
+      the first-exit rule.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 60}
@@ -271,7 +279,9 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         depth, rho, alpha, lt = contact_single(pile, self._x, self._z, self._th, cfg.bucket.floor_length,
                                                cfg.slope_window)
         self._depth, self._rho, self._alpha, self._lt = depth, rho, alpha, lt
-        self._entered = depth > 0.0
+        self._touched = depth > 0.0
+        self._entered = self._touched and self.cfg.exit_min_fill <= 0.0
+        self._crest = float(np.max(pile.heights))
 
     def _initial_forces(self, k: int) -> tuple[float, float]:
         """Forces at the start pose (measured with the noise of step index ``k``), logged as sample 0."""
@@ -411,9 +421,13 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         reward = r_fill + r_energy + r_valid + r_stall + r_force
         # --- episode end
         if in_soil:
-            self._entered = True
+            self._touched = True
+            if fill >= cfg.exit_min_fill * cap:
+                self._entered = True
         clearance = zn - self._start_pile._height_scalar(xn)
-        cycle_done = self._entered and clearance > cfg.exit_clearance
+        # done: out of the soil after loading (or, with too little loaded, once above the pile's crest)
+        out_of_pile = self._entered or (self._touched and zn > self._crest + cfg.exit_clearance)
+        cycle_done = out_of_pile and clearance > cfg.exit_clearance
         stall_end = self._stall_count >= cfg.stall_patience
         terminated = stall_end
         info = {

@@ -251,6 +251,13 @@ def _non_negative(name: str, value: Any) -> float:
     return float(value)
 
 
+def _fraction(name: str, value: Any) -> float:
+    value = _non_negative(name, value)
+    if value > 1.0:
+        raise ParameterError(f"{name} must be a fraction in [0, 1], got {value!r}")
+    return value
+
+
 # ------------------------------------------------------------------ config
 @dataclass(frozen=True, eq=False)
 class EnvConfig:
@@ -272,6 +279,7 @@ class EnvConfig:
     max_tilt_acceleration: float
     stall_patience: int
     exit_clearance: float
+    exit_min_fill: float
     lookahead: tuple[float, ...]
     slope_window: float
     keep_pile: bool
@@ -318,7 +326,8 @@ class EnvConfig:
             "soil": soil, "loader": self.loader.to_dict(), "bucket": self.bucket.to_dict(),
             "control_rate": self.control_rate, "sensor_noise": self.sensor_noise, "sensor_range": self.sensor_range,
             "reward": asdict(self.reward), "truth": self.truth.to_dict(), "stall_patience": self.stall_patience,
-            "exit_clearance": self.exit_clearance, "keep_pile": self.keep_pile, "relax": self.relax,
+            "exit_clearance": self.exit_clearance, "exit_min_fill": self.exit_min_fill, "keep_pile": self.keep_pile,
+            "relax": self.relax,
             "relax_iterations": self.relax_iterations,
             "cycles_per_episode": self.cycles_per_episode,
         }
@@ -342,6 +351,7 @@ def make_config(
     max_tilt_acceleration: float = 4.0,
     stall_patience: int = 1,
     exit_clearance: float = 0.02,
+    exit_min_fill: float = 0.05,
     lookahead: Sequence[float] = (0.1, 0.2, 0.3, 0.4, 0.5),
     slope_window: float = 0.1,
     keep_pile: bool = False,
@@ -385,6 +395,7 @@ def make_config(
         lift_headroom=_non_negative("lift_headroom", lift_headroom),
         max_tilt_acceleration=_positive("max_tilt_acceleration", max_tilt_acceleration),
         stall_patience=stall_patience, exit_clearance=_non_negative("exit_clearance", exit_clearance),
+        exit_min_fill=_fraction("exit_min_fill", exit_min_fill),
         lookahead=look, slope_window=_positive("slope_window", slope_window), keep_pile=bool(keep_pile),
         relax=relax, relax_iterations=relax_iterations, cycles_per_episode=cycles_per_episode,
     )

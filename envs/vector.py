@@ -107,6 +107,8 @@ class BucketLoadingVectorEnv(VectorEnv):
         self._mt, self._mn = z(n), z(n)
         self._e_soil, self._e_pay = z(n), z(n)
         self._entered = np.zeros(n, dtype=bool)
+        self._touched = np.zeros(n, dtype=bool)
+        self._crest = np.zeros(n)
         self._stall = np.zeros(n, dtype=np.int64)
         self._k = np.zeros(n, dtype=np.int64)
         self._steps = np.zeros(n, dtype=np.int64)
@@ -175,7 +177,9 @@ class BucketLoadingVectorEnv(VectorEnv):
         self._steps[i] = 0
         depth, rho, alpha, lt = contact_single(pile, x, z, th, cfg.bucket.floor_length, cfg.slope_window)
         self._depth[i], self._rho[i], self._alpha[i] = depth, rho, alpha
-        self._entered[i] = depth > 0.0
+        self._touched[i] = depth > 0.0
+        self._entered[i] = depth > 0.0 and cfg.exit_min_fill <= 0.0
+        self._crest[i] = float(np.max(pile.heights))
         self._noise_n[i], self._noise_u[i] = draw_noise_chunk(rng)
         f_t, f_n, _, _ = soil_forces_single(soil, depth, rho, alpha, lt, 0.0, cfg.bucket, DEFAULT_OPTIONS)
         r = cfg.sensor_range
@@ -366,10 +370,14 @@ class BucketLoadingVectorEnv(VectorEnv):
         excess = (np.maximum(f_t / ld.max_push_force - soft, 0.0) + np.maximum(f_n / ld.max_lift_force - soft, 0.0))
         r_force = -rw.force * excess
         # episode end
-        entered = self._entered[g] | in_soil
+        entered = self._entered[g] | (in_soil & (fill >= cfg.exit_min_fill * cap))
+        touched = self._touched[g] | in_soil
         self._entered[g] = entered
+        self._touched[g] = touched
         clearance = zn - h_surf
-        cycle_done = entered & (clearance > cfg.exit_clearance)
+        # done: out of the soil after loading (or, with too little loaded, once above the pile's crest)
+        out_of_pile = entered | (touched & (zn > self._crest[g] + cfg.exit_clearance))
+        cycle_done = out_of_pile & (clearance > cfg.exit_clearance)
         terminated = cycle_done | (self._stall[g] >= cfg.stall_patience)
         return (r_fill, r_energy, r_valid, r_stall, r_force), terminated, stalled
 

@@ -5,7 +5,10 @@ Methods
 ``"default"`` (alias ``"varpro"``)
     Our method (:mod:`wheelloader.estimator.varpro`): variable projection on
     the model's linear structure, a global grid over ``(phi, delta, n)``,
-    analytic-Jacobian bounded least squares, optional warm start.
+    analytic-Jacobian bounded least squares, optional warm start; with
+    ``regularize=True`` the MAP estimate under a weak prior (mid-range or
+    warm start, bound range / sqrt(12); noise per effective sample from the
+    residual autocorrelation) resolves directions the cycle leaves undetermined.
 ``"single-stage"``, ``"multi-stage"``
     The paper's baselines (:mod:`wheelloader.estimator.paper_methods`),
     L-BFGS-B with finite differences, as in Section III.
@@ -291,6 +294,7 @@ def calibrate(
     options: ModelOptions = DEFAULT_OPTIONS,
     slope_window: float = DEFAULT_SLOPE_WINDOW,
     min_samples: int = MIN_SAMPLES,
+    regularize: bool = False,
 ) -> Calibration:
     """Calibrate the eight soil parameters from one cycle.
 
@@ -328,6 +332,12 @@ def calibrate(
         Half-width of the local slope chord [m].
     min_samples : int
         Smallest number of in-soil samples accepted.
+    regularize : bool
+        Default method only: after the exact least-squares fit, take the MAP
+        estimate under a weak prior (mean ``initial`` or the mid-range of the
+        bounds, standard deviation range / sqrt(12)) with the noise per
+        independent sample estimated from the residuals' autocorrelation
+        (:mod:`wheelloader.estimator.varpro`, step 6).
 
     Returns
     -------
@@ -361,6 +371,8 @@ def calibrate(
         raise CalibrationError(f"n_starts must be a positive integer, got {n_starts!r}")
     if not (isinstance(min_samples, int) and not isinstance(min_samples, bool) and min_samples >= 1):
         raise CalibrationError(f"min_samples must be a positive integer, got {min_samples!r}")
+    if not isinstance(regularize, bool):
+        raise CalibrationError(f"regularize must be True or False, got {regularize!r}")
     prior = _coerce_initial(initial)
     bucket = cycle.bucket
     b = bucket.edge_thickness
@@ -373,9 +385,14 @@ def calibrate(
     njev = 0
     settings: dict[str, Any] = {"lambda": lam}
     if method == "default":
-        settings.update(grid=list(grid), n_starts=n_starts, max_nfev=max_iter or 100)
+        settings.update(grid=list(grid), n_starts=n_starts, max_nfev=max_iter or 100, regularize=regularize)
         x0 = None if prior is None else soil_to_fit(prior, b)
-        fit = fit_default(data, lo, hi, lam, x0, tuple(int(g) for g in grid), n_starts, max_iter or 100)
+        fit = fit_default(data, lo, hi, lam, x0, tuple(int(g) for g in grid), n_starts, max_iter or 100,
+                          regularize=regularize)
+        if fit.prior is not None:
+            settings["prior"] = {"mean": fit.prior.mean, "scale": fit.prior.scale, "nu": fit.prior.nu,
+                                 "autocorrelation_time": fit.tau, "exact_fit": fit.exact,
+                                 "exact_fit_cost": fit.exact_cost}
         x = fit.x
         nfev, njev = fit.evaluations.nfev, fit.evaluations.njev
         success = fit.success and fit.status > 0

@@ -183,3 +183,57 @@ def analyse(jacobian: np.ndarray, residual: np.ndarray, x: np.ndarray, lo: np.nd
         else:
             status[n] = "not determined"
     return Uncertainty(FIT_NAMES, np.asarray(x, float).copy(), cov, std, s, sigma_eff, status, rse, combos, cond)
+
+
+# ------------------------------------------------------------ noise of autocorrelated residuals
+#: Window constant of :func:`integrated_autocorrelation_time` (Sokal's choice).
+SOKAL_WINDOW = 5.0
+
+
+def integrated_autocorrelation_time(series: np.ndarray, window: float = SOKAL_WINDOW) -> float:
+    """Integrated autocorrelation time ``tau = 1 + 2 sum_{k>=1} rho_k`` of a series (>= 1).
+
+    The autocorrelation ``rho_k`` is the sample autocorrelation (FFT, mean
+    removed); the sum is cut at the smallest lag ``M`` with ``M >= window *
+    tau(M)`` (Sokal's adaptive window, as used for MCMC chains). ``N / tau``
+    is the effective number of independent samples in a series of ``N``:
+    the variance of a mean, or of a least-squares estimate whose regressors
+    vary more slowly than the noise, is ``tau`` times the white-noise value.
+    A constant or zero series returns 1.
+    """
+    r = np.asarray(series, float).ravel()
+    n = r.size
+    if n < 2:
+        return 1.0
+    r = r - r.mean()
+    spec = np.fft.rfft(r, 2 * n)
+    acf = np.fft.irfft(spec * np.conj(spec), 2 * n)[:n]
+    if not acf[0] > 0.0:
+        return 1.0
+    taus = 1.0 + 2.0 * np.cumsum(acf[1:] / acf[0])
+    lags = np.arange(1, n)
+    ok = np.flatnonzero(lags >= window * taus)
+    tau = taus[ok[0]] if ok.size else taus[-1]
+    return float(max(tau, 1.0))
+
+
+def noise_per_effective_sample(residuals: list[np.ndarray], parameters: int) -> tuple[float, float]:
+    """``(nu, tau)``: residual variance per *independent* sample of a least-squares fit, and its ``tau``.
+
+    ``residuals`` are the weighted residual series of the fit (one per
+    measured channel, each in time order). ``s^2 = sum r^2 / (M - p)`` is the
+    usual residual variance (``M`` residuals, ``p`` fitted parameters);
+    autocorrelated residuals carry fewer independent samples, ``M / tau``,
+    so the noise that matches the least-squares cost's curvature is
+    ``nu = tau * s^2`` (``tau`` of each channel from
+    :func:`integrated_autocorrelation_time`, averaged with the channels'
+    residual energies as weights). ``nu`` is 0 for an exact fit.
+    """
+    series = [np.asarray(r, float).ravel() for r in residuals]
+    energy = np.array([float(np.sum(r**2)) for r in series])
+    total = float(energy.sum())
+    count = sum(r.size for r, e in zip(series, energy, strict=True) if e > 0.0)
+    if not total > 0.0 or count <= parameters:
+        return 0.0, 1.0
+    tau = float(sum(e * integrated_autocorrelation_time(r) for r, e in zip(series, energy, strict=True)) / total)
+    return tau * total / (count - parameters), tau

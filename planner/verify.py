@@ -71,7 +71,7 @@ def path_energy(path: BucketPath, soil: SoilParams, pile: Pile, bucket: Bucket) 
 
 def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pile, bucket: Bucket | None = None,
                 loader: Loader | None = None, options: PlannerOptions | None = None, rate: float = 60.0,
-                tolerance: float = 0.02) -> PlanCheck:
+                tolerance: float = 0.02, exit_clearance: float = 0.02, exit_min_fill: float = 0.05) -> PlanCheck:
     """Check a plan against the NumPy model and the machine's limits.
 
     Checks: forces within the loader's limits (the plan's ``force_margin`` is
@@ -79,7 +79,8 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
     and tilt-rate limits, acceleration between the plan's intervals, every
     in-soil sample inside the model's validity domain (no flag but "tip out of
     soil"), the bucket not over its capacity (nothing spilled), forward motion
-    only, and the end pose at least ``end_clearance / 2`` above the surface.
+    only, the end pose at least ``end_clearance / 2`` above the surface, and
+    no early end of the cycle (see ``exit_clearance``).
     ``tolerance`` is the relative slack on the rate limits (numerical rounding
     of the solver).
 
@@ -97,6 +98,12 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
         Sampling rate of the re-simulation [Hz].
     tolerance : float
         Relative slack on speed and acceleration limits.
+    exit_clearance, exit_min_fill : float
+        The env's end-of-cycle rule (``BucketLoadingEnv``'s options of the
+        same names): a tip that has been in soil with at least
+        ``exit_min_fill`` of the capacity loaded and then rises more than
+        ``exit_clearance`` [m] above the surface ends the cycle there, so a
+        path that does so and later digs again fails the check.
 
     Returns
     -------
@@ -122,6 +129,8 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
     in_soil = state.depth > 0.0
     bad = in_soil & ((forces.flags & ~FLAG_OUT_OF_SOIL) != 0)
     end_clear = float(path.z[-1] - pile.surface_height(float(path.x[-1])))
+    early_exit = premature_exit(path, pile, state.depth, state.fill_volume / bucket.capacity, exit_clearance,
+                                exit_min_fill)
     slack = 1.0 + tolerance
     checks = {
         "tangential force above the loader's push limit": float(forces.tangential.max()) > loader.max_push_force,
@@ -133,6 +142,7 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
         "bucket over capacity (soil spilled)": sim["spilled"] > 1e-3 * bucket.capacity,
         "tip moves backwards": bool(np.any(vx < -1e-6)),
         "path does not end out of the pile": end_clear < 0.5 * options.end_clearance,
+        "tip leaves the soil before the end (the env would end the cycle there)": early_exit is not None,
     }
     failures = tuple(name for name, failed in checks.items() if failed)
     rho_in = state.rho[in_soil]
@@ -144,8 +154,26 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
         min_rho_in_soil=float(rho_in.min()) if rho_in.size else math.nan,
         fill=sim["fill"], spilled=sim["spilled"], energy=sim["energy"], end_clearance=end_clear,
         backward_steps=int(np.count_nonzero(vx < -1e-6)),
-        details={"flags": forces.flag_summary(), "samples": len(path)},
+        details={"flags": forces.flag_summary(), "samples": len(path), "early_exit_s": early_exit},
     )
+
+
+def premature_exit(path: BucketPath, pile: Pile, depth: np.ndarray, fill_fraction: np.ndarray,
+                   exit_clearance: float = 0.02, exit_min_fill: float = 0.05) -> float | None:
+    """Time at which the env would end the cycle before the path is done digging, or None [s].
+
+    The env ends a cycle at the first sample where the tip has been in soil
+    with at least ``exit_min_fill`` of the capacity loaded and is more than
+    ``exit_clearance`` above the start surface. That is premature when the
+    path is in soil again at a later sample (it hopped out and meant to dig on).
+    """
+    in_soil = np.asarray(depth) > 0.0
+    entered = np.cumsum(in_soil & (np.asarray(fill_fraction) >= exit_min_fill)) > 0
+    clearance = path.z - np.asarray(pile.surface_height(path.x))
+    ends = np.nonzero(entered & (clearance > exit_clearance))[0]
+    if ends.size == 0 or not np.any(in_soil[ends[0] + 1:]):
+        return None
+    return float(path.t[ends[0]])
 
 
 def _interval_acceleration(plan: Plan) -> float:

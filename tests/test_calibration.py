@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import pickle
 
 import numpy as np
 import pytest
-from scipy.optimize import lsq_linear
+from scipy.optimize import lsq_linear, minimize_scalar
 
 from wheelloader.estimator import PAPER_BOUNDS, Bucket, Pile, bezier_path, contact_state, default_path, preset
 from wheelloader.estimator.boxqp import solve_box_qp
@@ -19,6 +20,8 @@ from wheelloader.estimator.fitmodel import FIT_NAMES, FitData, fit_bounds, soil_
 from wheelloader.estimator.force_model import soil_forces
 from wheelloader.estimator.prediction import predict
 from wheelloader.estimator.synthetic import synthetic_cycle
+from wheelloader.estimator.uncertainty import integrated_autocorrelation_time, noise_per_effective_sample
+from wheelloader.estimator.varpro import fit_default
 
 #: Presets used for the known-answer tests.
 KNOWN_ANSWER_PRESETS = ("gravel", "sand", "dirt", "modified_sand", "dry_sand", "lean_clay", "fat_clay")
@@ -172,6 +175,93 @@ def test_fixed_parameter_by_equal_bounds():
     cal = calibrate(cycle, bounds={"gamma": (1360.0, 1360.0)})
     assert cal.params.gamma == 1360.0
     assert cal.quality.percent_r < 0.1
+
+
+# ------------------------------------------------------------ weak prior (regularize=True)
+def test_integrated_autocorrelation_time_known_answers():
+    rng = np.random.default_rng(0)
+    assert integrated_autocorrelation_time(rng.standard_normal(20000)) == pytest.approx(1.0, abs=0.1)
+    rho, e = 0.9, rng.standard_normal(200000)
+    ar = np.empty_like(e)
+    ar[0] = e[0]
+    for i in range(1, e.size):
+        ar[i] = rho * ar[i - 1] + e[i]
+    assert integrated_autocorrelation_time(ar) == pytest.approx((1 + rho) / (1 - rho), rel=0.1)  # AR(1): 19
+    assert integrated_autocorrelation_time(np.zeros(50)) == 1.0
+    nu, tau = noise_per_effective_sample([np.zeros(30), np.zeros(30)], 7)
+    assert (nu, tau) == (0.0, 1.0)
+    white = rng.standard_normal((2, 5000))
+    nu, tau = noise_per_effective_sample(list(white), 7)
+    assert nu == pytest.approx(1.0, rel=0.1) and tau == pytest.approx(1.0, abs=0.1)
+
+
+def _flat_depth_data(soil_name: str, noise: float, seed: int):
+    """Fit data at one constant depth d0: only K d0^n is identifiable, not K and n (eq 15)."""
+    data, x_true = _fit_data(soil_name)
+    d0 = float(np.median(data.depth))
+    flat = dataclasses.replace(data, depth=np.full_like(data.depth, d0))
+    y_t, y_n, _ = flat.forces(x_true)
+    rng = np.random.default_rng(seed)
+    scale = noise * float(np.max(np.hypot(y_t, y_n)))
+    flat = dataclasses.replace(flat, y_t=y_t + scale * rng.standard_normal(y_t.size),
+                               y_n=y_n + scale * rng.standard_normal(y_n.size))
+    return flat, d0
+
+
+@pytest.mark.parametrize("soil_name", ["dirt", "gravel", "lean_clay"])
+def test_weak_prior_resolves_an_unidentifiable_direction(soil_name):
+    """K and n not separately identifiable: the MAP lands on the prior-nearest point of the K d0^n valley."""
+    data, d0 = _flat_depth_data(soil_name, noise=0.05, seed=3)
+    lo, hi = fit_bounds(PAPER_BOUNDS, 0.02)
+    exact = fit_default(data, lo, hi)
+    fit = fit_default(data, lo, hi, regularize=True)
+    prior = fit.prior
+    assert prior is not None and prior.nu > 0.0
+    np.testing.assert_allclose(prior.mean, 0.5 * (lo + hi))
+    np.testing.assert_allclose(prior.scale, (hi - lo) / math.sqrt(12.0))
+    np.testing.assert_allclose(fit.exact, exact.x)
+    product = fit.x[5] * d0 ** fit.x[6]
+    assert product == pytest.approx(exact.x[5] * d0 ** exact.x[6], rel=0.03)  # the data's combination is kept
+
+    def prior_distance(n):  # along the valley K = product / d0^n
+        return ((product / d0**n - prior.mean[5]) / prior.scale[5]) ** 2 + ((n - prior.mean[6]) / prior.scale[6]) ** 2
+
+    n_star = minimize_scalar(prior_distance, bounds=(lo[6], hi[6]), method="bounded", options={"xatol": 1e-10}).x
+    assert fit.x[6] == pytest.approx(n_star, abs=0.005)
+    assert fit.x[5] == pytest.approx(product / d0**n_star, rel=0.02)
+    # the data fit is as good as the exact one to within the noise per independent sample
+    assert exact.cost <= fit.cost <= exact.cost + prior.nu
+
+
+@pytest.mark.parametrize("soil_name", ["gravel", "dirt", "dry_sand"])
+def test_weak_prior_leaves_identifiable_fits_unchanged(soil_name):
+    cycle = synthetic_cycle(soil_name, noise=0.0)
+    exact, reg = calibrate(cycle), calibrate(cycle, regularize=True)
+    errors = _relative_errors(reg, soil_name)
+    assert max(errors.values()) <= 0.01, errors
+    assert reg.quality.percent_r <= 0.1
+    a = np.array([*(getattr(exact.params, n) for n in FIT_NAMES[:5]), exact.sinkage_modulus, exact.params.n])
+    b = np.array([*(getattr(reg.params, n) for n in FIT_NAMES[:5]), reg.sinkage_modulus, reg.params.n])
+    lo, hi = fit_bounds(PAPER_BOUNDS, 0.02)
+    assert np.max(np.abs(a - b) / np.maximum(np.abs(a), 1e-6 * (hi - lo))) <= 1e-3
+
+
+def test_weak_prior_noisy_fit_stays_at_the_noise_floor_and_uses_the_warm_start(tmp_path):
+    cycle = synthetic_cycle("sand", noise=0.05, vibration=0.02, seed=11)
+    cal = calibrate(cycle, regularize=True)
+    data = FitData.from_state(cycle.contact_state(), cycle.tangential, cycle.normal, cycle.bucket)
+    f_t, f_n, _ = data.forces(soil_to_fit(preset("sand"), 0.02))
+    assert cal.quality.rmse_r <= 1.02 * FitQuality.from_forces(data.y_t, data.y_n, f_t, f_n).rmse_r
+    pr = cal.settings["prior"]
+    assert pr["nu"] > 0 and pr["autocorrelation_time"] >= 1.0
+    assert cal.cost >= 0.5 * pr["exact_fit_cost"] * (1 - 1e-9)  # eq 19a with lambda = 0.5 vs the weighted sum
+    saved = json.loads(cal.save_json(tmp_path / "params.json").read_text())
+    assert saved["calibration"]["settings"]["regularize"] is True
+    warm = calibrate(cycle, initial=preset("dirt"), regularize=True)
+    np.testing.assert_allclose(warm.settings["prior"]["mean"], soil_to_fit(preset("dirt"), 0.02))
+    assert not calibrate(cycle).settings.get("prior")
+    with pytest.raises(CalibrationError):
+        calibrate(cycle, regularize="yes")
 
 
 # ------------------------------------------------------------ paper methods

@@ -345,3 +345,41 @@ def test_sb3_ppo_smoke():
     model.learn(total_timesteps=64)
     action, _ = model.predict(env.reset(seed=0)[0], deterministic=True)
     assert env.action_space.contains(action)
+
+
+def _thin_layer_pile() -> Pile:
+    """4 cm of soil over the ground from x = 0 to 1 m, then a 30 deg face (a carved pile's residue)."""
+    return Pile.from_polyline([-0.5, 0.0, 0.02, 1.0, 1.0 + 1.0 / math.tan(math.radians(30.0)), 4.0],
+                              [0.0, 0.0, 0.04, 0.04, 1.0, 1.0])
+
+
+def _graze_and_rise(**kwargs) -> dict:
+    """Skim the layer 2 cm deep, then rise 6 cm above it and hold: the info of the last step."""
+    from wheelloader.envs.scripted import PathTracker
+    from wheelloader.estimator import BucketPath
+
+    t = np.linspace(0.0, 2.0, 121)
+    x = np.interp(t, [0.0, 0.8, 1.4, 2.0], [-0.1, 0.3, 0.45, 0.45])
+    z = np.interp(t, [0.0, 0.3, 0.8, 1.4, 2.0], [0.03, 0.02, 0.02, 0.10, 0.10])
+    path = BucketPath(t, x, z, np.full_like(t, math.radians(-5.0)), "graze")
+    env = gym.make("wheelloader/BucketLoading-v0", pile=_thin_layer_pile(), truth=None, sensor_noise=0.0,
+                   start_pose=(-0.1, 0.03, math.radians(-5.0)), start_noise=(0.0, 0.0, 0.0), **kwargs)
+    obs, _ = env.reset(seed=0)
+    tracker = PathTracker(path)
+    touched = False
+    for _ in range(150):
+        obs, _, terminated, truncated, info = env.step(tracker(obs))
+        touched |= info["depth"] > 0.0
+        if terminated or truncated:
+            break
+    assert touched
+    return info
+
+
+def test_grazing_a_thin_layer_does_not_end_the_cycle():
+    info = _graze_and_rise()
+    assert info["fill_fraction"] < 0.05 and not info["cycle_done"]
+    # the old rule (end at the first exit after any contact) is still available
+    assert _graze_and_rise(exit_min_fill=0.0)["cycle_done"]
+    with pytest.raises(ParameterError, match="exit_min_fill"):
+        gym.make("wheelloader/BucketLoading-v0", exit_min_fill=1.5)

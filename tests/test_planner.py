@@ -223,3 +223,30 @@ def test_options_are_validated_and_cached():
     assert b is not a
     with pytest.raises(PlanningError):
         PlannerOptions(intervals=2)
+
+
+def test_verify_rejects_a_path_that_leaves_the_soil_and_digs_again(pile):
+    """The env ends a cycle at the first exit after loading: a path that hops out and back in fails the check."""
+    from wheelloader.estimator import BucketPath
+    from wheelloader.planner.verify import premature_exit
+
+    t = np.linspace(0.0, 4.0, 241)
+    x = np.interp(t, [0.0, 4.0], [-0.1, 1.6])
+    surface = np.asarray(pile.surface_height(x))
+    dig = np.maximum(surface - 0.15, 0.02)
+    hop = (t > 2.0) & (t < 2.6)  # 8 cm above the surface in the middle of the dig
+    z_hop = np.where(hop, surface + 0.08, dig)
+    z_hop[-20:] = surface[-20:] + 0.3
+    dig[-20:] = surface[-20:] + 0.3
+    blade = np.full_like(t, math.radians(10.0))
+    soil = preset("gravel")
+    for z, hops in ((dig, False), (z_hop, True)):
+        path = BucketPath(t, x, z, blade, "test")
+        state = contact_state(path.x, path.z, path.blade_angle, pile, Bucket())
+        exit_time = premature_exit(path, pile, state.depth, state.fill_volume / Bucket().capacity)
+        check = verify_plan(path, soil, pile)
+        message = "tip leaves the soil before the end (the env would end the cycle there)"
+        assert (exit_time is not None) == hops
+        assert (message in check.failures) == hops
+        if hops:
+            assert 2.0 < exit_time < 2.6
