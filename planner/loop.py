@@ -74,7 +74,7 @@ def cycle_duration(pile: Pile, start: StartState) -> float:
 def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: StartState | None = None,
                     bucket: Bucket | None = None, loader: Loader | None = None,
                     options: PlannerOptions | None = None, control_rate: float = 60.0, mpc: bool = True,
-                    replan_every: int = 6) -> Any:
+                    replan_every: int = 6, replan_within: float | None = None) -> Any:
     """Plan the next cycle on ``pile`` with ``params``; return a ``PlanOutcome`` for the adaptation loop.
 
     The plan is accepted only when the NumPy re-simulation
@@ -84,6 +84,9 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     (``success=False``) and the loop falls back. With
     ``mpc`` the outcome carries an :class:`MPCController` (warm-started with
     the plan) that re-plans every ``replan_every`` steps during the cycle.
+    A plan that fails the check is re-planned (at most twice) with wider
+    margins, unless ``replan_within`` [s] is given and has already passed
+    (a time budget: with ``options.max_wall_time`` it bounds the planning time).
     """
     from wheelloader.adaptation import PlanOutcome
 
@@ -98,7 +101,7 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
         plan = opt.solve(params, pile, start, duration)
         check = verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate)
         for level in (1, 2):
-            if check.ok:
+            if check.ok or (replan_within is not None and time.perf_counter() - tic > replan_within):
                 break
             # the smooth CasADi surface can differ from a (carved) pile near its kinks, and the path between
             # the plan's nodes can graze a crest: re-plan with wider margins, from the plan that failed

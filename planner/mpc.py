@@ -3,14 +3,19 @@
 Every ``replan_every`` control steps the controller reads the tip pose,
 velocity and fill from the observation, solves the trajectory optimisation
 for the remaining time of the cycle (shrinking horizon: the same ``N``
-intervals over less time; the end-out-of-the-pile constraint stays), warm
-started with IPOPT's warm-start settings from the previous accepted solution
-(primal and dual; the first re-plan of a cycle from the remaining part of the
-plan being executed), and tracks the new plan
+intervals over less time; the end-out-of-the-pile constraint stays) with a
+few IPOPT iterations (``max_iter``, default 8), warm started with IPOPT's
+warm-start settings from the previous re-plan's last iterate (primal and dual;
+the first re-plan of a cycle from the remaining part of the plan being
+executed): the real-time-iteration idea, where the optimisation converges
+over successive control steps instead of within one. The new plan is tracked
 with feed-forward velocity plus proportional feedback
 (:class:`~wheelloader.envs.scripted.PathTracker`). The solver status is
-checked every time: a failed or non-finite solve keeps the last feasible
-plan; with none, a retreat (lift the bucket out of the pile) is tracked.
+checked every time: a converged solve, or an unconverged one whose last
+iterate satisfies the constraints (primal infeasibility at most
+``feasible_tolerance``), is used; a failed, infeasible or non-finite solve
+keeps the last used plan; with none, a retreat (lift the bucket out of the
+pile) is tracked.
 Every solve is recorded in :attr:`MPCController.history`.
 """
 
@@ -63,7 +68,7 @@ class MPCController:
     replan_every : int
         Control steps between re-plans (default 6: 10 Hz at 60 Hz).
     intervals : int
-        Intervals of the MPC's optimisation (default 16).
+        Intervals of the MPC's optimisation (default 12).
     min_remaining : float
         Below this remaining time [s] the controller stops re-planning and tracks the last plan.
     initial_plan : Plan, optional
@@ -74,14 +79,22 @@ class MPCController:
         Weight [1/m^2] of staying near the plan being executed (keeps successive
         re-plans from jumping between local optima).
     max_iter : int
-        IPOPT iteration limit per re-plan (default 60): a re-plan that does not
-        converge by then is not used, the last accepted plan goes on.
+        IPOPT iteration limit per re-plan (default 8, in the spirit of the
+        real-time iteration: a few Newton steps per control step, each re-plan
+        continuing from the previous one's last iterate). A re-plan that stops
+        at the limit is used when its last iterate satisfies the constraints
+        (IPOPT's primal infeasibility at most ``feasible_tolerance``): feasible,
+        not yet proven optimal; otherwise the last accepted plan goes on.
+    feasible_tolerance : float
+        Largest primal infeasibility of an unconverged iterate that is still
+        used (default 1e-4: 0.1 mm on positions, 1e-4 of the force limits).
     """
 
     def __init__(self, soil: SoilParams | str | dict, pile: Pile, duration: float, *, bucket: Bucket | None = None,
                  loader: Loader | None = None, control_rate: float = 60.0, replan_every: int = 6,
-                 intervals: int = 16, min_remaining: float = 0.4, initial_plan: Plan | None = None,
-                 options: PlannerOptions | None = None, reference_weight: float = 20.0, max_iter: int = 60) -> None:
+                 intervals: int = 12, min_remaining: float = 0.4, initial_plan: Plan | None = None,
+                 options: PlannerOptions | None = None, reference_weight: float = 20.0, max_iter: int = 8,
+                 feasible_tolerance: float = 1e-4) -> None:
         if not (isinstance(replan_every, int) and replan_every >= 1):
             raise PlanningError(f"replan_every must be a positive integer, got {replan_every!r}")
         if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0.0):
@@ -104,6 +117,7 @@ class MPCController:
                                                      max_iter=min(base.max_iter, max_iter)))
         self.initial_plan = initial_plan
         self.reference_weight = float(reference_weight)
+        self.feasible_tolerance = float(feasible_tolerance)
         self.history: list[SolveRecord] = []
         self.reset()
 
@@ -148,9 +162,9 @@ class MPCController:
         guess = self._remaining_guess(k / self.rate)
         tic = time.perf_counter()
         try:
-            # after an accepted solve in this cycle, IPOPT restarts from that solution (primal and dual);
-            # otherwise from the remaining part of the plan being executed
-            warm = bool(self.history) and self.history[-1].accepted
+            # after a solve in this cycle, IPOPT continues from its last iterate (primal and dual);
+            # at the first one (or after an error) from the remaining part of the plan being executed
+            warm = bool(self.history) and not self.history[-1].status.startswith("error")
             plan = self.optimizer.solve(self.soil, self.pile, start, remaining,
                                         initial_guess=None if warm else guess, warm=warm, reference=guess,
                                         reference_weight=self.reference_weight)
@@ -159,7 +173,8 @@ class MPCController:
                                             self._fallback_name()))
             return
         seconds = time.perf_counter() - tic
-        usable = plan.status in ACCEPTED_STATUSES and _finite(plan)
+        feasible = plan.raw.get("primal_infeasibility", math.inf) <= self.feasible_tolerance
+        usable = (plan.status in ACCEPTED_STATUSES or feasible) and _finite(plan)
         if usable:
             self.plan = plan
             self._plan_start = k / self.rate

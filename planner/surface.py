@@ -39,12 +39,20 @@ class SurfaceGrid:
         Width over which each kink of the knot polyline is rounded [m] (default 0.01 m).
     behind : float
         How far behind the path's start the first knot lies [m] (default 0.3 m).
+    window : int
+        Knots per node window (default 20: 0.95 m). Each node of the NLP sees
+        the surface through the knots of a window placed around the node's
+        position in the initial guess (:meth:`window_parameters`), the
+        polyline's earlier knots folded into one straight line: the same
+        heights as through all knots while the node stays inside its window,
+        at a quarter of the cost per evaluation.
     """
 
     knots: int = 72
     spacing: float = 0.05
     kappa: float = 0.01
     behind: float = 0.3
+    window: int = 20
 
     def __post_init__(self) -> None:
         if not (isinstance(self.knots, int) and self.knots >= 4):
@@ -55,6 +63,8 @@ class SurfaceGrid:
                 raise PlanningError(f"SurfaceGrid.{name} must be a finite number >= 0, got {value!r}")
         if self.spacing <= 0.0 or self.kappa <= 0.0:
             raise PlanningError("SurfaceGrid.spacing and kappa must be > 0 m")
+        if not (isinstance(self.window, int) and 4 <= self.window <= self.knots - 2):
+            raise PlanningError(f"SurfaceGrid.window must be an integer in [4, knots - 2], got {self.window!r}")
 
     @property
     def size(self) -> int:
@@ -91,6 +101,60 @@ class SurfaceGrid:
             out = out + (slope - slope_prev) * k * softplus((x - x0 - i * dx) / k)
             slope_prev = slope
         return out
+
+    @property
+    def window_size(self) -> int:
+        """Number of NLP parameters of one node window: ``x_a, z_a, s_a`` and one slope change per knot."""
+        return 3 + self.window
+
+    def window_parameters(self, params: np.ndarray, centres: np.ndarray) -> np.ndarray:
+        """Windows of the surface ``params`` (from :meth:`parameters`) around each of ``centres`` [m].
+
+        Returns an array ``(len(centres), window_size)``: per centre the first
+        window knot ``x_a``, its height ``z_a``, the slope ``s_a`` of the
+        segment before it, and the slope changes at the window's knots. See
+        :meth:`window_height`.
+        """
+        x0, z = float(params[0]), np.asarray(params[1:], dtype=float)
+        dx, m = self.spacing, self.window
+        slopes = np.diff(z) / dx  # segment i: knots i -> i + 1
+        first = np.rint((np.asarray(centres, dtype=float) - x0) / dx).astype(int) - m // 2
+        first = np.clip(first, 1, self.knots - 1 - m)
+        j = first[:, None] + np.arange(m)[None, :]
+        out = np.empty((first.size, self.window_size))
+        out[:, 0] = x0 + dx * first
+        out[:, 1] = z[first]
+        out[:, 2] = slopes[first - 1]
+        out[:, 3:] = slopes[j] - slopes[j - 1]
+        return out
+
+    def window_range(self, windows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(lo, hi)`` [m]: where each window reproduces the full surface (one knot spacing beyond its ends)."""
+        lo = windows[:, 0] - self.spacing
+        return lo, windows[:, 0] + self.spacing * self.window
+
+    def window_height(self, x, wp):
+        """Smooth surface height at ``x`` [m] through one window ``wp`` (CasADi symbols or NumPy values).
+
+        ``z(x) = z_a + s_a (x - x_a) + sum_j d_j kappa softplus((x - x_a - j spacing) / kappa)``: inside the
+        window's range the same as :meth:`height` with all knots (up to the softplus tails of the knots
+        before it, below ``kappa exp(-spacing / kappa)``).
+        """
+        k, dx = self.kappa, self.spacing
+        symbolic = isinstance(x, (ca.SX, ca.MX)) or isinstance(wp, (ca.SX, ca.MX))
+        softplus = _softplus_casadi if symbolic else _softplus_numpy
+        xa = wp[0]
+        out = wp[1] + wp[2] * (x - xa)
+        for j in range(self.window):
+            out = out + wp[3 + j] * k * softplus((x - xa - j * dx) / k)
+        return out
+
+    def window_slope_angle(self, x, wp, window: float = DEFAULT_SLOPE_WINDOW):
+        """Chord slope angle over ``x +- window`` [rad] through one node window."""
+        rise = self.window_height(x + window, wp) - self.window_height(x - window, wp)
+        if isinstance(rise, (ca.SX, ca.MX)):
+            return ca.atan(rise / (2.0 * window))
+        return np.arctan(rise / (2.0 * window))
 
     def slope_angle(self, x, params, window: float = DEFAULT_SLOPE_WINDOW):
         """Chord slope angle over ``x +- window`` [rad], as :meth:`Pile.slope_angle`."""

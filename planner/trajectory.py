@@ -54,6 +54,7 @@ from wheelloader.estimator import (
     as_soil,
 )
 from wheelloader.estimator.errors import PlanningError
+from wheelloader.estimator.kinematics import DEFAULT_SLOPE_WINDOW
 
 from .casadi_model import casadi_forces, smooth_pos, soil_vector
 from .surface import SurfaceGrid
@@ -94,6 +95,10 @@ class PlannerOptions:
         interval [m] (default 0.01 m; the env ends a cycle at 0.02 m).
     max_iter : int
         IPOPT iteration limit (default 300).
+    max_wall_time : float, optional
+        IPOPT wall-time limit per solve [s] (default None: none). A solve stopped by it returns
+        its last iterate (status ``Maximum_WallTime_Exceeded``): check it with
+        :func:`~wheelloader.planner.verify_plan` before use.
     ipopt_warm_start : bool
         Build IPOPT with its warm-start settings (``warm_start_init_point``, ``mu_init`` 1e-4): a
         ``solve(..., warm=True)`` then starts from the previous primal *and* dual solution. For MPC,
@@ -116,6 +121,7 @@ class PlannerOptions:
     fill_limit: float = 0.95
     stay_clearance: float = 0.01
     max_iter: int = 300
+    max_wall_time: float | None = None
     ipopt_warm_start: bool = False
     tolerance: float = 1e-4
     surface: SurfaceGrid = field(default_factory=SurfaceGrid)
@@ -139,6 +145,10 @@ class PlannerOptions:
                                 f"got {self.blade_angle_limits!r}")
         if not (isinstance(self.max_iter, int) and self.max_iter >= 1) or not self.tolerance > 0.0:
             raise PlanningError("PlannerOptions.max_iter must be a positive integer and tolerance > 0")
+        if self.max_wall_time is not None and not (isinstance(self.max_wall_time, (int, float))
+                                                   and math.isfinite(self.max_wall_time) and self.max_wall_time > 0):
+            raise PlanningError(f"PlannerOptions.max_wall_time must be None or a number of seconds > 0, "
+                                f"got {self.max_wall_time!r}")
 
 
 @dataclass(frozen=True)
@@ -338,11 +348,9 @@ class TrajectoryOptimizer:
             ref = np.column_stack([np.interp(ts, rt, reference.x), np.interp(ts, rt, reference.z)])
         else:
             reference_weight = 0.0
-        p = np.concatenate([self._parameters(soil, pile, start, h, lam), ref.ravel(), [reference_weight],
-                            [face_position(pile, start)]])
         lbx, ubx = self._bounds(pile, start)
         lbg, ubg = self._constraint_bounds(soil, min_fill)
-        args: dict[str, Any] = {"p": p, "lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
+        args: dict[str, Any] = {"lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
         if warm and self._last is not None and initial_guess is None:
             args["x0"] = np.clip(self._last["x"], lbx, ubx)
             args["lam_x0"] = self._last["lam_x"]
@@ -350,12 +358,25 @@ class TrajectoryOptimizer:
         else:
             guess = initial_guess if initial_guess is not None else straight_dig(pile, start, duration, self.bucket)
             args["x0"] = np.clip(self._guess_vector(guess, pile, start, h), lbx, ubx)
+        tail = np.concatenate([ref.ravel(), [reference_weight], [face_position(pile, start)]])
         tic = time.perf_counter()
-        sol = self._solver(**args)
+        # each node sees the surface through a window placed around its start position; a node that moves
+        # out of its window's range is re-solved once, from where IPOPT stopped, with re-centred windows
+        iterations = 0
+        for attempt in range(2):
+            windows = self._windows(pile, start, args["x0"])
+            args["p"] = p = np.concatenate([self._parameters(soil, pile, start, h, lam, windows), tail])
+            sol = self._solver(**args)
+            stats = dict(self._solver.stats())
+            iterations += int(stats.get("iter_count", 0))
+            w = np.array(sol["x"]).ravel()
+            self._last = {"x": w, "lam_x": np.array(sol["lam_x"]).ravel(), "lam_g": np.array(sol["lam_g"]).ravel()}
+            if attempt == 1 or not self._outside_windows(windows, w):
+                break
+            args.update(x0=w, lam_x0=self._last["lam_x"], lam_g0=self._last["lam_g"])
         elapsed = time.perf_counter() - tic
-        stats = self._solver.stats()
-        w = np.array(sol["x"]).ravel()
-        self._last = {"x": w, "lam_x": np.array(sol["lam_x"]).ravel(), "lam_g": np.array(sol["lam_g"]).ravel()}
+        stats["iter_count"] = iterations
+        stats["window_recentred"] = attempt == 1
         return self._plan_from(w, p, h, start, stats, elapsed, float(sol["f"]))
 
     def reset_warm_start(self) -> None:
@@ -366,19 +387,30 @@ class TrajectoryOptimizer:
         """CasADi-model forces and energy along any path (for comparing with the NumPy model)."""
         soil = as_soil(soil)
         grid = self.options.surface
-        surf = grid.parameters(pile, float(path.x[0]))
+        windows = grid.window_parameters(grid.parameters(pile, float(path.x[0])), path.x)
         fill = pile.carve(path.x, path.z, self.bucket.width, self.bucket.capacity, start_fill).fill_history
         f = self._functions["forces"].map(len(path))
         ft, fn = f(np.asarray(path.x)[None, :], np.asarray(path.z)[None, :], np.asarray(path.blade_angle)[None, :],
-                   fill[None, :], soil_vector(soil, self.bucket), surf)
+                   fill[None, :], soil_vector(soil, self.bucket), windows.T)
         return {"F_T": np.array(ft).ravel(), "F_N": np.array(fn).ravel(), "fill": fill}
 
     # ------------------------------------------------------------------ internals
-    def _parameters(self, soil: SoilParams, pile: Pile, start: StartState, h: float, lam: float) -> np.ndarray:
-        grid = self.options.surface
-        surf = grid.parameters(pile, start.x)
+    def _parameters(self, soil: SoilParams, pile: Pile, start: StartState, h: float, lam: float,
+                    windows: np.ndarray) -> np.ndarray:
         return np.concatenate([[start.x, start.z, start.blade_angle, start.fill, start.vx, start.vz, start.omega,
-                                h, lam], soil_vector(soil, self.bucket), surf])
+                                h, lam], soil_vector(soil, self.bucket), windows.ravel()])
+
+    def _windows(self, pile: Pile, start: StartState, w: np.ndarray) -> np.ndarray:
+        """Surface windows ``(N + 1, window_size)`` around the node positions of the decision vector ``w``."""
+        grid = self.options.surface
+        node_x = w[0: 4 * (self.intervals + 1): 4]
+        return grid.window_parameters(grid.parameters(pile, start.x), node_x)
+
+    def _outside_windows(self, windows: np.ndarray, w: np.ndarray) -> bool:
+        """Whether a node of ``w`` (with its slope chord) left the range its window reproduces."""
+        lo, hi = self.options.surface.window_range(windows)
+        node_x = w[0: 4 * (self.intervals + 1): 4]
+        return bool(np.any(node_x - DEFAULT_SLOPE_WINDOW < lo) or np.any(node_x + DEFAULT_SLOPE_WINDOW > hi))
 
     def _bounds(self, pile: Pile, start: StartState) -> tuple[np.ndarray, np.ndarray]:
         n = self.intervals
@@ -442,7 +474,14 @@ class TrajectoryOptimizer:
                     controls[:, 0].copy(), controls[:, 1].copy(), controls[:, 2].copy(),
                     np.array(ft).ravel(), np.array(fn).ravel(), float(energy), bool(stats.get("success", False)),
                     status, int(stats.get("iter_count", -1)), elapsed, objective,
-                    raw={"start": start, "h": h})
+                    raw={"start": start, "h": h, "primal_infeasibility": _final_infeasibility(stats)})
+
+
+def _final_infeasibility(stats: dict) -> float:
+    """IPOPT's primal infeasibility (largest constraint violation, scaled) at its last iterate; NaN if unknown."""
+    history = stats.get("iterations") or {}
+    values = history.get("inf_pr") or []
+    return float(values[-1]) if len(values) else math.nan
 
 
 def first_rise(pile: Pile, start: StartState, rise: float, step: float = 0.005, reach: float = 4.0) -> float | None:
@@ -510,20 +549,21 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     p_h = ca.SX.sym("h")
     p_lam = ca.SX.sym("lam")
     p_soil = ca.SX.sym("soil", 7)
-    p_surf = ca.SX.sym("surf", grid.size)
+    p_surf = ca.SX.sym("surf", grid.window_size, n + 1)  # one surface window per node
     p_ref = ca.SX.sym("ref", 2, n + 1)
     p_wref = ca.SX.sym("wref")
     p_face = ca.SX.sym("face")
-    p = ca.vertcat(p_start, p_vel0, p_h, p_lam, p_soil, p_surf, ca.vec(p_ref), p_wref, p_face)
+    p = ca.vertcat(p_start, p_vel0, p_h, p_lam, p_soil, ca.vec(p_surf), ca.vec(p_ref), p_wref, p_face)
     # single-node force function (also used by predict)
     xs, zs, ths, vs = ca.SX.sym("x"), ca.SX.sym("z"), ca.SX.sym("th"), ca.SX.sym("V")
-    alpha = grid.slope_angle(xs, p_surf)
-    vertical = grid.height(xs, p_surf) - zs
+    p_win = ca.SX.sym("window", grid.window_size)
+    alpha = grid.window_slope_angle(xs, p_win)
+    vertical = grid.window_height(xs, p_win) - zs
     w_load = p_soil[0] * GRAVITY * vs
     out = casadi_forces(p_soil, vertical, alpha - ths, alpha, w_load, bucket, DEFAULT_OPTIONS)
     rho = alpha - ths
-    forces = ca.Function("forces", [xs, zs, ths, vs, p_soil, p_surf], [out["F_T"], out["F_N"]])
-    node = ca.Function("node", [xs, zs, ths, vs, p_soil, p_surf], [out["F_T"], out["F_N"], rho, vertical, alpha])
+    forces = ca.Function("forces", [xs, zs, ths, vs, p_soil, p_win], [out["F_T"], out["F_N"]])
+    node = ca.Function("node", [xs, zs, ths, vs, p_soil, p_win], [out["F_T"], out["F_N"], rho, vertical, alpha])
     # decision variables
     X = ca.SX.sym("X", 4, n + 1)
     U = ca.SX.sym("U", 3, n)
@@ -533,7 +573,7 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     energy = 0.0
     smooth = 0.0
     ft_all, fn_all = [], []
-    ft0, fn0, _, vertical_prev, _ = node(X[0, 0], X[1, 0], X[2, 0], X[3, 0], p_soil, p_surf)
+    ft0, fn0, _, vertical_prev, _ = node(X[0, 0], X[1, 0], X[2, 0], X[3, 0], p_soil, p_surf[:, 0])
     ft_all.append(ft0)
     fn_all.append(fn0)
     phi, delta = p_soil[3], p_soil[4]
@@ -553,7 +593,7 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
         # kinematics (exact for piecewise-constant velocity)
         g_eq += [xn - xk - dx, zn - zk - dz, tn - tk - h * u[2]]
         # forces at the new node (and its depth below the surface)
-        f_t, f_n, rho_n, vertical, alpha_n = node(xn, zn, tn, vn, p_soil, p_surf)
+        f_t, f_n, rho_n, vertical, alpha_n = node(xn, zn, tn, vn, p_soil, p_surf[:, k + 1])
         # fill: area between the start surface and the segment (trapezoid rule on the node depths),
         # capped by the bounds on V
         removed = bucket.width * dx * smooth_pos(0.5 * (vertical_prev + vertical), 1e-3)
@@ -582,7 +622,7 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
         work = f_t * (dx * c + dz * s) + f_n * (dz * c - dx * s)
         energy = energy + smooth_pos(work, 1.0) + smooth_pos(p_soil[0] * GRAVITY * vn * dz, 1.0)
     # end out of the pile
-    end_clear = X[1, n] - grid.height(X[0, n], p_surf) - options.end_clearance
+    end_clear = X[1, n] - grid.window_height(X[0, n], p_surf[:, n]) - options.end_clearance
     g_ineq.append(end_clear)
     fill_end = X[3, n]
     g = ca.vertcat(*g_eq, *g_ineq, fill_end)
@@ -597,6 +637,8 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
         "ipopt.acceptable_tol": 1e-3, "ipopt.acceptable_iter": 5,
         "ipopt.mu_strategy": "adaptive", "error_on_fail": False,
     }
+    if options.max_wall_time is not None:
+        solver_opts["ipopt.max_wall_time"] = float(options.max_wall_time)
     if options.ipopt_warm_start:
         solver_opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
                             "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})

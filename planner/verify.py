@@ -71,7 +71,8 @@ def path_energy(path: BucketPath, soil: SoilParams, pile: Pile, bucket: Bucket) 
 
 def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pile, bucket: Bucket | None = None,
                 loader: Loader | None = None, options: PlannerOptions | None = None, rate: float = 60.0,
-                tolerance: float = 0.02, exit_clearance: float = 0.02, exit_min_fill: float = 0.05) -> PlanCheck:
+                tolerance: float = 0.02, exit_clearance: float = 0.02, exit_min_fill: float = 0.05,
+                tracking_margin: float = 0.01) -> PlanCheck:
     """Check a plan against the NumPy model and the machine's limits.
 
     Checks: forces within the loader's limits (the plan's ``force_margin`` is
@@ -104,6 +105,10 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
         ``exit_min_fill`` of the capacity loaded and then rises more than
         ``exit_clearance`` [m] above the surface ends the cycle there, so a
         path that does so and later digs again fails the check.
+    tracking_margin : float
+        How much closer than ``exit_clearance`` to the surface the path must
+        stay for that check [m] (default 0.01 m: tracking error and the
+        env's start noise).
 
     Returns
     -------
@@ -129,8 +134,8 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
     in_soil = state.depth > 0.0
     bad = in_soil & ((forces.flags & ~FLAG_OUT_OF_SOIL) != 0)
     end_clear = float(path.z[-1] - pile.surface_height(float(path.x[-1])))
-    early_exit = premature_exit(path, pile, state.depth, state.fill_volume / bucket.capacity, exit_clearance,
-                                exit_min_fill)
+    early_exit = premature_exit(path, pile, state.depth, state.fill_volume / bucket.capacity,
+                                exit_clearance - tracking_margin, exit_min_fill)
     slack = 1.0 + tolerance
     checks = {
         "tangential force above the loader's push limit": float(forces.tangential.max()) > loader.max_push_force,

@@ -27,6 +27,7 @@ from wheelloader.planner import (
     plan_next_cycle,
     verify_plan,
 )
+from wheelloader.planner.surface import SurfaceGrid
 
 GOLDEN = Path(__file__).parent / "data" / "planner_golden.json"
 
@@ -204,7 +205,7 @@ def write_golden(seed: int = 3) -> None:
 def test_make_env_policy_digs_a_cycle_with_mpc():
     env = gym.make("wheelloader/BucketLoading-v0", soil="sand", sensor_noise=0.0)
     obs, _ = env.reset(seed=1)
-    policy = make_env_policy(env, replan_every=30, intervals=16)
+    policy = make_env_policy(env)
     done = False
     while not done:
         obs, _, term, trunc, info = env.step(policy(obs))
@@ -212,6 +213,11 @@ def test_make_env_policy_digs_a_cycle_with_mpc():
     assert term and not info["stalled"]
     assert info["fill_fraction"] > 0.5
     assert len(policy.history) >= 2
+    # every re-plan either converged or stopped at the iteration limit; only feasible iterates are used
+    for record in policy.history:
+        assert record.iterations <= 8
+        assert record.accepted == (record.action == "new plan")
+    assert any(r.accepted for r in policy.history)
     policy.reset()
     assert policy.history == [] and policy.step_index == 0
 
@@ -223,6 +229,37 @@ def test_options_are_validated_and_cached():
     assert b is not a
     with pytest.raises(PlanningError):
         PlannerOptions(intervals=2)
+    with pytest.raises(PlanningError, match="max_wall_time"):
+        PlannerOptions(max_wall_time=0.0)
+    with pytest.raises(PlanningError, match="window"):
+        SurfaceGrid(window=100)
+
+
+def test_surface_windows_reproduce_the_full_surface(pile):
+    """Each node's window gives the same smooth surface as all knots inside the window's range."""
+    grid = SurfaceGrid()
+    carved = pile.carve(np.array([-0.1, 0.8, 1.2]), np.array([0.03, 0.2, 0.9]), 1.0, 10.0).pile
+    for surface in (pile, carved):
+        params = grid.parameters(surface, -0.1)
+        xs = np.linspace(-0.3, 3.0, 331)
+        windows = grid.window_parameters(params, xs)
+        own = np.array([grid.window_height(x, w) for x, w in zip(xs, windows, strict=True)])
+        np.testing.assert_allclose(own, grid.height(xs, params), atol=1e-9)
+        centre = grid.window_parameters(params, np.array([1.0]))[0]
+        lo, hi = grid.window_range(centre[None, :])
+        inside = (xs >= lo[0]) & (xs <= hi[0])
+        np.testing.assert_allclose(grid.window_height(xs[inside], centre), grid.height(xs[inside], params),
+                                   atol=1e-9)
+
+
+def test_wall_time_limit_returns_the_last_iterate_and_the_loop_reports_it(pile):
+    opts = PlannerOptions(max_wall_time=0.02)
+    plan = optimizer_for(options=opts).solve("gravel", pile, default_start(pile), 4.0)
+    assert plan.status == "Maximum_WallTime_Exceeded" and not plan.success
+    outcome = plan_next_cycle("gravel", pile, options=opts, mpc=False, replan_within=0.0)
+    # used only when the NumPy check passes; either way the message says what happened
+    assert ("Maximum_WallTime_Exceeded" in outcome.message) and (outcome.success == ("NumPy check" not in
+                                                                                      outcome.message.split(";")[0]))
 
 
 def test_verify_rejects_a_path_that_leaves_the_soil_and_digs_again(pile):

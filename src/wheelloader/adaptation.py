@@ -326,6 +326,12 @@ def default_bucket() -> Bucket:
     return Bucket()
 
 
+#: Time budget of the plan between cycles [s]: IPOPT's wall-time limit per solve; no re-plan with wider
+#: margins once half of it has passed. A plan stopped by the limit is used only when it passes the NumPy
+#: check (feasible, not proven optimal); otherwise the loop falls back to the Bezier path on the face.
+BETWEEN_CYCLES_BUDGET = 0.7
+
+
 def default_planner(mpc: bool = False) -> Any:
     """The planner used between cycles, or None when the planner is not available.
 
@@ -340,7 +346,8 @@ def default_planner(mpc: bool = False) -> Any:
         return None
     import functools
 
+    options = PlannerOptions(max_wall_time=BETWEEN_CYCLES_BUDGET)
     # build the NLPs once (the plan and its two wider-margin re-plans), before the loop's timings start
     for level in (0, 1, 2):
-        optimizer_for(options=cautious_options(PlannerOptions(), level) if level else None)
-    return functools.partial(plan_next_cycle, mpc=mpc)
+        optimizer_for(options=cautious_options(options, level))
+    return functools.partial(plan_next_cycle, mpc=mpc, options=options, replan_within=0.5 * BETWEEN_CYCLES_BUDGET)
