@@ -74,7 +74,8 @@ def cycle_duration(pile: Pile, start: StartState) -> float:
 def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: StartState | None = None,
                     bucket: Bucket | None = None, loader: Loader | None = None,
                     options: PlannerOptions | None = None, control_rate: float = 60.0, mpc: bool = True,
-                    replan_every: int = 6, replan_within: float | None = None) -> Any:
+                    replan_every: int = 6, replan_within: float | None = None,
+                    initial_guess: Any = None) -> Any:
     """Plan the next cycle on ``pile`` with ``params``; return a ``PlanOutcome`` for the adaptation loop.
 
     The plan is accepted only when the NumPy re-simulation
@@ -87,6 +88,8 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     A plan that fails the check is re-planned (at most twice) with wider
     margins, unless ``replan_within`` [s] is given and has already passed
     (a time budget: with ``options.max_wall_time`` it bounds the planning time).
+    ``initial_guess`` (a ``BucketPath``, or a function of the pile returning
+    one) is where IPOPT starts; default a straight dig along the surface.
     """
     from wheelloader.adaptation import PlanOutcome
 
@@ -98,7 +101,8 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     retried = ""
     first_failure = ""
     try:
-        plan = opt.solve(params, pile, start, duration)
+        guess = initial_guess(pile) if callable(initial_guess) else initial_guess
+        plan = opt.solve(params, pile, start, duration, initial_guess=guess)
         check = verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate)
         for level in (1, 2):
             if check.ok or (replan_within is not None and time.perf_counter() - tic > replan_within):
