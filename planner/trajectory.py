@@ -362,6 +362,7 @@ class TrajectoryOptimizer:
         tic = time.perf_counter()
         # each node sees the surface through a window placed around its start position; a node that moves
         # out of its window's range is re-solved once, from where IPOPT stopped, with re-centred windows
+        # (not after the wall-time limit: the NumPy check judges that iterate on the real pile)
         iterations = 0
         for attempt in range(2):
             windows = self._windows(pile, start, args["x0"])
@@ -371,7 +372,8 @@ class TrajectoryOptimizer:
             iterations += int(stats.get("iter_count", 0))
             w = np.array(sol["x"]).ravel()
             self._last = {"x": w, "lam_x": np.array(sol["lam_x"]).ravel(), "lam_g": np.array(sol["lam_g"]).ravel()}
-            if attempt == 1 or not self._outside_windows(windows, w):
+            out_of_time = stats.get("return_status") == "Maximum_WallTime_Exceeded"
+            if attempt == 1 or out_of_time or not self._outside_windows(windows, w):
                 break
             args.update(x0=w, lam_x0=self._last["lam_x"], lam_g0=self._last["lam_g"])
         elapsed = time.perf_counter() - tic
