@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     import gymnasium as gym
 
     import wheelloader.envs  # noqa: F401
-    from wheelloader.adaptation import default_planner, run_loop
+    from wheelloader.adaptation import LOOP_ENV_KWARGS, default_planner, run_loop
 
     soils, piles, seeds, cycles = SOILS, PILES, range(args.seeds), args.cycles
     if args.quick:
@@ -107,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
                 hidden = _plant_soil(soil_name, seed)
                 for name, make in makers.items():
                     env = gym.make("wheelloader/BucketLoading-v0", soil=hidden, pile=pile_kwargs, truth=TRUTH,
-                                   relax=True)
+                                   **LOOP_ENV_KWARGS)
                     records, _ = run_loop(env, make(), cycles=cycles, seed=seed)
                     env.close()
                     for r in records:

@@ -120,12 +120,13 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Episode End
 
-    * Termination, cycle done: the tip has been in soil with at least
-      ``exit_min_fill`` (5 %) of the bucket's capacity loaded, and is now
-      more than ``exit_clearance`` (0.02 m) above the start surface (so
-      grazing the thin layer a carved pile leaves on the ground does not end
-      a cycle; ``exit_min_fill=0`` ends it at the first exit). A cycle that
-      touched soil but loaded less ends once the tip is more than
+    * Termination, cycle done: the tip has been in soil and is now more
+      than ``exit_clearance`` (0.02 m) above the start surface. With
+      ``exit_min_fill`` > 0 (a fraction of the bucket's capacity; default 0)
+      the tip must also have been in soil with at least that much loaded, so
+      that grazing the thin layer a carved pile leaves on the ground does not
+      end a cycle (the cycle-to-cycle loop uses 0.05); a cycle that touched
+      soil but loaded less then ends once the tip is more than
       ``exit_clearance`` above the pile's crest. In the multi-cycle
       variant the next cycle starts instead (empty bucket, carved pile) until
       ``cycles_per_episode`` cycles are done.
@@ -174,8 +175,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
     ## Version History
 
     * v0: initial version. Before the first release the end-of-cycle rule
-      gained ``exit_min_fill`` (default 5 %); ``exit_min_fill=0`` restores
-      the first-exit rule.
+      gained the opt-in ``exit_min_fill`` (default 0: the first-exit rule).
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 60}

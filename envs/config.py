@@ -351,7 +351,7 @@ def make_config(
     max_tilt_acceleration: float = 4.0,
     stall_patience: int = 1,
     exit_clearance: float = 0.02,
-    exit_min_fill: float = 0.05,
+    exit_min_fill: float = 0.0,
     lookahead: Sequence[float] = (0.1, 0.2, 0.3, 0.4, 0.5),
     slope_window: float = 0.1,
     keep_pile: bool = False,

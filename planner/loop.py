@@ -75,7 +75,7 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
                     bucket: Bucket | None = None, loader: Loader | None = None,
                     options: PlannerOptions | None = None, control_rate: float = 60.0, mpc: bool = True,
                     replan_every: int = 6, replan_within: float | None = None,
-                    initial_guess: Any = None) -> Any:
+                    initial_guess: Any = None, exit_min_fill: float = 0.0) -> Any:
     """Plan the next cycle on ``pile`` with ``params``; return a ``PlanOutcome`` for the adaptation loop.
 
     The plan is accepted only when the NumPy re-simulation
@@ -90,6 +90,7 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     (a time budget: with ``options.max_wall_time`` it bounds the planning time).
     ``initial_guess`` (a ``BucketPath``, or a function of the pile returning
     one) is where IPOPT starts; default a straight dig along the surface.
+    ``exit_min_fill`` is the env's (passed to :func:`verify_plan`).
     """
     from wheelloader.adaptation import PlanOutcome
 
@@ -103,7 +104,8 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     try:
         guess = initial_guess(pile) if callable(initial_guess) else initial_guess
         plan = opt.solve(params, pile, start, duration, initial_guess=guess)
-        check = verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate)
+        check = verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate,
+                            exit_min_fill=exit_min_fill)
         for level in (1, 2):
             if check.ok or (replan_within is not None and time.perf_counter() - tic > replan_within):
                 break
@@ -112,7 +114,8 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
             first_failure = first_failure or "; ".join(check.failures)
             opt = optimizer_for(opt.bucket, opt.loader, cautious_options(options or PlannerOptions(), level))
             plan = opt.solve(params, pile, start, duration, initial_guess=plan)
-            check = verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate)
+            check = verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate,
+                            exit_min_fill=exit_min_fill)
             retried = f" (re-planned {level}x with wider margins after: {first_failure})"
     except PlanningError as exc:
         return PlanOutcome(None, False, f"planning failed: {exc}", time.perf_counter() - tic)

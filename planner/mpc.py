@@ -240,7 +240,8 @@ def make_env_policy(env: Any, soil: SoilParams | str | dict | None = None, **kwa
         # for as long as re-plans fail (only when the NumPy check accepts it)
         opt = optimizer_for(cfg.bucket, cfg.loader, kwargs.get("options"))
         plan = opt.solve(params, pile, start, duration)
-        if verify_plan(plan, params, pile, cfg.bucket, cfg.loader, opt.options, rate=cfg.control_rate).ok:
+        if verify_plan(plan, params, pile, cfg.bucket, cfg.loader, opt.options, rate=cfg.control_rate,
+                       exit_clearance=cfg.exit_clearance, exit_min_fill=cfg.exit_min_fill).ok:
             kwargs["initial_plan"] = plan
     return MPCController(params, pile, duration, bucket=cfg.bucket, loader=cfg.loader,
                          control_rate=cfg.control_rate, **kwargs)

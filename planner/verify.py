@@ -71,7 +71,7 @@ def path_energy(path: BucketPath, soil: SoilParams, pile: Pile, bucket: Bucket) 
 
 def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pile, bucket: Bucket | None = None,
                 loader: Loader | None = None, options: PlannerOptions | None = None, rate: float = 60.0,
-                tolerance: float = 0.02, exit_clearance: float = 0.02, exit_min_fill: float = 0.05,
+                tolerance: float = 0.02, exit_clearance: float = 0.02, exit_min_fill: float = 0.0,
                 tracking_margin: float = 0.01) -> PlanCheck:
     """Check a plan against the NumPy model and the machine's limits.
 
@@ -164,7 +164,7 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
 
 
 def premature_exit(path: BucketPath, pile: Pile, depth: np.ndarray, fill_fraction: np.ndarray,
-                   exit_clearance: float = 0.02, exit_min_fill: float = 0.05) -> float | None:
+                   exit_clearance: float = 0.02, exit_min_fill: float = 0.0) -> float | None:
     """Time at which the env would end the cycle before the path is done digging, or None [s].
 
     The env ends a cycle at the first sample where the tip has been in soil

@@ -6,6 +6,7 @@ import pytest
 
 import wheelloader.envs  # noqa: F401
 from wheelloader.adaptation import (
+    LOOP_ENV_KWARGS,
     NOMINAL_SOIL,
     Calibrating,
     FixedBezier,
@@ -21,7 +22,7 @@ from wheelloader.estimator import CalibrationError, Pile, default_path, preset
 
 
 def _env():
-    return gym.make("wheelloader/BucketLoading-v0", soil=hidden_default_soil(), relax=True)
+    return gym.make("wheelloader/BucketLoading-v0", soil=hidden_default_soil(), **LOOP_ENV_KWARGS)
 
 
 def test_calibrating_loop_learns_the_plant():

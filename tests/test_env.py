@@ -376,10 +376,10 @@ def _graze_and_rise(**kwargs) -> dict:
     return info
 
 
-def test_grazing_a_thin_layer_does_not_end_the_cycle():
-    info = _graze_and_rise()
+def test_grazing_a_thin_layer_ends_the_cycle_only_under_the_first_exit_rule():
+    info = _graze_and_rise(exit_min_fill=0.05)
     assert info["fill_fraction"] < 0.05 and not info["cycle_done"]
-    # the old rule (end at the first exit after any contact) is still available
-    assert _graze_and_rise(exit_min_fill=0.0)["cycle_done"]
+    # the default rule ends a cycle at the first exit after any contact
+    assert _graze_and_rise()["cycle_done"]
     with pytest.raises(ParameterError, match="exit_min_fill"):
         gym.make("wheelloader/BucketLoading-v0", exit_min_fill=1.5)

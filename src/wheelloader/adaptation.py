@@ -44,6 +44,12 @@ from wheelloader.estimator import (
 
 #: Nominal (uncalibrated) parameters of the baselines: the "sand" preset, a middle-of-the-road soil.
 NOMINAL_SOIL = "sand"
+#: The loop's end-of-cycle rule: a cycle ends on the exit after loading 5 % of the bucket, so that skimming
+#: the residue a carved pile leaves on the ground does not end it (``BucketLoadingEnv``'s ``exit_min_fill``).
+LOOP_EXIT_MIN_FILL = 0.05
+#: Keyword arguments of the loop's env besides soil, pile and truth: slump the pile between cycles, the
+#: loop's end-of-cycle rule.
+LOOP_ENV_KWARGS = {"relax": True, "exit_min_fill": LOOP_EXIT_MIN_FILL}
 
 
 @dataclass
@@ -135,13 +141,13 @@ def bezier_on_face(pile: Pile, rate: float = 60.0, bucket: Bucket | None = None,
 
 
 def _fill_kept(pile: Pile, x: np.ndarray, z: np.ndarray, bucket: Bucket, exit_clearance: float = 0.02,
-               exit_min_fill: float = 0.05) -> float:
+               exit_min_fill: float = LOOP_EXIT_MIN_FILL) -> float:
     """Fill [m^3] a path would hold where the env ends its cycle (the first exit after loading, else the end)."""
     return _kept(pile, x, z, bucket, exit_clearance, exit_min_fill)[0]
 
 
 def _kept(pile: Pile, x: np.ndarray, z: np.ndarray, bucket: Bucket, exit_clearance: float = 0.02,
-          exit_min_fill: float = 0.05) -> tuple[float, int]:
+          exit_min_fill: float = LOOP_EXIT_MIN_FILL) -> tuple[float, int]:
     """``(fill [m^3], index of the last sample)`` of a path up to where the env would end its cycle."""
     fill = pile.carve(x, z, bucket.width, bucket.capacity).fill_history
     clearance = z - np.asarray(pile.surface_height(x))
@@ -416,4 +422,5 @@ def default_planner(mpc: bool = False) -> Any:
     # build the NLPs once (the plan and its two wider-margin re-plans), before the loop's timings start
     for level in (0, 1, 2):
         optimizer_for(options=cautious_options(options, level))
-    return functools.partial(plan_next_cycle, mpc=mpc, options=options, replan_within=0.5 * BETWEEN_CYCLES_BUDGET)
+    return functools.partial(plan_next_cycle, mpc=mpc, options=options, replan_within=0.5 * BETWEEN_CYCLES_BUDGET,
+                             exit_min_fill=LOOP_EXIT_MIN_FILL)

@@ -59,6 +59,7 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
 
     import wheelloader.envs  # noqa: F401  (registers the env ids)
     from wheelloader.adaptation import (
+        LOOP_ENV_KWARGS,
         NOMINAL_SOIL,
         Calibrating,
         FixedBezier,
@@ -78,7 +79,7 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     results = {}
     for strategy in (Calibrating(preset(NOMINAL_SOIL), planner=planner), FixedBezier(preset(NOMINAL_SOIL))):
         say(f"running {cycles} cycles, strategy '{strategy.name}' ...")
-        env = gym.make("wheelloader/BucketLoading-v0", soil=hidden, relax=True)
+        env = gym.make("wheelloader/BucketLoading-v0", soil=hidden, **LOOP_ENV_KWARGS)
         records, logs = run_loop(env, strategy, cycles=cycles, seed=seed, progress=say)
         results[strategy.name] = (records, logs)
         env.close()
