@@ -1,4 +1,4 @@
-"""The documented full run of the RL baseline (~16 min measured on a shared 2-core CPU, 11 of them the MPC).
+"""The documented full run of the RL baseline (336 s measured on the 2-core CPU, 62 s of them the MPC).
 
 1. PPO on the plant with randomised soils (domain randomisation);
 2. PPO on the digital twin (one plant cycle with the Bezier path,
