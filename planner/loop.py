@@ -101,11 +101,15 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     duration = cycle_duration(pile, start)
     retried = ""
     first_failure = ""
+
+    def checked(plan, opt):
+        return verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate,
+                           exit_min_fill=exit_min_fill)
+
     try:
         guess = initial_guess(pile) if callable(initial_guess) else initial_guess
         plan = opt.solve(params, pile, start, duration, initial_guess=guess)
-        check = verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate,
-                            exit_min_fill=exit_min_fill)
+        check = checked(plan, opt)
         for level in (1, 2):
             if check.ok or (replan_within is not None and time.perf_counter() - tic > replan_within):
                 break
@@ -114,8 +118,7 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
             first_failure = first_failure or "; ".join(check.failures)
             opt = optimizer_for(opt.bucket, opt.loader, cautious_options(options or PlannerOptions(), level))
             plan = opt.solve(params, pile, start, duration, initial_guess=plan)
-            check = verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate,
-                            exit_min_fill=exit_min_fill)
+            check = checked(plan, opt)
             retried = f" (re-planned {level}x with wider margins after: {first_failure})"
     except PlanningError as exc:
         return PlanOutcome(None, False, f"planning failed: {exc}", time.perf_counter() - tic)

@@ -378,7 +378,6 @@ class TrajectoryOptimizer:
             args.update(x0=w, lam_x0=self._last["lam_x"], lam_g0=self._last["lam_g"])
         elapsed = time.perf_counter() - tic
         stats["iter_count"] = iterations
-        stats["window_recentred"] = attempt == 1
         return self._plan_from(w, p, h, start, stats, elapsed, float(sol["f"]))
 
     def reset_warm_start(self) -> None:
@@ -402,16 +401,19 @@ class TrajectoryOptimizer:
         return np.concatenate([[start.x, start.z, start.blade_angle, start.fill, start.vx, start.vz, start.omega,
                                 h, lam], soil_vector(soil, self.bucket), windows.ravel()])
 
+    def _node_x(self, w: np.ndarray) -> np.ndarray:
+        """Tip x of every node of the decision vector ``w`` [m]."""
+        return w[0: 4 * (self.intervals + 1): 4]
+
     def _windows(self, pile: Pile, start: StartState, w: np.ndarray) -> np.ndarray:
         """Surface windows ``(N + 1, window_size)`` around the node positions of the decision vector ``w``."""
         grid = self.options.surface
-        node_x = w[0: 4 * (self.intervals + 1): 4]
-        return grid.window_parameters(grid.parameters(pile, start.x), node_x)
+        return grid.window_parameters(grid.parameters(pile, start.x), self._node_x(w))
 
     def _outside_windows(self, windows: np.ndarray, w: np.ndarray) -> bool:
         """Whether a node of ``w`` (with its slope chord) left the range its window reproduces."""
         lo, hi = self.options.surface.window_range(windows)
-        node_x = w[0: 4 * (self.intervals + 1): 4]
+        node_x = self._node_x(w)
         return bool(np.any(node_x - DEFAULT_SLOPE_WINDOW < lo) or np.any(node_x + DEFAULT_SLOPE_WINDOW > hi))
 
     def _bounds(self, pile: Pile, start: StartState) -> tuple[np.ndarray, np.ndarray]:

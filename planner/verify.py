@@ -173,12 +173,24 @@ def premature_exit(path: BucketPath, pile: Pile, depth: np.ndarray, fill_fractio
     path is in soil again at a later sample (it hopped out and meant to dig on).
     """
     in_soil = np.asarray(depth) > 0.0
-    entered = np.cumsum(in_soil & (np.asarray(fill_fraction) >= exit_min_fill)) > 0
     clearance = path.z - np.asarray(pile.surface_height(path.x))
-    ends = np.nonzero(entered & (clearance > exit_clearance))[0]
-    if ends.size == 0 or not np.any(in_soil[ends[0] + 1:]):
+    end = cycle_end_index(in_soil, clearance, fill_fraction, exit_clearance, exit_min_fill)
+    if end is None or not np.any(in_soil[end + 1:]):
         return None
-    return float(path.t[ends[0]])
+    return float(path.t[end])
+
+
+def cycle_end_index(in_soil: np.ndarray, clearance: np.ndarray, fill_fraction: np.ndarray,
+                    exit_clearance: float = 0.02, exit_min_fill: float = 0.0) -> int | None:
+    """Sample at which ``BucketLoadingEnv`` ends a cycle along a path, or None when it does not.
+
+    The first sample where the tip has been in soil with at least
+    ``exit_min_fill`` of the capacity loaded (``fill_fraction``) and is more
+    than ``exit_clearance`` [m] above the start surface (``clearance``).
+    """
+    loaded = np.cumsum(np.asarray(in_soil) & (np.asarray(fill_fraction) >= exit_min_fill)) > 0
+    ends = np.nonzero(loaded & (np.asarray(clearance) > exit_clearance))[0]
+    return int(ends[0]) if ends.size else None
 
 
 def _interval_acceleration(plan: Plan) -> float:
