@@ -151,12 +151,16 @@ def beta_bounds(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS)
     return lo, hi
 
 
-def _log_ngamma_slope(beta, alpha, phi, s):
-    """d ln N_gamma / d beta and its derivative (for Newton)."""
-    t1 = np.tan(alpha + beta)
-    c2 = 1.0 / np.tan(alpha + beta + phi)
-    c3 = 1.0 / np.tan(beta)
-    c4 = 1.0 / np.tan(beta + s)
+def log_ngamma_slope(beta, alpha, phi, s, tan=np.tan):
+    """d ln N_gamma / d beta and its derivative (for Newton on eq 14), ``s = rho + delta + phi``.
+
+    ``tan`` is the tangent of the array library (NumPy by default; the
+    planner passes ``casadi.tan`` for its symbolic Newton steps).
+    """
+    t1 = tan(alpha + beta)
+    c2 = 1.0 / tan(alpha + beta + phi)
+    c3 = 1.0 / tan(beta)
+    c4 = 1.0 / tan(beta + s)
     g = -t1 + c2 - c3 - c4
     dg = -t1 * t1 - c2 * c2 + c3 * c3 + c4 * c4
     return g, dg
@@ -175,8 +179,8 @@ def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
     alpha, rho, phi, delta = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (alpha, rho, phi, delta)))
     s = rho + delta + phi
     lo, hi = beta_bounds(alpha, rho, phi, delta, options)
-    g_lo, _ = _log_ngamma_slope(lo, alpha, phi, s)
-    g_hi, _ = _log_ngamma_slope(hi, alpha, phi, s)
+    g_lo, _ = log_ngamma_slope(lo, alpha, phi, s)
+    g_hi, _ = log_ngamma_slope(hi, alpha, phi, s)
     at_lo = g_lo >= 0.0
     at_hi = g_hi <= 0.0
     inner = ~(at_lo | at_hi)
@@ -191,7 +195,7 @@ def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
         out = np.empty_like(x)
         active = np.arange(x.size)
         for _ in range(max_iter):
-            g, dg = _log_ngamma_slope(x, al, ph, ss)
+            g, dg = log_ngamma_slope(x, al, ph, ss)
             pos = g > 0.0
             b = np.where(pos, x, b)
             a = np.where(pos, a, x)

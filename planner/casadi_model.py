@@ -29,6 +29,7 @@ import casadi as ca
 import numpy as np
 
 from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, ModelOptions, SoilParams
+from wheelloader.estimator.force_model import log_ngamma_slope
 
 #: Guarded Newton steps from the middle of the valid branch.
 NEWTON_STEPS = 8
@@ -101,12 +102,7 @@ def casadi_forces(soil, vertical_depth, rho, alpha, load_weight, bucket: Bucket,
     hi = smooth_min(math.pi - s - options.eps2, 0.5 * math.pi - alpha_c, SMOOTH_ANGLE)
     beta = 0.5 * (lo + hi)
     for _ in range(NEWTON_STEPS):
-        t1 = ca.tan(alpha_c + beta)
-        c2 = 1.0 / ca.tan(alpha_c + beta + phi)
-        c3 = 1.0 / ca.tan(beta)
-        c4 = 1.0 / ca.tan(beta + s)
-        g = -t1 + c2 - c3 - c4
-        dg = -t1 * t1 - c2 * c2 + c3 * c3 + c4 * c4
+        g, dg = log_ngamma_slope(beta, alpha_c, phi, s, tan=ca.tan)
         beta = smooth_min(smooth_max(beta - g / smooth_max(dg, 1.0, 0.1), lo, SMOOTH_ANGLE), hi, SMOOTH_ANGLE)
     s_beta = ca.sin(s + beta)
     sin_beta = ca.sin(beta)
