@@ -88,13 +88,7 @@ def plot_calibration(cycle: CycleLog, calibrations: Calibration | list[Calibrati
         s2.set_xlabel("t [s]")
         s2.set_ylabel("F [N]")
         s2.legend(fontsize=8)
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    if out is not None:
-        fig.savefig(out, dpi=120)
-        plt.close(fig)
-    return fig
+    return finish_figure(fig, out, title)
 
 
 def plot_prediction(prediction: Prediction, pile=None, out: str | Path | None = None, title: str | None = None) -> Any:
@@ -120,10 +114,17 @@ def plot_prediction(prediction: Prediction, pile=None, out: str | Path | None = 
     if prediction.quality is not None:
         ax.set_title(f"F_R RMSE {prediction.quality.rmse_r:.0f} N ({prediction.quality.percent_r:.1f} %)")
     ax.legend(fontsize=8)
+    return finish_figure(fig, out, title)
+
+
+def finish_figure(fig: Any, out: str | Path | None = None, title: str | None = None, dpi: int = 120) -> Any:
+    """Add the title, lay out, and with ``out`` save the figure there and close it; return the figure."""
+    import matplotlib.pyplot as plt
+
     if title:
         fig.suptitle(title)
     fig.tight_layout()
     if out is not None:
-        fig.savefig(out, dpi=120)
+        fig.savefig(out, dpi=dpi)
         plt.close(fig)
     return fig

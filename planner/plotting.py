@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from wheelloader.estimator import BucketPath, Loader, Pile
+from wheelloader.estimator.plotting import finish_figure
 
 from .pareto import ParetoPoint
 
@@ -124,10 +125,4 @@ def plot_plan(path: BucketPath, forces: dict[str, np.ndarray], pile: Pile, loade
         ax.set_ylabel("fill [m^3]")
         ax.legend(loc="lower right", fontsize=8)
         ax.set_title("Pareto sweep over lambda [1/kJ]")
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    if out is not None:
-        fig.savefig(out, dpi=110)
-        plt.close(fig)
-    return fig
+    return finish_figure(fig, out, title, dpi=110)
