@@ -257,9 +257,16 @@ def test_wall_time_limit_returns_the_last_iterate_and_the_loop_reports_it(pile):
     plan = optimizer_for(options=opts).solve("gravel", pile, default_start(pile), 4.0)
     assert plan.status == "Maximum_WallTime_Exceeded" and not plan.success
     outcome = plan_next_cycle("gravel", pile, options=opts, mpc=False, replan_within=0.0)
-    # used only when the NumPy check passes; either way the message says what happened
-    assert ("Maximum_WallTime_Exceeded" in outcome.message) and (outcome.success == ("NumPy check" not in
-                                                                                      outcome.message.split(";")[0]))
+    # A 20 ms limit is certain to fire, but how far IPOPT got before it depends on the machine's speed, so
+    # the iterate may pass or fail the NumPy check: each branch is checked for what it must report.
+    assert "Maximum_WallTime_Exceeded" in outcome.message
+    if outcome.success:
+        assert outcome.path is not None
+        assert "not proven optimal; feasible by the NumPy check" in outcome.message
+        assert "fails the NumPy check" not in outcome.message
+    else:
+        assert outcome.path is None and outcome.controller is None
+        assert outcome.message.startswith("IPOPT: Maximum_WallTime_Exceeded; plan fails the NumPy check: ")
 
 
 def test_verify_rejects_a_path_that_leaves_the_soil_and_digs_again(pile):
