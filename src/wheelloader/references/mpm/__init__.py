@@ -1,0 +1,1 @@
+"""Plane-strain MPM continuum reference (being built)."""
