@@ -224,6 +224,11 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
             raise ParameterError("call reset() before reading the soil")
         return self._soil
 
+    @property
+    def start_pile(self) -> Pile:
+        """The surface when the current cycle started (depth is measured to it; carved by earlier cycles)."""
+        return self._start_pile
+
     # ------------------------------------------------------------------ reset
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
@@ -424,7 +429,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
             self._touched = True
             if fill >= cfg.exit_min_fill * cap:
                 self._entered = True
-        clearance = zn - self._start_pile._height_scalar(xn)
+        clearance = zn - self._start_pile.height_at(xn)
         # done: out of the soil after loading (or, with too little loaded, once above the pile's crest)
         out_of_pile = self._entered or (self._touched and zn > self._crest + cfg.exit_clearance)
         cycle_done = out_of_pile and clearance > cfg.exit_clearance

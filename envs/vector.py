@@ -188,7 +188,7 @@ class BucketLoadingVectorEnv(VectorEnv):
 
     # ------------------------------------------------------------------ geometry helpers
     def _interp(self, heights: np.ndarray, rows: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """Surface height of ``heights[rows]`` at ``x`` (as Pile._height_scalar, row-wise; x may be 2-D)."""
+        """Surface height of ``heights[rows]`` at ``x`` (as Pile.height_at, row-wise; x may be 2-D)."""
         last = self._m - 1
         u = np.clip((x - self._x0) / self._sp, 0.0, last)
         i = u.astype(np.int64)

@@ -161,7 +161,7 @@ def contact_single(pile: Pile, x: float, z: float, blade_angle: float, floor_len
                    slope_window: float = DEFAULT_SLOPE_WINDOW) -> tuple[float, float, float, float]:
     """Scalar fast path: ``(depth, rho, alpha, blade_length)`` for one tip pose."""
     alpha = pile.slope_angle(x, slope_window)
-    vertical = pile._height_scalar(x) - z
+    vertical = pile.height_at(x) - z
     if vertical <= 0.0:
         return 0.0, alpha - blade_angle, alpha, 0.0
     depth = vertical * math.cos(alpha)

@@ -149,10 +149,11 @@ class Pile:
     def surface_height(self, x: float | np.ndarray) -> float | np.ndarray:
         """Surface height z_s(x) [m], linear between nodes, constant outside the grid."""
         if np.ndim(x) == 0:
-            return self._height_scalar(float(x))
+            return self.height_at(float(x))
         return np.interp(np.asarray(x, dtype=float), self.x, self.heights)
 
-    def _height_scalar(self, x: float) -> float:
+    def height_at(self, x: float) -> float:
+        """Surface height at one scalar ``x`` [m]: the fast path of :meth:`surface_height` (no NumPy call)."""
         u = (x - self.x0) / self.spacing
         z = self.heights
         if u <= 0.0:
@@ -172,7 +173,7 @@ class Pile:
         """
         if np.ndim(x) == 0:
             x = float(x)
-            return math.atan((self._height_scalar(x + window) - self._height_scalar(x - window)) / (2.0 * window))
+            return math.atan((self.height_at(x + window) - self.height_at(x - window)) / (2.0 * window))
         x = np.asarray(x, dtype=float)
         rise = self.surface_height(x + window) - self.surface_height(x - window)
         return np.arctan(rise / (2.0 * window))

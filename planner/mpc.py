@@ -231,7 +231,7 @@ def make_env_policy(env: Any, soil: SoilParams | str | dict | None = None, **kwa
 
     base = env.unwrapped
     cfg = base.cfg
-    pile = base._start_pile
+    pile = base.start_pile
     params = base.soil if soil is None else as_soil(soil)
     start = default_start(pile, cfg)
     duration = cycle_duration(pile, start)

@@ -168,7 +168,7 @@ def _closed_loop(seed: int = 3) -> dict[str, float]:
     env = gym.make("wheelloader/BucketLoading-v0", soil="gravel", sensor_noise=0.0)
     obs, _ = env.reset(seed=seed)
     base = env.unwrapped
-    outcome = plan_next_cycle(base.soil, base._start_pile, mpc=False)
+    outcome = plan_next_cycle(base.soil, base.start_pile, mpc=False)
     assert outcome.success, outcome.message
     tracker = PathTracker(outcome.path, base.cfg.loader, base.cfg.control_rate)
     done, steps = False, 0

@@ -322,7 +322,7 @@ def run_loop(env: Any, strategy: Strategy, cycles: int = 5, seed: int = 0,
     for k in range(1, cycles + 1):
         if k > 1:
             obs, info = env.reset(options={"keep_pile": True, "soil": "keep"})
-        pile = base._start_pile
+        pile = base.start_pile
         plan = strategy.plan(pile)
         controller = plan.controller or PathTracker(plan.path, base.cfg.loader, base.cfg.control_rate)
         params_used = strategy.params
