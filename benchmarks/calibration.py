@@ -116,7 +116,7 @@ def plot(results: dict, out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from wheelloader.estimator.plotting import plot_calibration
+    from wheelloader.plotting import plot_calibration
 
     first = results["soils"][0]
     plot_calibration(first["_train"], [first["methods"][m]["_cal"] for m in METHODS],

@@ -3,7 +3,7 @@
 Data: ``data/reference`` (``python dem/run.py reference``; see dem/README.md). Every method
 (``default``, ``single-stage``, ``multi-stage``) calibrates on the same filtered training cycle;
 the reference forces are filtered with a Gaussian (sigma ``--sigma`` s, default 0.1 s, mode
-'nearest'; ``wheelloader.dem.DEFAULT_FILTER``), as the paper compared with filtered forces. Every
+'nearest'; ``wheelloader.references.dem.DEFAULT_FILTER``), as the paper compared with filtered forces. Every
 table gives the F_R RMSE against the filtered reference and against the unfiltered DEM record
 (in N and in % of the mean observed |F_R| over the in-soil samples, the estimator's definition).
 
@@ -59,8 +59,8 @@ def fmt(pair) -> str:
 def run(args) -> dict:
     import numpy as np
 
-    from wheelloader import dem
     from wheelloader.estimator.calibration import calibrate
+    from wheelloader.references import dem
 
     np.random.default_rng(args.seed)  # the methods are deterministic; kept for the record
     data = Path(args.data)
@@ -206,8 +206,8 @@ def plots(results: dict, args, out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from wheelloader import dem
     from wheelloader.estimator.prediction import predict
+    from wheelloader.references import dem
 
     data = Path(args.data)
     cals = results["_cals"]

@@ -1,4 +1,4 @@
-"""Command line for the DEM ground truth (thin wrapper of :mod:`wheelloader.dem`).
+"""Command line for the DEM reference: the same as ``wheelloader dem`` (kept for old instructions).
 
     python dem/run.py list                              # reference cases and their commands
     python dem/run.py reference                         # regenerate all of data/reference
@@ -7,7 +7,9 @@
     python dem/run.py sanity                            # physical sanity figures of data/reference
 """
 
-from wheelloader.dem import main
+import sys
+
+from wheelloader.cli import main
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(main(["dem", *sys.argv[1:]]))

@@ -31,7 +31,9 @@ import numpy as np
 from wheelloader.estimator import Bucket, BucketPath, Loader, Pile, SoilParams, as_soil
 from wheelloader.estimator.errors import PlanningError
 
+from .cycle import cycle_duration, default_start, optimizer_for
 from .trajectory import Plan, PlannerOptions, StartState, TrajectoryOptimizer
+from .verify import verify_plan
 
 #: Statuses of IPOPT the controller accepts as a usable plan.
 ACCEPTED_STATUSES = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
@@ -226,9 +228,6 @@ def make_env_policy(env: Any, soil: SoilParams | str | dict | None = None, **kwa
     env's current pile when :meth:`MPCController.reset` is called after a new
     ``env.reset()`` only if you build a new one: use one controller per cycle.
     """
-    from .loop import cycle_duration, default_start, optimizer_for
-    from .verify import verify_plan
-
     base = env.unwrapped
     cfg = base.cfg
     pile = base.start_pile

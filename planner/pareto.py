@@ -8,7 +8,7 @@ energy of a point are those of the NumPy re-simulation, not the CasADi
 prediction (which is kept as ``predicted_energy`` for comparison). A point
 whose solve or check fails is kept and marked, never dropped: ``status`` and
 ``solver_ok`` say what IPOPT reported, ``check_ok`` and ``failures`` what the
-re-simulation found. As in :func:`~wheelloader.planner.loop.plan_next_cycle`,
+re-simulation found. As in :func:`~wheelloader.planner.plan_next_cycle`,
 a plan that passes the check is usable (``ok``) even when IPOPT stopped
 without success; it is then feasible but not proven optimal for its lambda.
 """
@@ -23,7 +23,7 @@ from typing import Any
 from wheelloader.estimator import Bucket, Loader, Pile, SoilParams, as_soil
 from wheelloader.estimator.errors import PlanningError
 
-from .loop import cycle_duration, default_start, optimizer_for
+from .cycle import cycle_duration, default_start, optimizer_for
 from .mpc import ACCEPTED_STATUSES
 from .trajectory import Plan, PlannerOptions, StartState
 from .verify import PlanCheck, verify_plan
@@ -132,11 +132,11 @@ def pareto_sweep(soil: SoilParams | str | dict, pile: Pile, weights: Sequence[fl
         Energy weights lambda [1/kJ], solved in the given order (default
         :data:`DEFAULT_WEIGHTS`); each finite and >= 0.
     start : StartState, optional
-        Start of the plan (default :func:`~wheelloader.planner.loop.default_start`).
+        Start of the plan (default :func:`~wheelloader.planner.default_start`).
     bucket, loader, options : optional
         Machine and planner settings (the optimiser is cached per settings).
     duration : float, optional
-        Cycle duration [s] (default :func:`~wheelloader.planner.loop.cycle_duration`).
+        Cycle duration [s] (default :func:`~wheelloader.planner.cycle_duration`).
     rate : float
         Sampling rate of the NumPy re-simulation [Hz].
 

@@ -9,13 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wheelloader import dem
 from wheelloader.estimator.cyclelog import CycleLog
 from wheelloader.estimator.errors import ParameterError
 from wheelloader.estimator.machine import Bucket
 from wheelloader.estimator.paths import paper_paths
+from wheelloader.references import dem
 
-REFERENCE = dem.REFERENCE_DIR
+REFERENCE = Path(__file__).resolve().parents[1] / "data" / "reference"
 
 
 def test_config_validation_names_the_argument():

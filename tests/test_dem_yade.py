@@ -14,8 +14,8 @@ import shutil
 import numpy as np
 import pytest
 
-from wheelloader import dem
 from wheelloader.estimator.cyclelog import CycleLog
+from wheelloader.references import dem
 
 _REQUIRED = os.environ.get("WHEELLOADER_REQUIRE_YADE", "") not in ("", "0")
 

@@ -144,7 +144,7 @@ def test_forced_solver_failure_is_reported(tmp_path, capsys, monkeypatch):
     """IPOPT stopped after one iteration (also in the re-plan): reported, written, marked, exit status 1."""
     from dataclasses import replace
 
-    import wheelloader.planner.loop as loop
+    import wheelloader.planner.next_cycle as loop
 
     real = loop.optimizer_for
 
@@ -192,6 +192,6 @@ def test_mark_pareto_optimal():
 
 
 def test_importing_the_command_does_not_import_matplotlib():
-    code = ("import sys, wheelloader.planner.commands, wheelloader.planner.plotting, wheelloader.cli;"
+    code = ("import sys, wheelloader.cli.plan, wheelloader.cli, wheelloader.plotting;"
             "wheelloader.cli.build_parser(); assert 'matplotlib' not in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True)

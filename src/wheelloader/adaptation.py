@@ -20,6 +20,7 @@ cycle's record.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -29,53 +30,31 @@ from typing import Any
 import numpy as np
 
 from wheelloader.estimator import (
-    Bucket,
     BucketPath,
     CycleLog,
-    Loader,
     Pile,
     SoilParams,
     WheelloaderError,
     calibrate,
-    default_path,
     predict,
     preset,
+)
+from wheelloader.planner import (
+    LOOP_EXIT_MIN_FILL,
+    PlannerOptions,
+    PlanOutcome,
+    bezier_on_face,
+    cautious_options,
+    model_bezier_on_face,
+    optimizer_for,
+    plan_next_cycle,
 )
 
 #: Nominal (uncalibrated) parameters of the baselines: the "sand" preset, a middle-of-the-road soil.
 NOMINAL_SOIL = "sand"
-#: The loop's end-of-cycle rule: a cycle ends on the exit after loading 5 % of the bucket, so that skimming
-#: the residue a carved pile leaves on the ground does not end it (``BucketLoadingEnv``'s ``exit_min_fill``).
-LOOP_EXIT_MIN_FILL = 0.05
 #: Keyword arguments of the loop's env besides soil, pile and truth: slump the pile between cycles, the
 #: loop's end-of-cycle rule.
 LOOP_ENV_KWARGS = {"relax": True, "exit_min_fill": LOOP_EXIT_MIN_FILL}
-
-
-@dataclass
-class PlanOutcome:
-    """What a planning step returned.
-
-    Attributes
-    ----------
-    path : BucketPath or None
-        The path to dig (None when planning failed and there is no fallback yet).
-    success : bool
-        Whether the planner itself succeeded.
-    message : str
-        Solver status or fallback note.
-    seconds : float
-        Wall time of the planning step [s].
-    controller : callable or None
-        Optional closed-loop controller ``obs -> action`` (e.g. MPC); when None
-        the path is tracked with :class:`~wheelloader.envs.scripted.PathTracker`.
-    """
-
-    path: BucketPath | None
-    success: bool
-    message: str
-    seconds: float
-    controller: Callable[[np.ndarray], np.ndarray] | None = None
 
 
 @dataclass
@@ -111,90 +90,6 @@ class CycleRecord:
         out = asdict(self)
         out["between_cycles_s"] = self.between_cycles_s
         return out
-
-
-def bezier_on_face(pile: Pile, rate: float = 60.0, bucket: Bucket | None = None, step: float = 0.02,
-                   max_shift: float = 3.0) -> BucketPath:
-    """The default Bezier path slid along +x to the first place where it would fill the bucket.
-
-    The target is the fill the path reaches on the fresh default pile (89 %
-    of the default bucket); the search is geometric (carving only, no force
-    model), in ``step`` increments up to ``max_shift`` metres, and counts the
-    fill the env would let the path keep: up to where the env would end the
-    cycle (:func:`~wheelloader.planner.verify.cycle_end_index`, the loop's
-    rule: the first exit 2 cm above the surface after loading 5 %). This is how an
-    operator would re-use a standard path on a carved pile: the fixed
-    baseline is positioned fairly, not left digging air or skimming a hump.
-    """
-    bucket = Bucket() if bucket is None else bucket
-    path = default_path(rate=rate)
-    target = Pile.trapezoid().carve(path.x, path.z, bucket.width, bucket.capacity).in_bucket
-    best, best_fill = 0.0, -1.0
-    for dx in np.arange(0.0, max_shift + 1e-9, step):
-        fill, _ = _kept(pile, path.x + dx, path.z, bucket)
-        if fill > best_fill + 1e-12:
-            best, best_fill = float(dx), fill
-        if fill >= 0.98 * target:
-            best = float(dx)
-            break
-    return path.shifted(dx=best, name="Bezier")
-
-
-def _kept(pile: Pile, x: np.ndarray, z: np.ndarray, bucket: Bucket) -> tuple[float, int]:
-    """``(fill [m^3], index of the last sample)`` of a path up to where the loop's env would end its cycle
-    (the first exit after loading :data:`LOOP_EXIT_MIN_FILL`, else the path's end)."""
-    from wheelloader.planner.verify import cycle_end_index
-
-    fill = pile.carve(x, z, bucket.width, bucket.capacity).fill_history
-    clearance = z - np.asarray(pile.surface_height(x))
-    end = cycle_end_index(clearance < 0.0, clearance, fill / bucket.capacity, exit_min_fill=LOOP_EXIT_MIN_FILL)
-    end = len(x) - 1 if end is None else end
-    return float(fill[end]), end
-
-
-#: Offsets [m] of the default Bezier path tried by :func:`model_bezier_on_face`: along x around the geometric
-#: placement, and along z (negative: deeper).
-MODEL_SHIFTS = (-0.10, -0.05, 0.0, 0.05, 0.10, 0.15, 0.20)
-MODEL_LIFTS = (0.04, 0.0, -0.04, -0.08)
-
-
-def model_bezier_on_face(soil: SoilParams, pile: Pile, rate: float = 60.0, bucket: Bucket | None = None,
-                         loader: Loader | None = None) -> BucketPath:
-    """The default Bezier path moved to where ``soil``'s force model predicts the least energy per m^3.
-
-    Starts from :func:`bezier_on_face` (geometric placement) and tries it
-    moved by :data:`MODEL_SHIFTS` along x and :data:`MODEL_LIFTS` along z.
-    A candidate counts only if it keeps at least the geometric placement's
-    fill (up to where the env would end the cycle) and the predicted forces
-    stay within the loader's limits (no stall); among those, the least
-    predicted energy per m^3 (the NumPy model with ``soil``: calibrated
-    parameters make this choice better) wins. The fallback of the
-    calibrating strategies when a plan fails its check; up to 28 model
-    evaluations (50–100 ms measured on carved piles).
-    """
-    from wheelloader.planner.verify import path_energy
-
-    bucket = Bucket() if bucket is None else bucket
-    loader = Loader() if loader is None else loader
-    base = bezier_on_face(pile, rate, bucket)
-    need = 0.98 * _kept(pile, base.x, base.z, bucket)[0]
-    best, best_cost = base, math.inf
-    for dx in MODEL_SHIFTS:
-        for dz in MODEL_LIFTS:
-            path = base.shifted(dx=dx, dz=dz)
-            fill, end = _kept(pile, path.x, path.z, bucket)
-            if fill < need or fill <= 0.0:
-                continue
-            part = BucketPath(path.t[:end + 1], path.x[:end + 1], path.z[:end + 1], path.blade_angle[:end + 1],
-                              path.name)
-            sim = path_energy(part, soil, pile, bucket)
-            forces = sim["forces"]
-            if forces.tangential.max() > loader.max_push_force or forces.normal.max() > loader.max_lift_force:
-                continue
-            cost = sim["energy"] / fill
-            if cost < best_cost:
-                best, best_cost = path, cost
-    return best.shifted(name="Bezier, model-placed")
 
 
 class Strategy:
@@ -388,34 +283,25 @@ def hidden_default_soil() -> SoilParams:
     return g.replace(gamma=g.gamma * 1.06, phi=g.phi - 0.04, delta=g.delta + 0.03, k_c=g.k_c * 1.3)
 
 
-def default_bucket() -> Bucket:
-    """The loop's bucket (the project default)."""
-    return Bucket()
+#: Work budget of the plan between cycles: IPOPT iterations per solve. A plan stopped at this limit is used
+#: only when it passes the NumPy check (feasible, not proven optimal); otherwise it is re-planned with wider
+#: margins while at most half of the budget is spent, and then the loop falls back to
+#: :func:`~wheelloader.planner.model_bezier_on_face`. An iteration count, not a wall time, so that the same
+#: seed gives the same cycles on a quiet and on a busy machine.
+BETWEEN_CYCLES_MAX_ITER = 130
 
 
-#: Time budget of the plan between cycles [s]: IPOPT's wall-time limit per solve; no re-plan with wider
-#: margins once half of it has passed. A plan stopped by the limit is used only when it passes the NumPy
-#: check (feasible, not proven optimal); otherwise the loop falls back to :func:`model_bezier_on_face`.
-BETWEEN_CYCLES_BUDGET = 0.7
+def default_planner(mpc: bool = False) -> Callable[[SoilParams, Pile], PlanOutcome]:
+    """The planner used between cycles.
 
-
-def default_planner(mpc: bool = False) -> Any:
-    """The planner used between cycles, or None when the planner is not available.
-
-    A full-cycle CasADi plan, checked with the NumPy model, tracked in the env;
-    with ``mpc`` an MPC controller re-plans the rest of the cycle every 0.1 s
+    A full-cycle CasADi plan within :data:`BETWEEN_CYCLES_MAX_ITER` IPOPT
+    iterations, checked with the NumPy model, tracked in the env; with
+    ``mpc`` an MPC controller re-plans the rest of the cycle every 0.1 s
     (slower, see the planner benchmark).
     """
-    try:
-        from wheelloader.planner import PlannerOptions
-        from wheelloader.planner.loop import cautious_options, optimizer_for, plan_next_cycle
-    except ImportError:
-        return None
-    import functools
-
-    options = PlannerOptions(max_wall_time=BETWEEN_CYCLES_BUDGET)
+    options = PlannerOptions(max_iter=BETWEEN_CYCLES_MAX_ITER)
     # build the NLPs once (the plan and its two wider-margin re-plans), before the loop's timings start
     for level in (0, 1, 2):
         optimizer_for(options=cautious_options(options, level))
-    return functools.partial(plan_next_cycle, mpc=mpc, options=options, replan_within=0.5 * BETWEEN_CYCLES_BUDGET,
-                             exit_min_fill=LOOP_EXIT_MIN_FILL)
+    return functools.partial(plan_next_cycle, mpc=mpc, options=options,
+                             replan_within_iterations=BETWEEN_CYCLES_MAX_ITER // 2, exit_min_fill=LOOP_EXIT_MIN_FILL)

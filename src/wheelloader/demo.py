@@ -1,8 +1,8 @@
 """``wheelloader demo``: the cycle-to-cycle adaptation loop on the built-in default.
 
 The plant is the default pile with a hidden gravel-like soil and sensor
-noise. Cycle 1 digs the default Bezier path with nominal parameters; after
-each cycle the soil is calibrated (default method, warm-started), the next
+noise. Cycle 1 is planned with the nominal parameters (with ``use_planner=False``
+it digs the default Bezier path); after each cycle the soil is calibrated (default method, warm-started), the next
 cycle's forces are predicted, the next path is planned on the carved pile,
 and it is dug. The fixed-path baseline runs beside it for comparison. The
 demo prints a per-cycle table and writes figures and a JSON summary.
@@ -10,46 +10,13 @@ demo prints a per-cycle table and writes figures and a JSON summary.
 
 from __future__ import annotations
 
-import argparse
-import json
 import time
 from pathlib import Path
 from typing import Any
 
+from wheelloader.cli.output import write_json
+
 DEFAULT_CYCLES = 5
-
-
-def register(subparsers: Any) -> None:
-    """Add the ``demo`` subcommand."""
-    p = subparsers.add_parser("demo", help="run the cycle-to-cycle adaptation demo on the built-in default",
-                              description=__doc__.splitlines()[0])
-    p.add_argument("-o", "--out", default="wheelloader-demo",
-                   help="output directory (a new NAME-2, NAME-3 ... is used if it exists; default: %(default)s)")
-    p.add_argument("--overwrite", action="store_true", help="write into --out even if it holds earlier results")
-    p.add_argument("--cycles", type=int, default=DEFAULT_CYCLES, help="digging cycles (default: %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the plant (default: %(default)s)")
-    p.add_argument("--no-planner", action="store_true",
-                   help="dig the Bezier path every cycle (calibration and prediction only)")
-    p.add_argument("--mpc", action="store_true",
-                   help="execute each plan with the receding-horizon MPC instead of tracking it (slower)")
-    p.set_defaults(func=run)
-
-
-def run(args: argparse.Namespace) -> int:
-    """Handler of ``wheelloader demo``."""
-    from wheelloader.estimator.errors import ParameterError
-    from wheelloader.outdir import fresh_directory
-
-    if args.cycles < 1 or args.cycles > 50:
-        raise ParameterError(f"--cycles must be between 1 and 50, got {args.cycles}")
-    out = fresh_directory(args.out, args.overwrite)
-    summary = run_demo(out, cycles=args.cycles, seed=args.seed, use_planner=not args.no_planner,
-                       progress=lambda line: print(line, flush=True), mpc=args.mpc)
-    print()
-    print(summary["table"])
-    print()
-    print(f"results written to {out.resolve()}")
-    return 0
 
 
 def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner: bool = True,
@@ -97,7 +64,7 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
         "figures": files,
         "table": table,
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    write_json(out / "summary.json", summary)
     return summary
 
 
@@ -105,28 +72,28 @@ def write_figures(out: Path, results: dict[str, Any]) -> list[str]:
     """Observed vs predicted forces, piles and paths, metrics over cycles."""
     import numpy as np
 
-    from wheelloader import figures
+    from wheelloader import plotting
     from wheelloader.estimator import predict, preset
 
     records, logs = results["ours"]
     n = len(logs)
-    fig, axes = figures.new_figure(1, n, (3.2 * n, 3.2))
+    fig, axes = plotting.new_figure(1, n, (3.2 * n, 3.2))
     axes = np.atleast_1d(axes)
     for k, (ax, log, rec) in enumerate(zip(axes, logs, records, strict=True)):
         pred = predict(preset(rec.params) if isinstance(rec.params, str) else _soil(rec.params), log)
-        figures.plot_forces(log.path.t, {"measured F_R": log.resultant, "predicted F_R": pred.forces.resultant},
+        plotting.plot_forces(log.path.t, {"measured F_R": log.resultant, "predicted F_R": pred.forces.resultant},
                             ax=ax, styles={"measured F_R": "-", "predicted F_R": "--"})
         ax.set_title(f"cycle {k + 1}: RMSE {rec.prediction_rmse_percent:.1f} %", fontsize=9)
-    figures.save(fig, out / "forces.png")
+    plotting.finish_figure(fig, out / "forces.png")
 
-    fig, ax = figures.new_figure(1, 1, (8, 4))
+    fig, ax = plotting.new_figure(1, 1, (8, 4))
     paths = [log.path.shifted(name=f"cycle {k + 1}") for k, log in enumerate(logs)]
-    figures.plot_pile_and_paths(logs[0].pile, paths, ax=ax,
+    plotting.plot_pile_and_paths(logs[0].pile, paths, ax=ax,
                                 carved=[log.pile_after for log in logs], x_range=(-0.5, 3.5))
     ax.set_title("pile, paths and the soil each cycle removed ('ours')")
-    figures.save(fig, out / "piles.png")
+    plotting.finish_figure(fig, out / "piles.png")
 
-    fig, axes = figures.new_figure(1, 4, (15, 3.4))
+    fig, axes = plotting.new_figure(1, 4, (15, 3.4))
     for name, (recs, _) in results.items():
         c = [r.cycle for r in recs]
         axes[0].plot(c, [r.prediction_rmse_percent for r in recs], "o-", label=name)
@@ -139,7 +106,7 @@ def write_figures(out: Path, results: dict[str, Any]) -> list[str]:
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
-    figures.save(fig, out / "metrics.png")
+    plotting.finish_figure(fig, out / "metrics.png")
     return ["forces.png", "piles.png", "metrics.png"]
 
 

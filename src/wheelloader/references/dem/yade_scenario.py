@@ -5,7 +5,7 @@ standard library)::
 
     yade -n -j1 -x dem/yade_scenario.py --out DIR --path cycle1.csv [--path cycle2.csv ...] [options]
 
-Normally it is driven by ``dem/run.py`` / :mod:`wheelloader.dem`, which
+Normally it is driven by ``wheelloader dem`` / :mod:`wheelloader.references.dem`, which
 writes the path CSVs, runs Yade as a subprocess and converts the raw output
 into ``CycleLog`` files. ``--help`` lists every option.
 

@@ -1,0 +1,34 @@
+"""One conversion of results to JSON-ready Python values, used by every writer of the project."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def to_jsonable(value: Any) -> Any:
+    """A copy of ``value`` that ``json.dumps(..., allow_nan=False)`` accepts.
+
+    Dicts (keys as strings), lists and tuples are converted recursively; NumPy arrays become lists,
+    NumPy scalars Python numbers and booleans; paths become strings; objects with ``to_dict()`` (soil
+    parameters, bucket, pile) are converted through it; non-finite floats (NaN, inf) become ``None``,
+    since JSON has no such numbers and a reader must not mistake them for values.
+    """
+    if isinstance(value, dict):
+        return {str(k): to_jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [to_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return to_jsonable(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if hasattr(value, "to_dict") and callable(value.to_dict):
+        return to_jsonable(value.to_dict())
+    return value

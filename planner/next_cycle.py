@@ -1,0 +1,148 @@
+"""Planning between cycles: the next cycle's plan and the MPC that executes it.
+
+:func:`plan_next_cycle` is what the cycle-to-cycle loop (``wheelloader.adaptation``) and
+``wheelloader plan`` call: a full-cycle trajectory optimisation on the carved pile with the calibrated
+parameters, checked against the NumPy model, re-planned with wider margins when the check fails, and
+handed over with an :class:`~wheelloader.planner.mpc.MPCController` that re-plans during the cycle.
+
+Budgets are IPOPT iteration counts, so the same inputs give the same plan on a quiet and on a busy
+machine; a wall-time limit (``PlannerOptions.max_wall_time``) is an opt-in safety cap whose firing the
+outcome reports.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from wheelloader.estimator import Bucket, BucketPath, Loader, Pile, SoilParams, as_soil
+from wheelloader.estimator.errors import PlanningError
+
+from .cycle import cautious_options, cycle_duration, default_start, optimizer_for
+from .mpc import ACCEPTED_STATUSES, MPCController
+from .trajectory import Plan, PlannerOptions, StartState
+from .verify import PlanCheck, verify_plan
+
+
+@dataclass
+class PlanOutcome:
+    """What a planning step returned.
+
+    Attributes
+    ----------
+    path : BucketPath or None
+        The path to dig (None when planning failed and there is no fallback yet).
+    success : bool
+        Whether the planner itself succeeded.
+    message : str
+        Solver status or fallback note.
+    seconds : float
+        Wall time of the planning step [s] (measured, reported; nothing depends on it).
+    controller : callable or None
+        Optional closed-loop controller ``obs -> action`` (e.g. MPC); when None
+        the path is tracked with :class:`~wheelloader.envs.scripted.PathTracker`.
+    plan : Plan or None
+        The optimiser's last plan (also when it failed the check).
+    check : PlanCheck or None
+        The NumPy re-simulation of that plan.
+    first_failures : list of str
+        Why the first plan failed the check, when it was re-planned with wider margins.
+    """
+
+    path: BucketPath | None
+    success: bool
+    message: str
+    seconds: float
+    controller: Callable[[np.ndarray], np.ndarray] | None = None
+    plan: Plan | None = None
+    check: PlanCheck | None = None
+    first_failures: list[str] = field(default_factory=list)
+
+
+def _flag_note(flags: dict[str, int]) -> str:
+    """The validity flags that fired (samples per flag), without "tip out of soil"."""
+    fired = [f"{name}: {count}" for name, count in flags.items() if count and name != "tip out of soil"]
+    return f" [{', '.join(fired)}]" if fired else ""
+
+
+def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: StartState | None = None,
+                    bucket: Bucket | None = None, loader: Loader | None = None,
+                    options: PlannerOptions | None = None, control_rate: float = 60.0, mpc: bool = True,
+                    replan_every: int = 6, replan_within: float | None = None,
+                    replan_within_iterations: int | None = None, energy_weight: float | None = None,
+                    initial_guess: Any = None, exit_min_fill: float = 0.0) -> PlanOutcome:
+    """Plan the next cycle on ``pile`` with ``params``; return a ``PlanOutcome`` for the adaptation loop.
+
+    The plan is accepted only when the NumPy re-simulation
+    (:func:`verify_plan`) passes every check (when IPOPT stopped without
+    success, e.g. at its iteration limit, the message says the plan is feasible
+    but not proven optimal); otherwise the outcome says why
+    (``success=False``) and the loop falls back. With
+    ``mpc`` the outcome carries an :class:`MPCController` (warm-started with
+    the plan) that re-plans every ``replan_every`` steps during the cycle.
+    A plan that fails the check is re-planned (at most twice) with wider
+    margins, unless ``replan_within_iterations`` is given and the IPOPT
+    iterations spent so far exceed it (an iteration budget: with
+    ``options.max_iter`` it bounds the planning work, the same on any
+    machine), or the opt-in wall-time cap ``replan_within`` [s] has passed.
+    ``energy_weight`` overrides ``options.energy_weight`` (lambda per kJ).
+    ``initial_guess`` (a ``BucketPath``, or a function of the pile returning
+    one) is where IPOPT starts; default a straight dig along the surface.
+    ``exit_min_fill`` is the env's (passed to :func:`verify_plan`).
+    """
+    tic = time.perf_counter()
+    params = as_soil(params)
+    opt = optimizer_for(bucket, loader, options)
+    start = start or default_start(pile)
+    duration = cycle_duration(pile, start)
+    retried = ""
+    first_failures: list[str] = []
+    spent = 0
+
+    def over_budget() -> bool:
+        return ((replan_within_iterations is not None and spent > replan_within_iterations)
+                or (replan_within is not None and time.perf_counter() - tic > replan_within))
+
+    def checked(plan, opt):
+        return verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate,
+                           exit_min_fill=exit_min_fill)
+
+    try:
+        guess = initial_guess(pile) if callable(initial_guess) else initial_guess
+        plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=guess)
+        spent += plan.iterations
+        check = checked(plan, opt)
+        for level in (1, 2):
+            if check.ok or over_budget():
+                break
+            # the smooth CasADi surface can differ from a (carved) pile near its kinks, and the path between
+            # the plan's nodes can graze a crest: re-plan with wider margins, from the plan that failed
+            first_failures = first_failures or list(check.failures)
+            opt = optimizer_for(opt.bucket, opt.loader, cautious_options(options or PlannerOptions(), level))
+            plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=plan)
+            spent += plan.iterations
+            check = checked(plan, opt)
+            retried = f" (re-planned {level}x with wider margins after: {'; '.join(first_failures)})"
+    except PlanningError as exc:
+        return PlanOutcome(None, False, f"planning failed: {exc}", time.perf_counter() - tic)
+    seconds = time.perf_counter() - tic
+    if not check.ok:
+        return PlanOutcome(None, False, f"IPOPT: {plan.status}; plan fails the NumPy check: "
+                           + "; ".join(check.failures) + _flag_note(check.details["flags"]) + retried, seconds,
+                           plan=plan, check=check, first_failures=first_failures)
+    # a plan that passes every check of the NumPy re-simulation is feasible even when IPOPT stopped at its
+    # iteration limit (then it is not proven optimal): use it and say so
+    note = "" if plan.status in ACCEPTED_STATUSES else " (not proven optimal; feasible by the NumPy check)"
+    controller = None
+    if mpc:
+        controller = MPCController(params, pile, duration, bucket=opt.bucket, loader=opt.loader,
+                                   control_rate=control_rate, replan_every=replan_every, initial_plan=plan,
+                                   options=opt.options)
+    path = plan.path(control_rate, name="planned")
+    return PlanOutcome(path, True, f"IPOPT {plan.status} in {plan.iterations} it.{note}{retried}; predicted fill "
+                       f"{check.fill / opt.bucket.capacity:.0%}, {check.energy / 1e3:.1f} kJ", seconds, controller,
+                       plan=plan, check=check, first_failures=first_failures)

@@ -1,0 +1,135 @@
+"""``wheelloader calibrate`` and ``wheelloader predict``.
+
+* ``wheelloader calibrate LOG.csv [--method M] [--initial params.json] -o params.json [--plot fig.png]``
+  calibrates the soil from one logged cycle (CSV + JSON sidecar) and prints timing, fit quality and
+  what the cycle determined.
+* ``wheelloader predict params.json PATH.csv -o forces.csv [--pile P] [--plot fig.png]`` predicts the
+  forces of a path. ``PATH.csv`` is either a path (columns ``t, x, z, blade_angle``; the pile comes from
+  ``--pile``, default the trapezoid pile) or a cycle log (then its own pile is used unless ``--pile`` is
+  given, and the RMSE against its measured forces is printed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+from .inputs import PILE_PRESETS, is_cycle_log, load_pile, load_soil, sidecar_of
+from .output import add_force_flag, atomic_output, check_outputs, write_json
+
+#: Calibration methods offered on the command line ("varpro" is ours; "default" names it too).
+METHOD_CHOICES = ("default", "single-stage", "multi-stage")
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``calibrate`` and ``predict`` subcommands."""
+    p = subparsers.add_parser("calibrate", help="calibrate the soil parameters from one logged cycle",
+                              description="Calibrate the soil parameters from one logged cycle (CSV + JSON "
+                                          "sidecar); print timing, fit quality and what the cycle determined.")
+    p.add_argument("log", help="cycle log CSV (with its JSON sidecar of the same stem)")
+    p.add_argument("--method", default="default", choices=METHOD_CHOICES,
+                   help="calibration method (default: %(default)s, ours; the others are the paper's baselines)")
+    p.add_argument("--initial", help="warm start: params.json of a previous cycle (or a soil preset name)")
+    p.add_argument("--sigma", type=float, default=3.0,
+                   help="multi-stage stage-2 Gaussian filter sigma [samples] (default: %(default)s)")
+    p.add_argument("--compare", action="store_true",
+                   help="also run the other methods and show all side by side (output params: --method's)")
+    p.add_argument("-o", "--output", default="params.json", help="output parameter file (default: %(default)s)")
+    p.add_argument("--plot", help="write an observed-vs-predicted figure (PNG) like the paper's Figs. 6-7")
+    add_force_flag(p)
+    p.set_defaults(func=run_calibrate)
+
+    q = subparsers.add_parser("predict", help="predict the forces of a bucket path with calibrated parameters",
+                              description="Predict the forces of a bucket path (a path CSV or a cycle log) "
+                                          "with calibrated parameters.")
+    q.add_argument("params", help="params.json from 'wheelloader calibrate' (or a bare 8-parameter JSON, "
+                                  "or a soil preset name)")
+    q.add_argument("path", help="path CSV (t, x, z, blade_angle) or a cycle log CSV")
+    q.add_argument("-o", "--output", default="forces.csv", help="output CSV (default: %(default)s)")
+    q.add_argument("--pile", help="pile: JSON file with {\"x\": [...], \"z\": [...]} (or a cycle-log sidecar), "
+                                  f"or a preset: {', '.join(PILE_PRESETS)} (default: the log's pile, else trapezoid)")
+    q.add_argument("--plot", help="write a figure of the predicted (and observed) forces (PNG)")
+    add_force_flag(q)
+    q.set_defaults(func=run_predict)
+
+
+def _check_sigma(sigma: float, samples: int) -> None:
+    from wheelloader.estimator import ParameterError
+
+    if not (math.isfinite(sigma) and 0.0 <= sigma <= samples):
+        raise ParameterError(f"--sigma must be a number of samples between 0 and the log's length ({samples}), "
+                             f"got {sigma!r}")
+
+
+def run_calibrate(args: argparse.Namespace) -> int:
+    """Handler of ``wheelloader calibrate``."""
+    from wheelloader.estimator import CycleLog, calibrate, load_params
+
+    inputs = [args.log, sidecar_of(args.log), args.initial]
+    check_outputs([("-o/--output", args.output), ("--plot", args.plot)], inputs, args.force)
+    cycle = CycleLog.load(args.log)
+    _check_sigma(args.sigma, len(cycle))
+    initial = load_params(args.initial) if args.initial else None
+    cal = calibrate(cycle, args.method, initial=initial, sigma=args.sigma)
+    others = []
+    if args.compare:
+        others = [calibrate(cycle, m, initial=initial, sigma=args.sigma)
+                  for m in METHOD_CHOICES if m != cal.method]
+    print(f"{args.log}: {len(cycle)} samples, {int(cal.in_soil.sum())} in soil")
+    print(cal.summary())
+    for other in others:
+        flag = "converged" if other.success else "NOT CONVERGED"
+        print(f"compare {other.method:>12}: {other.time_s * 1e3:8.1f} ms, {other.nfev:6d} evals, {flag}; "
+              f"{other.quality.describe()}")
+    write_json(args.output, cal.to_dict())
+    print(f"parameters written to {args.output}")
+    if args.plot:
+        from wheelloader.plotting import plot_calibration
+
+        with atomic_output(args.plot) as tmp:
+            plot_calibration(cycle, [cal, *others], tmp, title=f"calibration of {Path(args.log).name}")
+        print(f"figure written to {args.plot}")
+    return 0 if cal.success else 1
+
+
+def run_predict(args: argparse.Namespace) -> int:
+    """Handler of ``wheelloader predict``."""
+    from wheelloader.estimator import CycleLog, load_path_csv, predict
+
+    path_file = Path(args.path)
+    inputs = [args.params, path_file, sidecar_of(path_file), args.pile]
+    check_outputs([("-o/--output", args.output), ("--plot", args.plot)], inputs, args.force)
+    soil = load_soil(args.params)
+    pile = None if args.pile is None else load_pile(args.pile)
+    start = time.perf_counter()
+    if is_cycle_log(path_file):
+        target = CycleLog.load(path_file)
+        pile_used = pile if pile is not None else target.pile
+    else:
+        target = load_path_csv(path_file)
+        pile = load_pile(None) if pile is None else pile
+        pile_used = pile
+    pred = predict(soil, target, pile=pile)
+    elapsed = time.perf_counter() - start
+    with atomic_output(args.output) as tmp:
+        pred.save_csv(tmp, overwrite=True)
+    f = pred.forces
+    print(f"{path_file.name}: {len(pred.path)} samples, {int((pred.state.depth > 0).sum())} in soil; "
+          f"predicted in {elapsed * 1e3:.1f} ms")
+    print(f"peak F_T {f.tangential.max():.0f} N, peak F_N {f.normal.max():.0f} N, peak F_R {f.resultant.max():.0f} N")
+    flagged = {k: v for k, v in f.flag_summary().items() if v and k != "tip out of soil"}
+    if flagged:
+        print("samples outside the model's validity domain: " + ", ".join(f"{k}: {v}" for k, v in flagged.items()))
+    if pred.quality is not None:
+        print(pred.quality.describe())
+    print(f"forces written to {args.output}")
+    if args.plot:
+        from wheelloader.plotting import plot_prediction
+
+        with atomic_output(args.plot) as tmp:
+            plot_prediction(pred, pile_used, tmp, title=f"prediction for {path_file.name}")
+        print(f"figure written to {args.plot}")
+    return 0

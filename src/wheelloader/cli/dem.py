@@ -1,0 +1,131 @@
+"""``wheelloader dem``: the DEM (Yade) reference scenario and its shipped data set.
+
+Subcommands: ``list`` (the reference cases and the command that regenerates each), ``reference``
+(generate them, resumable), ``cycle`` (one scenario run into a directory), ``sanity`` (physical sanity
+figures of a reference directory).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wheelloader.estimator import ParameterError
+from wheelloader.references.dem import (
+    REFERENCE_DIR,
+    SOILS,
+    DemConfig,
+    dual_cycle_paths,
+    generate_reference,
+    reference_cases,
+    regenerate_command,
+    run_scenario,
+    sanity_report,
+    scenario_paths,
+)
+
+from .output import check_outputs, write_json
+
+
+def _config_from_args(args: Any, soil: str) -> DemConfig:
+    return DemConfig(soil=soil, scale=args.scale, slab_width=args.slab_width, radius=args.radius, young=args.young,
+                     seed=args.seed, bulk_density=args.bulk_density, threads=args.threads)
+
+
+def _cmd_reference(args: Any) -> int:
+    cases = reference_cases()
+    if args.only:
+        known = {c.name: c for c in cases}
+        unknown = [n for n in args.only if n not in known]
+        if unknown:
+            raise ParameterError(f"unknown reference case(s) {unknown}; choose from {sorted(known)}")
+        cases = [known[n] for n in args.only]
+    out = Path(args.out)
+    for k, case in enumerate(cases):
+        if args.skip_existing and all((out / f"{s}.csv").exists() for s in case.file_stems()):
+            print(f"[{k + 1}/{len(cases)}] {case.name}: exists, skipped", flush=True)
+            continue
+        print(f"[{k + 1}/{len(cases)}] {case.name}: soil={case.config.soil} paths={','.join(case.paths)}", flush=True)
+        t0 = time.time()
+        generate_reference(case, out, cache_dir=args.cache_dir, progress=lambda s: print("   " + s, flush=True))
+        print(f"[{k + 1}/{len(cases)}] {case.name}: done in {time.time() - t0:.1f} s", flush=True)
+    return 0
+
+
+def _cmd_list(args: Any) -> int:
+    for case in reference_cases():
+        print(f"{case.name:24s} soil={case.config.soil:14s} paths={','.join(case.paths):12s} "
+              f"seed={case.config.seed}  ->  {regenerate_command(case.name)}")
+    return 0
+
+
+def _cmd_cycle(args: Any) -> int:
+    config = _config_from_args(args, args.soil)
+    if args.path == "dual":
+        paths = list(dual_cycle_paths(config))
+    else:
+        paths = [scenario_paths(config)[int(args.path) - 1]]
+    out = Path(args.out)
+    run = run_scenario(config, paths, out, cache_dir=args.cache_dir)
+    for i, log in enumerate(run.logs):
+        fname = out / f"cycle{i + 1}.csv"
+        log.save(fname, overwrite=True)
+        print(f"wrote {fname} ({len(log)} samples, {log.metadata['particles']} particles, "
+              f"mean F_R {np.mean(log.resultant):.1f} N, carried {log.metadata['carried_mass_end_load']:.2f} kg)")
+    print(f"Yade run: {run.wall_s:.1f} s")
+    return 0
+
+
+def _cmd_sanity(args: Any) -> int:
+    data = Path(args.data)
+    if not (data / "manifest.json").is_file():
+        raise ParameterError(f"--data {data}: no manifest.json there (run from the repository root, or pass the "
+                             "reference directory)")
+    check_outputs([("--json", args.json)], [data / "manifest.json"], args.force)
+    report = sanity_report(data)
+    if args.json:
+        write_json(args.json, report)
+    print(json.dumps(report, indent=1))
+    return 0
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``dem`` command (subcommands list, reference, cycle, sanity)."""
+    parser = subparsers.add_parser("dem", help="DEM (Yade) reference scenario and its shipped data set",
+                                   description="The DEM (Yade) reference: list the shipped reference cases, "
+                                               "regenerate them (resumable), run one scenario, or report the "
+                                               "data's sanity figures.")
+    parser.set_defaults(func=lambda args: parser.print_help() or 2)
+    sub = parser.add_subparsers(title="dem commands", metavar="SUBCOMMAND")
+    p = sub.add_parser("reference", help="(re)generate the shipped reference cycles")
+    p.add_argument("--only", nargs="+", metavar="NAME", help="case names (see 'list'); default: all")
+    p.add_argument("--out", default=str(REFERENCE_DIR),
+                   help="output directory (default: %(default)s, relative to the working directory)")
+    p.add_argument("--cache-dir", default=None, help="settled-pile cache (default ~/.cache/wheelloader/dem)")
+    p.add_argument("--skip-existing", action="store_true", help="skip cases whose files exist")
+    p.set_defaults(func=_cmd_reference)
+    p = sub.add_parser("list", help="list the reference cases and their regeneration commands")
+    p.set_defaults(func=_cmd_list)
+    p = sub.add_parser("cycle", help="run one scenario and write its cycle log(s)")
+    p.add_argument("--soil", default="gravel", choices=SOILS)
+    p.add_argument("--path", default="1", choices=["1", "2", "3", "4", "dual"])
+    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--scale", type=float, default=0.6)
+    p.add_argument("--slab-width", type=float, default=0.35)
+    p.add_argument("--radius", type=float, default=0.03)
+    p.add_argument("--young", type=float, default=5e7)
+    p.add_argument("--bulk-density", type=float, default=None)
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--cache-dir", default=None)
+    p.set_defaults(func=_cmd_cycle)
+    p = sub.add_parser("sanity", help="physical sanity figures of a reference directory")
+    p.add_argument("--data", default=str(REFERENCE_DIR),
+                   help="reference directory (default: %(default)s, relative to the working directory)")
+    p.add_argument("--json", default=None, help="also write the report here")
+    p.add_argument("--force", "--overwrite", dest="force", action="store_true", help="replace an existing --json")
+    p.set_defaults(func=_cmd_sanity)

@@ -1,0 +1,70 @@
+"""Reading what a command is given: soil parameters, piles, paths and cycle logs, with clear errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from wheelloader.estimator import PRESET_NAMES, ParameterError, Pile, SoilParams, load_params
+
+#: Pile presets of ``--pile``.
+PILE_PRESETS = ("trapezoid", "ideal_slope", "slope")
+
+
+def load_pile(spec: str | None) -> Pile:
+    """A :class:`Pile` from a JSON file (``{"x": [...], "z": [...]}`` or a cycle-log sidecar) or a preset
+    name (``None``: the trapezoid)."""
+    if spec is None or spec == "trapezoid":
+        return Pile.trapezoid()
+    if spec in ("slope", "ideal_slope"):
+        return Pile.ideal_slope()
+    path = Path(spec)
+    if not path.exists():
+        raise ParameterError(f"--pile {spec!r} is neither a file nor a preset ({', '.join(PILE_PRESETS)})")
+    try:
+        data = json.loads(path.read_text(encoding="utf-8-sig"))
+    except (json.JSONDecodeError, UnicodeDecodeError, IsADirectoryError) as exc:
+        raise ParameterError(f"{path}: not a valid JSON file ({exc})") from None
+    if isinstance(data, dict) and isinstance(data.get("pile"), dict):
+        data = data["pile"]  # a cycle-log sidecar
+    try:
+        return Pile.from_dict(data)
+    except ParameterError as exc:
+        raise ParameterError(f"{path}: {exc}") from None
+
+
+def load_soil(spec: str) -> SoilParams:
+    """Soil parameters from a params.json (as ``wheelloader calibrate`` writes it, or a bare 8-parameter
+    JSON) or a soil preset name."""
+    path = Path(spec)
+    if path.exists() or path.suffix.lower() == ".json":
+        if not path.exists():
+            raise ParameterError(f"params file {spec} not found")
+        if path.is_dir():
+            raise ParameterError(f"params {spec} is a directory; give a params.json file")
+        return load_params(path)
+    try:
+        return load_params(spec)
+    except ParameterError:
+        raise ParameterError(f"params {spec!r} is neither a file nor a soil preset ({', '.join(PRESET_NAMES)})"
+                             ) from None
+
+
+def is_cycle_log(path: Path) -> bool:
+    """Whether ``path`` is a cycle-log CSV (a JSON sidecar beside it and F_T, F_N columns)."""
+    if not path.with_suffix(".json").exists() or not path.is_file():
+        return False
+    try:
+        with open(path, encoding="utf-8-sig") as fh:
+            for line in fh:
+                if line.strip() and not line.lstrip().startswith("#"):
+                    header = [h.strip() for h in line.split(",")]
+                    return "F_T" in header and "F_N" in header
+    except UnicodeDecodeError:
+        return False  # reading it as a path CSV then reports the problem
+    return False
+
+
+def sidecar_of(csv_path: str | Path) -> Path:
+    """The JSON sidecar of a cycle-log CSV (same stem)."""
+    return Path(csv_path).with_suffix(".json")
