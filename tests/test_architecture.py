@@ -1,0 +1,112 @@
+"""The layer contract: estimator <- envs <- planner <- the application; no module imports a layer above it.
+
+Layers, lowest first (a module may import its own layer and those below):
+
+0. ``wheelloader.estimator`` (physics, calibration)
+1. ``wheelloader.envs``
+2. ``wheelloader.planner``
+3. the application: every other ``wheelloader.*`` module (CLI, demo, loop, references, plotting)
+
+The check reads the source with :mod:`ast` (imports inside functions count too), so it needs no
+import-linter; the test below also proves it fails on a deliberately added upward import.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Source folder of each layer's package.
+PACKAGE_DIRS = {"wheelloader.estimator": ROOT / "estimator", "wheelloader.envs": ROOT / "envs",
+                "wheelloader.planner": ROOT / "planner", "wheelloader": ROOT / "src" / "wheelloader"}
+LAYERS = ("wheelloader.estimator", "wheelloader.envs", "wheelloader.planner")
+
+
+def layer_of(module: str) -> int | None:
+    """Layer index of a ``wheelloader`` module name, None for third-party modules."""
+    if module != "wheelloader" and not module.startswith("wheelloader."):
+        return None
+    for k, prefix in enumerate(LAYERS):
+        if module == prefix or module.startswith(prefix + "."):
+            return k
+    if module == "wheelloader":
+        return 0  # the top package itself only holds __version__
+    return len(LAYERS)
+
+
+def module_name(package: str, directory: Path, file: Path) -> str:
+    parts = list(file.relative_to(directory).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join([package, *parts])
+
+
+def imported_modules(tree: ast.AST, module: str, is_package: bool) -> list[tuple[int, str]]:
+    """(line, absolute module name) of every import in ``tree``, relative ones resolved."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, alias.name) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = module.split(".")
+                base = base if is_package else base[:-1]
+                base = base[:len(base) - (node.level - 1)]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            found.append((node.lineno, target))
+            # "from wheelloader import envs" imports a subpackage
+            found += [(node.lineno, f"{target}.{alias.name}") for alias in node.names if target == "wheelloader"]
+    return found
+
+
+def layer_violations(package_dirs: dict[str, Path] = PACKAGE_DIRS) -> list[str]:
+    """Every import of a higher layer, as ``file:line: module (layer i) imports target (layer j)``."""
+    problems = []
+    for package, directory in package_dirs.items():
+        for file in sorted(directory.rglob("*.py")):
+            if file.name == "yade_scenario.py":  # runs under Yade's own Python, imports nothing of ours
+                continue
+            others = [d for p, d in package_dirs.items() if p != package]
+            if package == "wheelloader" and any(file.is_relative_to(d) for d in others):
+                continue
+            module = module_name(package, directory, file)
+            own = layer_of(module)
+            tree = ast.parse(file.read_text(encoding="utf-8"), filename=str(file))
+            for line, target in imported_modules(tree, module, file.name == "__init__.py"):
+                other = layer_of(target)
+                if other is not None and own is not None and other > own:
+                    where = file.relative_to(ROOT) if file.is_relative_to(ROOT) else file
+                    problems.append(f"{where}:{line}: {module} (layer {own}) imports {target} (layer {other})")
+    return problems
+
+
+def test_no_module_imports_a_layer_above_it():
+    assert layer_violations() == []
+
+
+@pytest.mark.parametrize("layer_dir, upward", [
+    ("estimator", "from wheelloader.envs import BucketLoadingEnv"),
+    ("estimator", "from wheelloader.cli import main"),
+    ("envs", "import wheelloader.planner"),
+    ("planner", "from wheelloader.adaptation import run_loop"),
+    ("planner", "from wheelloader import plotting"),
+])
+def test_the_contract_fails_on_an_added_upward_import(tmp_path, layer_dir, upward):
+    package = f"wheelloader.{layer_dir}"
+    fake = tmp_path / layer_dir
+    fake.mkdir()
+    (fake / "__init__.py").write_text('"""A package."""\n')
+    (fake / "sneaky.py").write_text(f"def f():\n    {upward}\n")
+    found = layer_violations({package: fake})
+    assert len(found) == 1 and "sneaky.py:2" in found[0]
+
+
+def test_relative_imports_are_resolved():
+    tree = ast.parse("from ..planner import x\nfrom . import y\n")
+    got = imported_modules(tree, "wheelloader.envs.vector", is_package=False)
+    assert got == [(1, "wheelloader.planner"), (2, "wheelloader.envs")]
