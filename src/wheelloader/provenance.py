@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import os
 import platform
+import subprocess
 import sys
 from importlib import metadata
+from pathlib import Path
 
 #: Packages whose versions every record names (None when not installed).
 PACKAGES = ("wheelloader", "numpy", "scipy", "casadi", "gymnasium", "matplotlib", "torch", "stable-baselines3")
@@ -35,6 +37,7 @@ def machine_info() -> dict[str, object]:
     except OSError:
         load = None
     return {
+        "git": git_revision(),
         "platform": platform.platform(),
         "python": sys.version.split()[0],
         "cpu": cpu,
@@ -43,3 +46,19 @@ def machine_info() -> dict[str, object]:
         "blas_threads_env": {k: os.environ.get(k) for k in BLAS_THREAD_VARIABLES},
         "versions": versions,
     }
+
+
+def git_revision(where: str | Path | None = None) -> dict[str, object] | None:
+    """The git commit of the checkout at ``where`` (default: the working directory, else this package's
+    source folder) and whether it has uncommitted changes; None outside a git checkout."""
+    candidates = [Path(where)] if where is not None else [Path.cwd(), Path(__file__).resolve().parent]
+    for folder in candidates:
+        try:
+            commit = subprocess.run(["git", "-C", str(folder), "rev-parse", "HEAD"], capture_output=True, text=True,
+                                    timeout=10, check=True).stdout.strip()
+            status = subprocess.run(["git", "-C", str(folder), "status", "--porcelain", "--untracked-files=no"],
+                                    capture_output=True, text=True, timeout=10, check=True).stdout
+        except (OSError, subprocess.SubprocessError):
+            continue
+        return {"commit": commit, "dirty": bool(status.strip()), "checkout": str(folder)}
+    return None

@@ -80,7 +80,7 @@ def generate_reference(
     *,
     cache_dir: str | Path | None = None,
     work_dir: str | Path | None = None,
-    progress: Callable[[str], None] | None = print,
+    progress: Callable[[str], None] | None = None,
 ) -> list[dict[str, Any]]:
     """Run one reference case, write its cycle logs into ``out_dir`` and update ``manifest.json``."""
 

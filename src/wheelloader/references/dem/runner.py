@@ -8,6 +8,7 @@ yade_scenario.py ...`` as a subprocess, streams its progress, and converts the r
 from __future__ import annotations
 
 import json
+import logging
 import os
 import shutil
 import subprocess
@@ -50,6 +51,8 @@ def scenario_script() -> Path:
                           "WHEELLOADER_DEM_SCRIPT")
     return script
 
+_log = logging.getLogger(__name__)
+
 
 @dataclass
 class DemRun:
@@ -69,7 +72,7 @@ def run_scenario(
     *,
     cache_dir: str | Path | None = None,
     yade: str | None = None,
-    progress: Callable[[str], None] | None = print,
+    progress: Callable[[str], None] | None = None,
     timeout: float | None = None,
     names: Sequence[str] | None = None,
 ) -> DemRun:
@@ -88,7 +91,7 @@ def run_scenario(
     yade : str, optional
         Yade executable (default ``yade`` on PATH).
     progress : callable, optional
-        Receives each progress line; None silences it.
+        Receives each progress line (default: this module's logger at INFO level).
     timeout : float, optional
         Wall-clock limit [s].
     names : sequence of str, optional
@@ -122,8 +125,8 @@ def run_scenario(
             for line in proc.stdout:
                 line = line.rstrip()
                 tail.append(line)
-                if progress is not None and line.startswith("[dem]"):
-                    progress(line)
+                if line.startswith("[dem]"):
+                    (progress or _log.info)(line)
                 if timeout is not None and time.time() - t0 > timeout:
                     proc.kill()
                     raise DemRunError(f"Yade run exceeded {timeout:g} s")
