@@ -68,6 +68,9 @@ def main(argv: list[str] | None = None) -> int:
     except WheelloaderError as exc:
         print(f"wheelloader: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # output piped into a reader that closed early (e.g. `| head`): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except FileNotFoundError as exc:
         print(f"wheelloader: error: file not found: {exc.filename}", file=sys.stderr)
         return 2
