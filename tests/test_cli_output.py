@@ -138,3 +138,14 @@ def test_check_outputs_and_atomic_output(tmp_path):
     assert a.read_text() == "keep" and sorted(p.name for p in tmp_path.iterdir()) == ["a.json"]
     write_json(a, {"x": float("nan"), "y": [1.0, float("inf")]})
     assert json.loads(a.read_text()) == {"x": None, "y": [1.0, None]}
+
+
+def test_help_imports_no_optimiser_or_plotting():
+    """``wheelloader --help`` builds every parser without importing the estimator, scipy or matplotlib."""
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom wheelloader.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+            "heavy = [m for m in ('scipy', 'matplotlib', 'casadi', 'wheelloader.estimator') if m in sys.modules]\n"
+            "assert not heavy, heavy\n")
+    subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)

@@ -55,14 +55,14 @@ def main(argv: list[str] | None = None) -> int:
     # BLAS on a 2-core machine; default to one thread unless the user chose otherwise.
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(var, "1")
-    from wheelloader.estimator.errors import WheelloaderError
-
     parser = build_parser()
     args = parser.parse_args(argv)
     if not hasattr(args, "func"):
         parser.print_help()
         return 2
     _configure_logging(args.verbose, args.quiet)
+    from wheelloader.estimator.errors import WheelloaderError  # after parsing: --help imports no estimator
+
     try:
         return int(args.func(args) or 0)
     except WheelloaderError as exc:

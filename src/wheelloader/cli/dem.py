@@ -12,31 +12,23 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from wheelloader.estimator import ParameterError
-from wheelloader.references.dem import (
-    REFERENCE_DIR,
-    SOILS,
-    DemConfig,
-    dual_cycle_paths,
-    generate_reference,
-    reference_cases,
-    regenerate_command,
-    run_scenario,
-    sanity_report,
-    scenario_paths,
-)
-
 from .output import check_outputs, write_json
 
+#: Default reference directory, relative to the working directory (the repository root).
+REFERENCE_DIR = Path("data") / "reference"
 
-def _config_from_args(args: Any, soil: str) -> DemConfig:
+
+def _config_from_args(args: Any, soil: str) -> Any:
+    from wheelloader.references.dem import DemConfig
+
     return DemConfig(soil=soil, scale=args.scale, slab_width=args.slab_width, radius=args.radius, young=args.young,
                      seed=args.seed, bulk_density=args.bulk_density, threads=args.threads)
 
 
 def _cmd_reference(args: Any) -> int:
+    from wheelloader.estimator import ParameterError
+    from wheelloader.references.dem import generate_reference, reference_cases
+
     cases = reference_cases()
     if args.only:
         known = {c.name: c for c in cases}
@@ -57,6 +49,8 @@ def _cmd_reference(args: Any) -> int:
 
 
 def _cmd_list(args: Any) -> int:
+    from wheelloader.references.dem import reference_cases, regenerate_command
+
     for case in reference_cases():
         print(f"{case.name:24s} soil={case.config.soil:14s} paths={','.join(case.paths):12s} "
               f"seed={case.config.seed}  ->  {regenerate_command(case.name)}")
@@ -64,6 +58,10 @@ def _cmd_list(args: Any) -> int:
 
 
 def _cmd_cycle(args: Any) -> int:
+    import numpy as np
+
+    from wheelloader.references.dem import dual_cycle_paths, run_scenario, scenario_paths
+
     config = _config_from_args(args, args.soil)
     if args.path == "dual":
         paths = list(dual_cycle_paths(config))
@@ -81,6 +79,9 @@ def _cmd_cycle(args: Any) -> int:
 
 
 def _cmd_sanity(args: Any) -> int:
+    from wheelloader.estimator import ParameterError
+    from wheelloader.references.dem import sanity_report
+
     data = Path(args.data)
     if not (data / "manifest.json").is_file():
         raise ParameterError(f"--data {data}: no manifest.json there (run from the repository root, or pass the "
@@ -111,7 +112,7 @@ def register(subparsers: Any) -> None:
     p = sub.add_parser("list", help="list the reference cases and their regeneration commands")
     p.set_defaults(func=_cmd_list)
     p = sub.add_parser("cycle", help="run one scenario and write its cycle log(s)")
-    p.add_argument("--soil", default="gravel", choices=SOILS)
+    p.add_argument("--soil", default="gravel", help="gravel (default), sand, dirt or modified_sand")
     p.add_argument("--path", default="1", choices=["1", "2", "3", "4", "dual"])
     p.add_argument("--out", required=True, help="output directory")
     p.add_argument("--scale", type=float, default=0.6)

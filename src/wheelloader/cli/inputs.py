@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from wheelloader.estimator import PRESET_NAMES, ParameterError, Pile, SoilParams, load_params
+if TYPE_CHECKING:  # the estimator (and scipy) is imported only when a command runs
+    from wheelloader.estimator import Pile, SoilParams
 
 #: Pile presets of ``--pile``.
 PILE_PRESETS = ("trapezoid", "ideal_slope", "slope")
@@ -14,6 +16,8 @@ PILE_PRESETS = ("trapezoid", "ideal_slope", "slope")
 def load_pile(spec: str | None) -> Pile:
     """A :class:`Pile` from a JSON file (``{"x": [...], "z": [...]}`` or a cycle-log sidecar) or a preset
     name (``None``: the trapezoid)."""
+    from wheelloader.estimator import ParameterError, Pile
+
     if spec is None or spec == "trapezoid":
         return Pile.trapezoid()
     if spec in ("slope", "ideal_slope"):
@@ -36,6 +40,8 @@ def load_pile(spec: str | None) -> Pile:
 def load_soil(spec: str) -> SoilParams:
     """Soil parameters from a params.json (as ``wheelloader calibrate`` writes it, or a bare 8-parameter
     JSON) or a soil preset name."""
+    from wheelloader.estimator import PRESET_NAMES, ParameterError, load_params
+
     path = Path(spec)
     if path.exists() or path.suffix.lower() == ".json":
         if not path.exists():

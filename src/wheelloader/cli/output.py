@@ -3,7 +3,8 @@
 Every subcommand declares its outputs and inputs up front with :func:`check_outputs` (before the slow
 part runs), then writes each file through :func:`atomic_output`: into a temporary file in the same
 directory, renamed over the target only when complete. A crash, a full disk or an interrupt leaves the
-old file as it was and no half-written one behind.
+old file as it was and no half-written one behind. Importing this module imports nothing heavy, so
+``wheelloader --help`` stays fast.
 """
 
 from __future__ import annotations
@@ -15,9 +16,6 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
-
-from wheelloader.estimator import ParameterError
-from wheelloader.estimator.jsonable import to_jsonable
 
 #: Help text of the ``--force`` flag every subcommand shares.
 FORCE_HELP = "replace existing output files (never an input file)"
@@ -52,6 +50,8 @@ def check_outputs(outputs: Sequence[tuple[str, str | Path | None]], inputs: Sequ
         An output is a directory or not a regular file, its directory is missing, it is one of the
         inputs, two outputs share a path, or it exists and ``force`` is false.
     """
+    from wheelloader.estimator import ParameterError
+
     resolved_inputs = {Path(p).resolve() for p in inputs if p is not None and Path(p).exists()}
     seen: dict[Path, str] = {}
     paths: list[Path] = []
@@ -96,6 +96,8 @@ def atomic_output(target: str | Path) -> Iterator[Path]:
 
 def write_json(target: str | Path, data: Any) -> Path:
     """Write ``data`` as indented JSON atomically (NumPy values as Python ones, NaN/inf as null)."""
+    from wheelloader.estimator.jsonable import to_jsonable
+
     text = json.dumps(to_jsonable(data), indent=1, allow_nan=False) + "\n"
     with atomic_output(target) as tmp:
         tmp.write_text(text, encoding="utf-8")
@@ -109,6 +111,8 @@ def fresh_directory(requested: str | Path, force: bool = False) -> Path:
     new sibling ``NAME-2``, ``NAME-3``, ... is used instead, so earlier
     results are never replaced without asking.
     """
+    from wheelloader.estimator import ParameterError
+
     path = Path(requested)
     if path.exists() and not path.is_dir():
         raise ParameterError(f"output directory {path} exists and is not a directory; choose another name")
