@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -14,6 +15,8 @@ from gymnasium import spaces
 from wheelloader.estimator import (
     DEFAULT_OPTIONS,
     GRAVITY,
+    Bucket,
+    Loader,
     Pile,
     SoilParams,
     SurfaceCarver,
@@ -21,21 +24,36 @@ from wheelloader.estimator import (
     soil_forces_single,
 )
 from wheelloader.estimator.errors import ParameterError
-from wheelloader.estimator.force_model import FLAG_OUT_OF_SOIL
 
+from .bookkeeping import (
+    RESET_OPTIONS,
+    cycle_done,
+    cycle_progress,
+    outside_validity,
+    parse_reset_options,
+    reward_terms,
+    step_work,
+)
 from .config import (
+    DEFAULT_BLADE_ANGLE_LIMITS,
+    DEFAULT_LOOKAHEAD,
+    DEFAULT_START_NOISE,
     NOISE_CHUNK,
     EnvConfig,
+    RewardWeights,
+    SoilRandomization,
     choose_soil,
     draw_noise_chunk,
     draw_start_pose,
     make_config,
     next_pile,
 )
-from .truth import as_truth, stone_decay
+from .truth import TruthOptions, as_truth, stone_decay
 
-#: Keys accepted in ``reset(options=...)``.
-RESET_OPTIONS = ("keep_pile", "relax", "soil", "truth", "sensor_noise")
+__all__ = ["RESET_OPTIONS", "BucketLoadingEnv"]
+
+#: What the ``soil`` argument accepts (see :func:`~wheelloader.envs.config.parse_soil`).
+SoilArgument = str | SoilParams | SoilRandomization | Mapping[str, Any] | Sequence[str | SoilParams]
 
 
 class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -180,8 +198,42 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 60}
 
-    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        self.cfg: EnvConfig = make_config(**kwargs)
+    def __init__(
+        self,
+        render_mode: str | None = None,
+        *,
+        soil: SoilArgument = "gravel",
+        pile: Pile | Mapping[str, Any] | None = None,
+        loader: Loader | Mapping[str, Any] | None = None,
+        bucket: Bucket | Mapping[str, Any] | None = None,
+        control_rate: float = 60.0,
+        sensor_noise: float = 150.0,
+        sensor_range: float = 100_000.0,
+        reward_weights: RewardWeights | Mapping[str, float] | None = None,
+        truth: TruthOptions | Mapping[str, float] | None = None,
+        start_pose: Sequence[float] | None = None,
+        start_noise: Sequence[float] = DEFAULT_START_NOISE,
+        blade_angle_limits: Sequence[float] = DEFAULT_BLADE_ANGLE_LIMITS,
+        lift_headroom: float = 1.0,
+        max_tilt_acceleration: float = 4.0,
+        stall_patience: int = 1,
+        exit_clearance: float = 0.02,
+        exit_min_fill: float = 0.0,
+        lookahead: Sequence[float] = DEFAULT_LOOKAHEAD,
+        slope_window: float = 0.1,
+        keep_pile: bool = False,
+        relax: bool | float = False,
+        relax_iterations: int = 500,
+        cycles_per_episode: int = 1,
+    ) -> None:
+        self.cfg: EnvConfig = make_config(
+            soil=soil, pile=pile, loader=loader, bucket=bucket, control_rate=control_rate,
+            sensor_noise=sensor_noise, sensor_range=sensor_range, reward_weights=reward_weights, truth=truth,
+            start_pose=start_pose, start_noise=start_noise, blade_angle_limits=blade_angle_limits,
+            lift_headroom=lift_headroom, max_tilt_acceleration=max_tilt_acceleration, stall_patience=stall_patience,
+            exit_clearance=exit_clearance, exit_min_fill=exit_min_fill, lookahead=lookahead,
+            slope_window=slope_window, keep_pile=keep_pile, relax=relax, relax_iterations=relax_iterations,
+            cycles_per_episode=cycles_per_episode)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ParameterError(f"render_mode must be one of {self.metadata['render_modes']} or None, "
                                  f"got {render_mode!r}")
@@ -216,6 +268,11 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         self._decay = stone_decay(cfg.truth, cfg.dt)
         self._sigma = cfg.sensor_noise
         self._frange = cfg.sensor_range
+        self._cap = cfg.bucket.capacity
+        self._min_fill = cfg.exit_min_fill * cfg.bucket.capacity
+        self._exit_clearance = cfg.exit_clearance
+        self._bucket, self._window = cfg.bucket, cfg.slope_window
+        self._patience = cfg.stall_patience
 
     @property
     def soil(self) -> SoilParams:
@@ -231,33 +288,18 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     # ------------------------------------------------------------------ reset
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        request = parse_reset_options(options, self.cfg)
         super().reset(seed=seed)
         if seed is not None:
             self._seed = int(seed)
-        opts = dict(options or {})
-        unknown = sorted(set(opts) - set(RESET_OPTIONS))
-        if unknown:
-            raise ParameterError(f"reset options: unknown key(s) {unknown}; expected some of {list(RESET_OPTIONS)}")
-        changes: dict[str, Any] = {}
-        if "truth" in opts:
-            changes["truth"] = as_truth(opts["truth"])
-        if "sensor_noise" in opts:
-            sigma = opts["sensor_noise"]
-            if isinstance(sigma, bool) or not isinstance(sigma, (int, float)) or not sigma >= 0 or sigma == math.inf:
-                raise ParameterError(f"reset option sensor_noise must be a finite number >= 0, got {sigma!r}")
-            changes["sensor_noise"] = float(sigma)
-        if changes:
-            self.cfg = dataclasses.replace(self.cfg, **changes)
+        if request.config_changed:
+            self.cfg = request.config
             self._cache_settings()
         if self._record is not None and len(self._record["t"]) >= 2:
             self._finish_cycle("reset")
-        keep = bool(opts.get("keep_pile", self.cfg.keep_pile))
-        relax = opts.get("relax", self.cfg.relax)
-        if not isinstance(relax, bool) and not (isinstance(relax, (int, float)) and 0 < relax < 0.5 * math.pi):
-            raise ParameterError(f"reset option relax must be a bool or a repose angle in (0, pi/2) rad, got {relax!r}")
         carved = self._carver.pile() if self._carver is not None else None
-        self._soil = choose_soil(self.cfg, self._soil, opts.get("soil"), self.np_random)
-        self._start_cycle(next_pile(self.cfg, carved, keep, relax, self._soil), new_episode=True)
+        self._soil = choose_soil(self.cfg, self._soil, request.soil, self.np_random)
+        self._start_cycle(next_pile(self.cfg, carved, request.keep_pile, request.relax, self._soil), new_episode=True)
         self._k = 0
         self._noise_n, self._noise_u = draw_noise_chunk(self.np_random)
         self._cycle_count = 0
@@ -284,8 +326,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         depth, rho, alpha, lt = contact_single(pile, self._x, self._z, self._th, cfg.bucket.floor_length,
                                                cfg.slope_window)
         self._depth, self._rho, self._alpha, self._lt = depth, rho, alpha, lt
-        self._touched = depth > 0.0
-        self._entered = self._touched and self.cfg.exit_min_fill <= 0.0
+        self._touched, self._entered = cycle_progress(False, False, depth > 0.0, 0.0, self._min_fill)
         self._crest = float(np.max(pile.heights))
 
     def _initial_forces(self, k: int) -> tuple[float, float]:
@@ -325,17 +366,67 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
     def step(self, action: np.ndarray):
         if self._carver is None:
             raise ParameterError("call reset() before step()")
-        a0, a1, a2 = (float(v) for v in np.asarray(action, dtype=np.float64).reshape(3))
-        # clip to [-1, 1]; a NaN command counts as 0
+        x, z, th = self._x, self._z, self._th
+        xn, zn, thn, vx, vz, om = self._move(action)
+        undo = self._carve(x, z, xn, zn)
+        fill0 = undo[3]
+        self._k += 1
+        j = self._k % NOISE_CHUNK
+        if j == 0:
+            self._noise_n, self._noise_u = draw_noise_chunk(self.np_random)
+        depth, rho, alpha, w_load, f_t, f_n, beta, flags = self._plant(xn, zn, thn, math.hypot(xn - x, zn - z), j)
+        stalled = f_t > self._fpush or f_n > self._flift
+        if stalled:  # the bucket does not move: carving undone, pose held, velocity zeroed
+            self._undo_carve(undo)
+            xn, zn, thn, vx, vz, om = x, z, th, 0.0, 0.0, 0.0
+            depth, rho, alpha, w_load, f_t, f_n, beta, flags = self._plant(x, z, th, 0.0, -1)
+            self._stall_count += 1
+        else:
+            self._stall_count = 0
+        if depth > 0.0:
+            self._beta = beta
+        fill = float(self._carver.fill)
+        e_soil, e_pay = step_work(f_t, f_n, xn - x, zn - z, thn, w_load, cos=math.cos, sin=math.sin)
+        self._energy_soil += e_soil
+        self._energy_payload += e_pay
+        m_t = self._measure(f_t, self._noise_n[j, 0])
+        m_n = self._measure(f_n, self._noise_n[j, 1])
+        self._x, self._z, self._th, self._vx, self._vz, self._om = xn, zn, thn, vx, vz, om
+        self._depth, self._rho, self._alpha = depth, rho, alpha
+        self._mt, self._mn = m_t, m_n
+        self._cycle_t += 1
+        self._log_sample(m_t, m_n, f_t, f_n, flags)
+        terms = reward_terms(self.cfg.reward, self._cap, self._fpush, self._flift, fill - fill0, e_soil + e_pay,
+                             outside_validity(depth, flags), stalled, f_t, f_n)
+        reward = terms[0] + terms[1] + terms[2] + terms[3] + terms[4]
+        # cycle end (one rule for every backend): out of the soil after loading
+        self._touched, self._entered = cycle_progress(self._touched, self._entered, depth > 0.0, fill,
+                                                      self._min_fill)
+        done = cycle_done(self._touched, self._entered, zn, zn - self._start_pile.height_at(xn), self._crest,
+                          self._exit_clearance)
+        info = {
+            "reward_fill": terms[0], "reward_energy": terms[1], "reward_validity": terms[2],
+            "reward_stall": terms[3], "reward_force": terms[4],
+            "fill_volume": fill, "fill_fraction": fill / self._cap, "spilled": float(self._carver.spilled),
+            "force_tangential": f_t, "force_normal": f_n, "measured_tangential": m_t, "measured_normal": m_n,
+            "energy_soil": self._energy_soil, "energy_payload": self._energy_payload,
+            "depth": depth, "flags": flags, "stalled": stalled, "cycle_done": done,
+            "cycle": self._cycle_count,
+        }
+        terminated = (self._end_cycle(done) if done or self._stall_count >= self._patience else False)
+        obs = self._observation(self._mt, self._mn)  # a new cycle of the multi-cycle variant measured its start
+        if self.render_mode == "human":
+            self.render()
+        return obs, reward, terminated, False, info
+
+    def _move(self, action: np.ndarray) -> tuple[float, float, float, float, float, float]:
+        """Kinematics: the action (clipped to [-1, 1], NaN counts as 0) moves the rate-limited velocity;
+        the new pose is clipped to the workspace. Returns ``(x, z, theta, vx, vz, omega)`` (not yet stored)."""
+        a0, a1, a2 = np.asarray(action, dtype=np.float64).reshape(3).tolist()
         a0 = 0.0 if a0 != a0 else (-1.0 if a0 < -1.0 else (1.0 if a0 > 1.0 else a0))
         a1 = 0.0 if a1 != a1 else (-1.0 if a1 < -1.0 else (1.0 if a1 > 1.0 else a1))
         a2 = 0.0 if a2 != a2 else (-1.0 if a2 < -1.0 else (1.0 if a2 > 1.0 else a2))
-        cfg = self.cfg
         dt, dv, dw = self._dt, self._dv, self._dw
-        carver = self._carver
-        soil = self._soil
-        bucket = cfg.bucket
-        # --- kinematics (rate-limited velocity, workspace clip)
         x, z, th = self._x, self._z, self._th
         d = a0 * self._vmax - self._vx
         vx = self._vx + (-dv if d < -dv else (dv if d > dv else d))
@@ -352,114 +443,54 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         lo, hi = self._alim
         thn = th + om * dt
         thn = lo if thn < lo else (hi if thn > hi else thn)
-        vx, vz, om = (xn - x) / dt, (zn - z) / dt, (thn - th) / dt
-        # --- carve (keep what is needed to undo a stalled step)
+        return xn, zn, thn, (xn - x) / dt, (zn - z) / dt, (thn - th) / dt
+
+    def _carve(self, x: float, z: float, xn: float, zn: float) -> tuple:
+        """Carve the segment into the surface; returns what :meth:`_undo_carve` needs."""
+        carver = self._carver
         sp, x0 = carver.spacing, carver.x0
         j0 = max(0, int(math.floor((min(x, xn) - x0) / sp)) - 1)
         j1 = int(math.ceil((max(x, xn) - x0) / sp)) + 2
-        saved = carver.heights[j0:j1].copy()
-        fill0, spilled0, removed0 = float(carver.fill), carver.spilled, carver.removed
+        undo = (j0, j1, carver.heights[j0:j1].copy(), float(carver.fill), carver.spilled, carver.removed)
         carver.cut_segment(x, z, xn, zn)
-        fill = float(carver.fill)
-        # --- forces at the new pose (shared model) + truth beyond the model
-        depth, rho, alpha, lt = contact_single(self._start_pile, xn, zn, thn, bucket.floor_length, cfg.slope_window)
-        w_load = soil.gamma * GRAVITY * fill
+        return undo
+
+    def _undo_carve(self, undo: tuple) -> None:
+        carver = self._carver
+        j0, j1, saved, fill, spilled, removed = undo
+        carver.heights[j0:j1] = saved
+        carver.fill, carver.spilled, carver.removed = fill, spilled, removed
+
+    def _plant(self, x: float, z: float, th: float, dist: float, j: int) -> tuple:
+        """Contact and plant forces at a pose with the current fill: the shared model (depth to the
+        start-of-cycle surface), then the truth beyond the model (``j < 0``: no new stone).
+
+        Returns ``(depth, rho, alpha, W_load, F_T, F_N, beta, flags)``.
+        """
+        soil, bucket = self._soil, self._bucket
+        depth, rho, alpha, lt = contact_single(self._start_pile, x, z, th, bucket.floor_length, self._window)
+        w_load = soil.gamma * GRAVITY * float(self._carver.fill)
         f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, lt, w_load, bucket, DEFAULT_OPTIONS,
                                                    self._beta)
-        self._k += 1
-        k = self._k
-        j = k % NOISE_CHUNK
-        if j == 0:
-            self._noise_n, self._noise_u = draw_noise_chunk(self.np_random)
-        dist = math.hypot(xn - x, zn - z)
         if self._truth_active:
-            f_t, f_n = self._truth_forces(f_t, f_n, depth, dist / dt, dist, j)
-        stalled = f_t > self._fpush or f_n > self._flift
-        if stalled:
-            carver.heights[j0:j1] = saved
-            carver.fill, carver.spilled, carver.removed = fill0, spilled0, removed0
-            fill = fill0
-            xn, zn, thn = x, z, th
-            vx = vz = om = 0.0
-            depth, rho, alpha, lt = contact_single(self._start_pile, x, z, th, bucket.floor_length, cfg.slope_window)
-            w_load = soil.gamma * GRAVITY * fill
-            f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, lt, w_load, bucket, DEFAULT_OPTIONS,
-                                                       self._beta)
-            if self._truth_active:
-                f_t, f_n = self._truth_forces(f_t, f_n, depth, 0.0, 0.0, -1)
-            self._stall_count += 1
-        else:
-            self._stall_count = 0
-        if depth > 0.0:
-            self._beta = beta
-        # --- energy: work on the soil (along/across the blade) and lifting work on the payload
-        ddx, ddz = xn - x, zn - z
-        c, s = math.cos(thn), math.sin(thn)
-        work = f_t * (ddx * c + ddz * s) + f_n * (ddz * c - ddx * s)
-        e_soil = work if work > 0.0 else 0.0
-        lift = w_load * ddz
-        e_pay = lift if lift > 0.0 else 0.0
-        self._energy_soil += e_soil
-        self._energy_payload += e_pay
-        # --- measurement
-        m_t = self._measure(f_t, self._noise_n[j, 0])
-        m_n = self._measure(f_n, self._noise_n[j, 1])
-        # --- state update and log
-        self._x, self._z, self._th, self._vx, self._vz, self._om = xn, zn, thn, vx, vz, om
-        self._depth, self._rho, self._alpha = depth, rho, alpha
-        self._mt, self._mn = m_t, m_n
-        self._cycle_t += 1
-        self._log_sample(m_t, m_n, f_t, f_n, flags)
-        # --- reward
-        rw = cfg.reward
-        cap = bucket.capacity
-        r_fill = rw.fill * (fill - fill0) / cap
-        r_energy = -rw.energy * (e_soil + e_pay)
-        in_soil = depth > 0.0
-        r_valid = -rw.validity if (in_soil and (flags & ~FLAG_OUT_OF_SOIL)) else 0.0
-        r_stall = -rw.stall if stalled else 0.0
-        soft = rw.force_soft_limit
-        ex_t = f_t / self._fpush - soft
-        ex_n = f_n / self._flift - soft
-        excess = (ex_t if ex_t > 0.0 else 0.0) + (ex_n if ex_n > 0.0 else 0.0)
-        r_force = -rw.force * excess
-        reward = r_fill + r_energy + r_valid + r_stall + r_force
-        # --- episode end
-        if in_soil:
-            self._touched = True
-            if fill >= cfg.exit_min_fill * cap:
-                self._entered = True
-        clearance = zn - self._start_pile.height_at(xn)
-        # done: out of the soil after loading (or, with too little loaded, once above the pile's crest)
-        out_of_pile = self._entered or (self._touched and zn > self._crest + cfg.exit_clearance)
-        cycle_done = out_of_pile and clearance > cfg.exit_clearance
-        stall_end = self._stall_count >= cfg.stall_patience
-        terminated = stall_end
-        info = {
-            "reward_fill": r_fill, "reward_energy": r_energy, "reward_validity": r_valid,
-            "reward_stall": r_stall, "reward_force": r_force,
-            "fill_volume": fill, "fill_fraction": fill / cap, "spilled": float(carver.spilled),
-            "force_tangential": f_t, "force_normal": f_n, "measured_tangential": m_t, "measured_normal": m_n,
-            "energy_soil": self._energy_soil, "energy_payload": self._energy_payload,
-            "depth": depth, "flags": flags, "stalled": stalled, "cycle_done": cycle_done,
-            "cycle": self._cycle_count,
-        }
-        if stall_end:
+            f_t, f_n = self._truth_forces(f_t, f_n, depth, dist / self._dt, dist, j)
+        return depth, rho, alpha, w_load, f_t, f_n, beta, flags
+
+    def _end_cycle(self, cycle_done: bool) -> bool:
+        """Close a stalled or finished cycle (in the multi-cycle variant start the next); whether to terminate."""
+        cfg = self.cfg
+        if self._stall_count >= cfg.stall_patience:
             self._finish_cycle("stall")
-        elif cycle_done:
-            self._finish_cycle("exit")
-            self._cycle_count += 1
-            if self._cycle_count >= cfg.cycles_per_episode:
-                terminated = True
-            else:
-                carved = carver.pile()
-                self._soil = choose_soil(cfg, self._soil, "keep", self.np_random)
-                self._start_cycle(next_pile(cfg, carved, True, cfg.relax, self._soil), new_episode=False)
-                m_t, m_n = self._initial_forces(k)
-        obs = self._observation(m_t, m_n)
-        if self.render_mode == "human":
-            self.render()
-        return obs, reward, terminated, False, info
+            return True
+        self._finish_cycle("exit")
+        self._cycle_count += 1
+        if self._cycle_count >= cfg.cycles_per_episode:
+            return True
+        carved = self._carver.pile()
+        self._soil = choose_soil(cfg, self._soil, "keep", self.np_random)
+        self._start_cycle(next_pile(cfg, carved, True, cfg.relax, self._soil), new_episode=False)
+        self._initial_forces(self._k)  # the new cycle's first sample, measured with this step's noise
+        return False
 
     def _truth_forces(self, f_t: float, f_n: float, depth: float, speed: float, dist: float,
                       j: int) -> tuple[float, float]:

@@ -9,6 +9,7 @@ and in :class:`~wheelloader.envs.vector.BucketLoadingVectorEnv`.
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
@@ -39,6 +40,13 @@ BASE_OBS_NAMES: tuple[str, ...] = (
 )
 #: Units of the base observation entries.
 BASE_OBS_UNITS: tuple[str, ...] = ("m", "m", "rad", "m/s", "m/s", "rad/s", "m", "rad", "rad", "-", "kN", "kN")
+
+#: Default half-widths of the uniform start-pose noise (x [m], z [m], blade angle [rad]).
+DEFAULT_START_NOISE: tuple[float, float, float] = (0.03, 0.01, math.radians(2.0))
+#: Default blade-angle range [rad].
+DEFAULT_BLADE_ANGLE_LIMITS: tuple[float, float] = (math.radians(-45.0), math.radians(75.0))
+#: Default look-ahead distances of the surface observations [m].
+DEFAULT_LOOKAHEAD: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4, 0.5)
 
 #: Keys of the reward terms in ``info``; the reward is their sum in this order.
 REWARD_TERMS: tuple[str, ...] = ("reward_fill", "reward_energy", "reward_validity", "reward_stall", "reward_force")
@@ -251,6 +259,16 @@ def _non_negative(name: str, value: Any) -> float:
     return float(value)
 
 
+def check_relax(value: Any, name: str = "relax") -> bool | float:
+    """Validate a ``relax`` setting: a bool, or a repose angle in (0, pi/2) rad (returned as float)."""
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if (isinstance(value, numbers.Real) and not isinstance(value, np.bool_) and math.isfinite(value)
+            and 0.0 < value < 0.5 * math.pi):
+        return float(value)
+    raise ParameterError(f"{name} must be a bool or a repose angle in (0, pi/2) rad, got {value!r}")
+
+
 def _fraction(name: str, value: Any) -> float:
     value = _non_negative(name, value)
     if value > 1.0:
@@ -345,14 +363,14 @@ def make_config(
     reward_weights: Any = None,
     truth: Any = None,
     start_pose: Sequence[float] | None = None,
-    start_noise: Sequence[float] = (0.03, 0.01, math.radians(2.0)),
-    blade_angle_limits: Sequence[float] = (math.radians(-45.0), math.radians(75.0)),
+    start_noise: Sequence[float] = DEFAULT_START_NOISE,
+    blade_angle_limits: Sequence[float] = DEFAULT_BLADE_ANGLE_LIMITS,
     lift_headroom: float = 1.0,
     max_tilt_acceleration: float = 4.0,
     stall_patience: int = 1,
     exit_clearance: float = 0.02,
     exit_min_fill: float = 0.0,
-    lookahead: Sequence[float] = (0.1, 0.2, 0.3, 0.4, 0.5),
+    lookahead: Sequence[float] = DEFAULT_LOOKAHEAD,
     slope_window: float = 0.1,
     keep_pile: bool = False,
     relax: bool | float = False,
@@ -382,10 +400,7 @@ def make_config(
         raise ParameterError(f"relax_iterations must be an int >= 1, got {relax_iterations!r}")
     if isinstance(cycles_per_episode, bool) or not isinstance(cycles_per_episode, int) or cycles_per_episode < 1:
         raise ParameterError(f"cycles_per_episode must be an int >= 1, got {cycles_per_episode!r}")
-    if not isinstance(relax, bool):
-        relax = _positive("relax (repose angle)", relax)
-        if relax >= 0.5 * math.pi:
-            raise ParameterError(f"relax repose angle must be < pi/2 rad, got {relax!r}")
+    relax = check_relax(relax)
     return EnvConfig(
         soil=parse_soil(soil), pile=pile_obj, loader=_as_obj(loader, Loader, "loader"),
         bucket=_as_obj(bucket, Bucket, "bucket"), control_rate=rate,

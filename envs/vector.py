@@ -9,12 +9,19 @@ without a seed would). Forces come from the shared vectorised model
 :func:`~wheelloader.estimator.soil_forces`, called once per distinct soil;
 per-env pile surfaces are rows of 2-D height arrays.
 
+Gymnasium's vector API: ``reset(seed=..., options=...)`` with the single
+env's reset options plus ``reset_mask`` (partial reset of the sub-envs where
+the mask is True), reset and step ``info`` with the single env's keys and a
+``_key`` mask each (as ``SyncVectorEnv`` builds them), ``get_attr`` /
+``set_attr`` / ``call`` and ``render`` (one frame per sub-env).
+
 Not supported here (use ``gym.make_vec(..., vectorization_mode="sync")``):
 ``cycles_per_episode > 1``, cycle logs, twins.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -29,6 +36,7 @@ from wheelloader.estimator import (
     ContactState,
     Pile,
     SoilParams,
+    as_soil,
     contact_single,
     soil_forces,
     soil_forces_single,
@@ -37,7 +45,15 @@ from wheelloader.estimator.errors import ParameterError
 from wheelloader.estimator.force_model import FLAG_OUT_OF_SOIL
 from wheelloader.estimator.kinematics import blade_length_in_soil
 
-from .bucket_loading import RESET_OPTIONS
+from .bookkeeping import (
+    ResetRequest,
+    cycle_done,
+    cycle_progress,
+    outside_validity,
+    parse_reset_options,
+    reward_terms,
+    step_work,
+)
 from .config import (
     NOISE_CHUNK,
     REWARD_TERMS,
@@ -47,7 +63,18 @@ from .config import (
     make_config,
     next_pile,
 )
-from .truth import as_truth, stone_decay
+from .truth import stone_decay
+
+__all__ = ["STEP_INFO_KEYS", "BucketLoadingVectorEnv"]
+
+#: Keys of the per-step ``info`` of both envs (the batched env adds a ``_key`` mask to each).
+STEP_INFO_KEYS: tuple[str, ...] = REWARD_TERMS + (
+    "fill_volume", "fill_fraction", "spilled", "force_tangential", "force_normal", "measured_tangential",
+    "measured_normal", "energy_soil", "energy_payload", "depth", "flags", "stalled", "cycle_done", "cycle")
+#: Keys of the reset ``info`` of both envs.
+RESET_INFO_KEYS: tuple[str, ...] = ("soil", "cycle")
+#: Attributes whose value differs between sub-envs (``get_attr`` / ``set_attr`` give one per sub-env).
+PER_ENV_ATTRIBUTES: tuple[str, ...] = ("soil", "np_random", "start_pile")
 
 
 class BucketLoadingVectorEnv(VectorEnv):
@@ -119,52 +146,95 @@ class BucketLoadingVectorEnv(VectorEnv):
         self._started = False
 
     # ------------------------------------------------------------------ reset
-    def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
+    def reset(self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None):
+        """Reset every sub-env, or with ``options["reset_mask"]`` those where the mask is True.
+
+        Parameters
+        ----------
+        seed : int, list or None
+            ``int``: sub-env ``i`` is seeded with ``seed + i``; a list gives one seed (or None) per
+            sub-env; None keeps each sub-env's generator. Only reset sub-envs are seeded.
+        options : dict, optional
+            The single env's reset options (see
+            :func:`~wheelloader.envs.bookkeeping.parse_reset_options`), applied to every reset sub-env,
+            plus ``reset_mask``: a boolean array of shape ``(num_envs,)`` with at least one True.
+            ``truth`` and ``sensor_noise`` are settings of the whole batch: they need a full reset.
+
+        Returns
+        -------
+        observations, info
+            Observations of every sub-env (unchanged where not reset) and the reset ``info``
+            (``soil``, ``cycle`` with their ``_soil``, ``_cycle`` masks).
+        """
+        n = self.num_envs
+        if options is not None and not isinstance(options, Mapping):
+            raise ParameterError(f"reset options must be a dict or None, got {type(options).__name__}")
+        opts = dict(options or {})
+        mask = self._check_reset_mask(opts.pop("reset_mask")) if "reset_mask" in opts else np.ones(n, dtype=bool)
+        request = parse_reset_options(opts, self.cfg)
+        partial = not mask.all()
+        if partial and not self._started:
+            raise ParameterError("reset_mask: the first reset must reset every sub-env")
+        if partial and request.config_changed:
+            raise ParameterError("reset options truth and sensor_noise apply to every sub-env of the batched env: "
+                                 "pass them without a partial reset_mask")
+        seeds = self._seed_list(seed)
+        rows = np.nonzero(mask)[0]
+        for i in rows:
+            if seeds[i] is not None or self._rngs[i] is None:
+                self._rngs[i], _ = seeding.np_random(seeds[i])
+        if request.config_changed:
+            self.cfg = request.config
+        for i in rows:
+            self._reset_env(int(i), request)
+        self._steps[rows] = 0
+        self._prev_done[rows] = False
+        self._started = True
+        return self._observation(), self._reset_info(mask)
+
+    def _seed_list(self, seed: int | Sequence[int | None] | None) -> list[int | None]:
         n = self.num_envs
         if seed is None:
-            seeds: list[int | None] = [None] * n
-        elif isinstance(seed, (int, np.integer)):
-            seeds = [int(seed) + i for i in range(n)]
-        else:
-            seeds = [None if s is None else int(s) for s in seed]
-            if len(seeds) != n:
-                raise ParameterError(f"seed list must have num_envs={n} entries, got {len(seeds)}")
-        for i, s in enumerate(seeds):
-            if s is not None or self._rngs[i] is None:
-                self._rngs[i], _ = seeding.np_random(s)
-        opts = dict(options or {})
-        unknown = sorted(set(opts) - set(RESET_OPTIONS))
-        if unknown:
-            raise ParameterError(f"reset options: unknown key(s) {unknown}; expected some of {list(RESET_OPTIONS)}")
-        changes: dict[str, Any] = {}
-        if "truth" in opts:
-            changes["truth"] = as_truth(opts["truth"])
-        if "sensor_noise" in opts:
-            changes["sensor_noise"] = float(opts["sensor_noise"])
-        if changes:
-            import dataclasses
+            return [None] * n
+        if isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
+            return [int(seed) + i for i in range(n)]
+        if isinstance(seed, Sequence) and not isinstance(seed, str):
+            if len(seed) != n:
+                raise ParameterError(f"seed list must have num_envs={n} entries, got {len(seed)}")
+            return [None if s is None else int(s) for s in seed]
+        raise ParameterError(f"seed must be an int, a list of num_envs ints (or None) or None, got {seed!r}")
 
-            self.cfg = dataclasses.replace(self.cfg, **changes)
-        for i in range(n):
-            self._reset_env(i, opts)
-        self._steps[:] = 0
-        self._prev_done[:] = False
-        self._started = True
-        return self._observation(), {}
+    def _check_reset_mask(self, mask: Any) -> np.ndarray:
+        n = self.num_envs
+        if not isinstance(mask, np.ndarray) or mask.dtype != np.bool_ or mask.shape != (n,):
+            shape = getattr(mask, "shape", None)
+            dtype = getattr(mask, "dtype", type(mask).__name__)
+            raise ParameterError(f"reset option reset_mask must be a NumPy bool array of shape ({n},), "
+                                 f"got {type(mask).__name__} of shape {shape} and dtype {dtype}")
+        if not mask.any():
+            raise ParameterError("reset option reset_mask must have at least one True entry")
+        return mask.copy()
 
-    def _reset_env(self, i: int, opts: dict[str, Any]) -> None:
+    def _reset_info(self, mask: np.ndarray) -> dict[str, Any]:
+        """Reset info of the sub-envs in ``mask`` (as SyncVectorEnv gathers the single env's)."""
+        soils = np.full(self.num_envs, None, dtype=object)
+        for i in np.nonzero(mask)[0]:
+            soils[i] = self._soils[i]
+        return {"soil": soils, "_soil": mask.copy(), "cycle": np.zeros(self.num_envs, dtype=int),
+                "_cycle": mask.copy()}
+
+    def _reset_env(self, i: int, request: ResetRequest) -> None:
         """Reset sub-env ``i`` exactly as BucketLoadingEnv.reset does (same random draws, same order)."""
         cfg = self.cfg
         rng = self._rngs[i]
-        keep = bool(opts.get("keep_pile", cfg.keep_pile))
-        relax = opts.get("relax", cfg.relax)
+        keep = request.keep_pile
         carved = Pile(self._x0, self._sp, self._h[i]) if keep and self._soils[i] is not None else None
-        soil = choose_soil(cfg, self._soils[i], opts.get("soil"), rng)
+        soil = choose_soil(cfg, self._soils[i], request.soil, rng)
         if soil is not self._soils[i]:
             self._groups = None
         self._soils[i] = soil
         self._gamma[i] = soil.gamma
-        pile = next_pile(cfg, carved, keep, relax, soil)
+        pile = next_pile(cfg, carved, keep, request.relax, soil)
         self._h0[i] = pile.heights
         self._h[i] = pile.heights
         x, z, th = draw_start_pose(cfg, rng)
@@ -177,8 +247,8 @@ class BucketLoadingVectorEnv(VectorEnv):
         self._steps[i] = 0
         depth, rho, alpha, lt = contact_single(pile, x, z, th, cfg.bucket.floor_length, cfg.slope_window)
         self._depth[i], self._rho[i], self._alpha[i] = depth, rho, alpha
-        self._touched[i] = depth > 0.0
-        self._entered[i] = depth > 0.0 and cfg.exit_min_fill <= 0.0
+        self._touched[i], self._entered[i] = cycle_progress(False, False, depth > 0.0, 0.0,
+                                                            cfg.exit_min_fill * cfg.bucket.capacity)
         self._crest[i] = float(np.max(pile.heights))
         self._noise_n[i], self._noise_u[i] = draw_noise_chunk(rng)
         f_t, f_n, _, _ = soil_forces_single(soil, depth, rho, alpha, lt, 0.0, cfg.bucket, DEFAULT_OPTIONS)
@@ -259,6 +329,12 @@ class BucketLoadingVectorEnv(VectorEnv):
 
     # ------------------------------------------------------------------ step
     def step(self, actions: np.ndarray):
+        """Step every sub-env; a sub-env whose episode ended at the previous step is reset instead
+        (``AutoresetMode.NEXT_STEP``: reward 0, not terminated, its reset info in ``info``).
+
+        ``info`` has the single env's step keys (:data:`STEP_INFO_KEYS`) with ``_key`` masks that are
+        False for the sub-envs reset at this step, and for those the reset keys ``soil`` and ``cycle``.
+        """
         if not self._started:
             raise ParameterError("call reset() before step()")
         n = self.num_envs
@@ -268,30 +344,43 @@ class BucketLoadingVectorEnv(VectorEnv):
         reward = np.zeros(n)
         terminated = np.zeros(n, dtype=bool)
         truncated = np.zeros(n, dtype=bool)
-        info_terms = {k: np.zeros(n) for k in REWARD_TERMS}
-        stalled_all = np.zeros(n, dtype=bool)
+        values = {k: np.zeros(n) for k in STEP_INFO_KEYS}
+        for key in ("flags", "cycle"):
+            values[key] = np.zeros(n, dtype=int)
+        for key in ("stalled", "cycle_done"):
+            values[key] = np.zeros(n, dtype=bool)
         if done.any():
+            request = parse_reset_options(None, self.cfg)
             for i in np.nonzero(done)[0]:
-                self._reset_env(int(i), {})
+                self._reset_env(int(i), request)
             rows = np.nonzero(~done)[0]
         else:
             rows = np.arange(n)
         if rows.size:
-            terms, term, stalled = self._step_rows(rows, acts[rows])
-            for key, val in zip(REWARD_TERMS, terms, strict=True):
-                info_terms[key][rows] = val
-            reward[rows] = terms[0] + terms[1] + terms[2] + terms[3] + terms[4]
+            out, term = self._step_rows(rows, acts[rows])
+            for key, val in out.items():
+                values[key][rows] = val
+            reward[rows] = out["reward_fill"] + out["reward_energy"] + out["reward_validity"] + \
+                out["reward_stall"] + out["reward_force"]
             self._steps[rows] += 1
             terminated[rows] = term
             truncated[rows] = self._steps[rows] >= self.max_episode_steps
-            stalled_all[rows] = stalled
         self._prev_done = terminated | truncated
-        info: dict[str, Any] = dict(info_terms)
-        info.update(fill_volume=self._fill.copy(), fill_fraction=self._fill / self.cfg.bucket.capacity,
-                    stalled=stalled_all, reset=done.copy())
+        stepped = ~done
+        info: dict[str, Any] = {}
+        if rows.size:
+            for key in STEP_INFO_KEYS:
+                info[key] = values[key]
+                info["_" + key] = stepped.copy()
+        if done.any():
+            reset = self._reset_info(done)
+            info["soil"], info["_soil"] = reset["soil"], reset["_soil"]
+            info["_cycle"] = np.ones(n, dtype=bool)
+            info["cycle"] = values["cycle"]
         return self._observation(), reward, terminated, truncated, info
 
-    def _step_rows(self, r: np.ndarray, a: np.ndarray):
+    def _step_rows(self, r: np.ndarray, a: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+        """Step the sub-envs ``r`` (as BucketLoadingEnv.step, row-wise); per-row info values and termination."""
         cfg = self.cfg
         ld = cfg.loader
         g: Any = slice(None) if r.size == self.num_envs else r  # gather/scatter index (a slice is cheaper)
@@ -342,13 +431,8 @@ class BucketLoadingVectorEnv(VectorEnv):
             self._stall[g] = np.where(stalled, self._stall[g] + 1, 0)
         else:
             self._stall[g] = 0
-        # energy
-        ddx, ddz = xn - x, zn - z
-        c, s_ = np.cos(thn), np.sin(thn)
-        work = f_t * (ddx * c + ddz * s_) + f_n * (ddz * c - ddx * s_)
-        e_soil = np.maximum(work, 0.0)
-        w_load = self._gamma[g] * GRAVITY * fill
-        e_pay = np.maximum(w_load * ddz, 0.0)
+        # energy (the shared bookkeeping)
+        e_soil, e_pay = step_work(f_t, f_n, xn - x, zn - z, thn, self._gamma[g] * GRAVITY * fill)
         self._e_soil[g] += e_soil
         self._e_pay[g] += e_pay
         # measurement
@@ -358,28 +442,22 @@ class BucketLoadingVectorEnv(VectorEnv):
         self._mn[g] = np.clip(f_n + cfg.sensor_noise * noise[:, 1], -rng_r, rng_r)
         self._x[g], self._z[g], self._th[g], self._vx[g], self._vz[g], self._om[g] = xn, zn, thn, vx, vz, om
         self._depth[g], self._rho[g], self._alpha[g] = depth, rho, alpha
-        # reward
-        rw = cfg.reward
         cap = cfg.bucket.capacity
-        r_fill = rw.fill * (fill - fill0) / cap
-        r_energy = -rw.energy * (e_soil + e_pay)
-        in_soil = depth > 0.0
-        r_valid = np.where(in_soil & ((flags & ~FLAG_OUT_OF_SOIL) != 0), -rw.validity, 0.0)
-        r_stall = np.where(stalled, -rw.stall, 0.0)
-        soft = rw.force_soft_limit
-        excess = (np.maximum(f_t / ld.max_push_force - soft, 0.0) + np.maximum(f_n / ld.max_lift_force - soft, 0.0))
-        r_force = -rw.force * excess
-        # episode end
-        entered = self._entered[g] | (in_soil & (fill >= cfg.exit_min_fill * cap))
-        touched = self._touched[g] | in_soil
+        terms = reward_terms(cfg.reward, cap, ld.max_push_force, ld.max_lift_force, fill - fill0, e_soil + e_pay,
+                             outside_validity(depth, flags), stalled, f_t, f_n)
+        # cycle end (the shared rule)
+        touched, entered = cycle_progress(self._touched[g], self._entered[g], depth > 0.0, fill,
+                                          cfg.exit_min_fill * cap)
         self._entered[g] = entered
         self._touched[g] = touched
-        clearance = zn - h_surf
-        # done: out of the soil after loading (or, with too little loaded, once above the pile's crest)
-        out_of_pile = entered | (touched & (zn > self._crest[g] + cfg.exit_clearance))
-        cycle_done = out_of_pile & (clearance > cfg.exit_clearance)
-        terminated = cycle_done | (self._stall[g] >= cfg.stall_patience)
-        return (r_fill, r_energy, r_valid, r_stall, r_force), terminated, stalled
+        done = cycle_done(touched, entered, zn, zn - h_surf, self._crest[g], cfg.exit_clearance)
+        terminated = done | (self._stall[g] >= cfg.stall_patience)
+        out = dict(zip(REWARD_TERMS, terms, strict=True))
+        out.update(fill_volume=fill, fill_fraction=fill / cap, spilled=self._spilled[g], force_tangential=f_t,
+                   force_normal=f_n, measured_tangential=self._mt[g], measured_normal=self._mn[g],
+                   energy_soil=self._e_soil[g], energy_payload=self._e_pay[g], depth=depth, flags=flags,
+                   stalled=stalled, cycle_done=done)
+        return out, terminated
 
     def _carve(self, r: np.ndarray, xa, za, xb, zb):
         """Batched SurfaceCarver.cut_segment on rows ``r``; returns (flat indices, old heights) of changed nodes."""
@@ -441,28 +519,106 @@ class BucketLoadingVectorEnv(VectorEnv):
         return obs.astype(np.float32)
 
     # ------------------------------------------------------------------ render
-    def render(self):
+    def render(self) -> tuple[np.ndarray, ...] | None:
+        """One RGB frame per sub-env (``render_mode="rgb_array"``), as Gymnasium's vector API returns them."""
         if self.render_mode is None:
             return None
+        return tuple(self._render_env(i) for i in range(self.num_envs))
+
+    def _render_env(self, i: int) -> np.ndarray:
         from .rendering import EnvRenderer
 
         if self._renderer is None:
             self._renderer = EnvRenderer("rgb_array", self.cfg)
-        pile0 = Pile(self._x0, self._sp, self._h0[0])
-        state = {
-            "pile": self.cfg.pile, "start_pile": pile0, "carved": Pile(self._x0, self._sp, self._h[0]),
-            "x": float(self._x[0]), "z": float(self._z[0]), "blade_angle": float(self._th[0]),
-            "fill": float(self._fill[0]), "capacity": self.cfg.bucket.capacity, "F_T": float(self._mt[0]),
-            "F_N": float(self._mn[0]), "floor_length": self.cfg.bucket.floor_length,
-            "time": float(self._steps[0]) * self.cfg.dt,
+        return self._renderer.draw(self._render_state(i))
+
+    def _render_state(self, i: int) -> dict[str, Any]:
+        """What the renderer draws for sub-env ``i`` (as BucketLoadingEnv.render_state)."""
+        return {
+            "pile": self.cfg.pile, "start_pile": Pile(self._x0, self._sp, self._h0[i]),
+            "carved": Pile(self._x0, self._sp, self._h[i]),
+            "x": float(self._x[i]), "z": float(self._z[i]), "blade_angle": float(self._th[i]),
+            "fill": float(self._fill[i]), "capacity": self.cfg.bucket.capacity, "F_T": float(self._mt[i]),
+            "F_N": float(self._mn[i]), "floor_length": self.cfg.bucket.floor_length,
+            "time": float(self._steps[i]) * self.cfg.dt,
             "limits": (self.cfg.loader.max_push_force, self.cfg.loader.max_lift_force),
         }
-        return self._renderer.draw(state)
 
     def close_extras(self, **kwargs: Any) -> None:
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+
+    # ------------------------------------------------------------------ sub-env attributes
+    def _per_env(self, name: str, i: int) -> Any:
+        if name == "soil":
+            return self._soils[i]
+        if name == "np_random":
+            return self._rngs[i]
+        return Pile(self._x0, self._sp, self._h0[i].copy())  # start_pile
+
+    def get_attr(self, name: str) -> tuple[Any, ...]:
+        """The attribute ``name`` of every sub-env (as ``SyncVectorEnv.get_attr``).
+
+        :data:`PER_ENV_ATTRIBUTES` (``soil``, ``np_random``, ``start_pile``) differ between sub-envs;
+        any other attribute of the batched env (``cfg``, ``render_mode``, ``metadata``, ...) is shared
+        and repeated ``num_envs`` times.
+        """
+        if name in PER_ENV_ATTRIBUTES:
+            return tuple(self._per_env(name, i) for i in range(self.num_envs))
+        value = getattr(self, name)
+        return tuple(value for _ in range(self.num_envs))
+
+    def set_attr(self, name: str, values: Any) -> None:
+        """Set ``name`` in every sub-env: ``values`` is a list of one value per sub-env, or one value for all.
+
+        Per sub-env: ``soil`` (the simulator soil from now on, e.g. calibrated parameters) and
+        ``np_random`` (a :class:`numpy.random.Generator`). Any other existing attribute is shared by
+        the batch, so every sub-env must get the same value.
+        """
+        n = self.num_envs
+        if isinstance(values, (list, tuple)):
+            if len(values) != n:
+                raise ParameterError(f"set_attr({name!r}): expected one value or num_envs={n} values, "
+                                     f"got {len(values)}")
+            per = list(values)
+        else:
+            per = [values] * n
+        if name == "soil":
+            soils = [as_soil(v) for v in per]
+            self._soils = soils
+            self._gamma[:] = [s.gamma for s in soils]
+            self._groups = None
+        elif name == "np_random":
+            for v in per:
+                if not isinstance(v, np.random.Generator):
+                    raise ParameterError(f"set_attr('np_random'): expected numpy.random.Generator, "
+                                         f"got {type(v).__name__}")
+            self._rngs = per
+        elif name == "start_pile" or not hasattr(self, name):
+            raise ParameterError(f"set_attr: {name!r} cannot be set on the batched env")
+        else:
+            if any(v is not per[0] and v != per[0] for v in per[1:]):
+                raise ParameterError(f"set_attr({name!r}): the attribute is shared by every sub-env of the batched "
+                                     "env; give one value")
+            setattr(self, name, per[0])
+
+    def call(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
+        """Call ``name`` in every sub-env (as ``SyncVectorEnv.call``); results one per sub-env.
+
+        ``"render"`` draws each sub-env; a per-sub-env attribute (:meth:`get_attr`) is returned as is;
+        another method of the batched env acts on the whole batch, so it is called once and its result
+        repeated; a non-callable attribute is returned like :meth:`get_attr`.
+        """
+        if name == "render":
+            if self.render_mode is None:
+                return tuple(None for _ in range(self.num_envs))
+            return tuple(self._render_env(i) for i in range(self.num_envs))
+        if name in PER_ENV_ATTRIBUTES:
+            return self.get_attr(name)
+        attr = getattr(self, name)
+        result = attr(*args, **kwargs) if callable(attr) else attr
+        return tuple(result for _ in range(self.num_envs))
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()

@@ -43,6 +43,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 
+from wheelloader.envs.bookkeeping import step_work
 from wheelloader.estimator import (
     DEFAULT_OPTIONS,
     GRAVITY,
@@ -537,6 +538,11 @@ _CACHE: dict[tuple, tuple] = {}
 VALIDITY_RELAX = 30.0
 
 
+def _smooth_work(v):
+    """Smooth ``max(v, 0)`` of a step's work [J] (1 J wide)."""
+    return smooth_pos(v, 1.0)
+
+
 def _build(bucket: Bucket, loader: Loader, options: PlannerOptions):
     key = (bucket, loader, options)
     if key not in _CACHE:
@@ -621,10 +627,10 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
             g_ineq.append(options.stay_clearance + vertical + 10.0 * before_face)
         g_ineq += [1.0 - f_t / f_push, 1.0 - f_n / f_lift, rho_n - rho_lo + slack, rho_hi - rho_n + slack,
                    alpha_hi - alpha_n + slack, alpha_n + alpha_hi + slack]
-        # energy (the env's bookkeeping)
-        c, s = ca.cos(tn), ca.sin(tn)
-        work = f_t * (dx * c + dz * s) + f_n * (dz * c - dx * s)
-        energy = energy + smooth_pos(work, 1.0) + smooth_pos(p_soil[0] * GRAVITY * vn * dz, 1.0)
+        # energy: the env's bookkeeping, with a smooth positive part (1 J wide)
+        e_soil, e_payload = step_work(f_t, f_n, dx, dz, tn, p_soil[0] * GRAVITY * vn, cos=ca.cos, sin=ca.sin,
+                                      pos=_smooth_work)
+        energy = energy + e_soil + e_payload
     # end out of the pile
     end_clear = X[1, n] - grid.window_height(X[0, n], p_surf[:, n]) - options.end_clearance
     g_ineq.append(end_clear)

@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
+from wheelloader.envs.bookkeeping import cycle_done, cycle_progress, outside_validity, step_work
 from wheelloader.estimator import Bucket, BucketPath, Loader, Pile, SoilParams, as_soil, contact_state, soil_forces
 from wheelloader.estimator.errors import PlanningError
-from wheelloader.estimator.force_model import FLAG_OUT_OF_SOIL
 
 from .trajectory import Plan, PlannerOptions
 
@@ -55,16 +55,14 @@ class PlanCheck:
 def path_energy(path: BucketPath, soil: SoilParams, pile: Pile, bucket: Bucket) -> dict[str, np.ndarray | float]:
     """Forces, fill and the env's energy bookkeeping along ``path`` with the NumPy model.
 
-    Energy per step: ``max(0, F_T ds_t + F_N ds_n)`` on the soil plus ``max(0, W_load dz)`` on the
-    payload, with the forces and blade angle at the step's end (as ``BucketLoadingEnv.step``).
+    Energy per step: the env's :func:`~wheelloader.envs.bookkeeping.step_work` (work on the soil plus
+    lifting work on the payload), with the forces and blade angle at the step's end.
     """
     state = contact_state(path.x, path.z, path.blade_angle, pile, bucket)
     forces = soil_forces(soil, state, bucket)
-    dx, dz = np.diff(path.x), np.diff(path.z)
-    c, s = np.cos(path.blade_angle[1:]), np.sin(path.blade_angle[1:])
-    work = forces.tangential[1:] * (dx * c + dz * s) + forces.normal[1:] * (dz * c - dx * s)
-    lift = state.load_weight(soil.gamma)[1:] * dz
-    energy = float(np.sum(np.maximum(work, 0.0)) + np.sum(np.maximum(lift, 0.0)))
+    e_soil, e_payload = step_work(forces.tangential[1:], forces.normal[1:], np.diff(path.x), np.diff(path.z),
+                                  path.blade_angle[1:], state.load_weight(soil.gamma)[1:])
+    energy = float(np.sum(e_soil) + np.sum(e_payload))
     return {"state": state, "forces": forces, "energy": energy, "fill": float(state.fill_volume[-1]),
             "spilled": float(state.carve.spilled) if state.carve is not None else 0.0}
 
@@ -132,7 +130,7 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
     dt = np.diff(path.t)
     vx, vz, om = np.diff(path.x) / dt, np.diff(path.z) / dt, np.diff(path.blade_angle) / dt
     in_soil = state.depth > 0.0
-    bad = in_soil & ((forces.flags & ~FLAG_OUT_OF_SOIL) != 0)
+    bad = outside_validity(state.depth, forces.flags)
     end_clear = float(path.z[-1] - pile.surface_height(float(path.x[-1])))
     early_exit = premature_exit(path, pile, state.depth, state.fill_volume / bucket.capacity,
                                 exit_clearance - tracking_margin, exit_min_fill)
@@ -167,29 +165,37 @@ def premature_exit(path: BucketPath, pile: Pile, depth: np.ndarray, fill_fractio
                    exit_clearance: float = 0.02, exit_min_fill: float = 0.0) -> float | None:
     """Time at which the env would end the cycle before the path is done digging, or None [s].
 
-    The env ends a cycle at the first sample where the tip has been in soil
-    with at least ``exit_min_fill`` of the capacity loaded and is more than
-    ``exit_clearance`` above the start surface. That is premature when the
-    path is in soil again at a later sample (it hopped out and meant to dig on).
+    The env ends a cycle by its rule (:func:`cycle_end_index`). That is
+    premature when the path is in soil again at a later sample (it hopped out
+    and meant to dig on).
     """
     in_soil = np.asarray(depth) > 0.0
     clearance = path.z - np.asarray(pile.surface_height(path.x))
-    end = cycle_end_index(in_soil, clearance, fill_fraction, exit_clearance, exit_min_fill)
+    end = cycle_end_index(in_soil, clearance, fill_fraction, exit_clearance, exit_min_fill, z=path.z,
+                          crest=float(np.max(pile.heights)))
     if end is None or not np.any(in_soil[end + 1:]):
         return None
     return float(path.t[end])
 
 
 def cycle_end_index(in_soil: np.ndarray, clearance: np.ndarray, fill_fraction: np.ndarray,
-                    exit_clearance: float = 0.02, exit_min_fill: float = 0.0) -> int | None:
+                    exit_clearance: float = 0.02, exit_min_fill: float = 0.0, *, z: np.ndarray | None = None,
+                    crest: float | None = None) -> int | None:
     """Sample at which ``BucketLoadingEnv`` ends a cycle along a path, or None when it does not.
 
-    The first sample where the tip has been in soil with at least
-    ``exit_min_fill`` of the capacity loaded (``fill_fraction``) and is more
-    than ``exit_clearance`` [m] above the start surface (``clearance``).
+    The env's rule (:func:`~wheelloader.envs.bookkeeping.cycle_done`): the first
+    sample where the tip has been in soil with at least ``exit_min_fill`` of the
+    capacity loaded (``fill_fraction``) and is more than ``exit_clearance`` [m]
+    above the start surface (``clearance``); with the tip heights ``z`` [m] and
+    the pile's ``crest`` [m] given, also where it has touched the soil with less
+    loaded and is more than ``exit_clearance`` above the crest.
     """
-    loaded = np.cumsum(np.asarray(in_soil) & (np.asarray(fill_fraction) >= exit_min_fill)) > 0
-    ends = np.nonzero(loaded & (np.asarray(clearance) > exit_clearance))[0]
+    in_soil = np.asarray(in_soil, dtype=bool)
+    touched, loads = cycle_progress(False, False, in_soil, np.asarray(fill_fraction), exit_min_fill)
+    done = cycle_done(np.logical_or.accumulate(touched), np.logical_or.accumulate(loads),
+                      0.0 if z is None else np.asarray(z), np.asarray(clearance),
+                      np.inf if crest is None else crest, exit_clearance)
+    ends = np.nonzero(done)[0]
     return int(ends[0]) if ends.size else None
 
 

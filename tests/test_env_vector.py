@@ -103,6 +103,8 @@ def test_vector_reset_accepts_seed_lists_and_renders():
     obs_a, _ = vec.reset(seed=[4, 5, 6])
     obs_b, _ = vec.reset(seed=4)
     np.testing.assert_array_equal(obs_a, obs_b)
-    frame = vec.render()
-    assert frame.dtype == np.uint8 and frame.ndim == 3
+    frames = vec.render()  # Gymnasium's vector API: one frame per sub-env
+    assert isinstance(frames, tuple) and len(frames) == 3
+    for frame in frames:
+        assert frame.dtype == np.uint8 and frame.ndim == 3
     vec.close()
