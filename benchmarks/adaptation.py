@@ -130,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
         "machine": machine_info(),
     }
     (out / "adaptation.json").write_text(json.dumps(result, indent=2, default=float))
-    table = format_summary(summary)
+    table = format_summary(summary) + "\n\n" + format_plan_passes(rows) + "\n\n" + provenance_line(result)
     (out / "adaptation.md").write_text(table + "\n")
     plot(rows, out / "adaptation.png")
     print()
@@ -175,6 +175,33 @@ def format_summary(summary: dict[str, dict[str, float]]) -> str:
                      f"{s['validity_violation_steps']} | {s['calibration_failures']} / {s['plan_failures']} | "
                      f"{s['between_cycles_median_s']:.3f} / {s['between_cycles_max_s']:.3f} s |")
     return "\n".join(lines)
+
+
+def format_plan_passes(rows: list[dict[str, Any]]) -> str:
+    """Markdown table: plans used (they passed the NumPy check) out of cycles, per strategy and cycle index."""
+    names = [n for n in dict.fromkeys(r["strategy"] for r in rows) if n not in ("fixed", "rl")]
+    cycles = sorted({r["cycle"] for r in rows})
+    lines = ["| plans that passed the NumPy check | " + " | ".join(f"cycle {c}" for c in cycles) + " | all |",
+             "|" + "---|" * (len(cycles) + 2)]
+    for name in names:
+        cells = []
+        for c in [*cycles, None]:
+            sel = [r for r in rows if r["strategy"] == name and (c is None or r["cycle"] == c)]
+            cells.append(f"{sum(bool(r['plan_ok']) for r in sel)} / {len(sel)}")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def provenance_line(result: dict[str, Any]) -> str:
+    """One italic line: command, commit, load and run time of this result."""
+    machine = result["machine"]
+    git = machine.get("git") or {}
+    commit = (git.get("commit") or "unknown")[:10] + (" (uncommitted changes)" if git.get("dirty") else "")
+    load = machine.get("loadavg_1_5_15min")
+    load_text = "/".join(f"{v:.1f}" for v in load) if load else "unknown"
+    return (f"*`python benchmarks/adaptation.py` at commit {commit}; {machine.get('cpu_count')} cores "
+            f"({machine.get('cpu') or 'CPU'}), load average {load_text} at the end, {result['wall_time_s']:.0f} s. "
+            "Tables are deterministic for the seeds; times depend on the machine and its load.*")
 
 
 def plot(rows: list[dict[str, Any]], path: Path) -> None:

@@ -51,6 +51,7 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
         results[strategy.name] = (records, logs)
         env.close()
     files = write_figures(out, results)
+    (out / "table.md").write_text(markdown_table(results["ours"][0], results["fixed"][0]) + "\n", encoding="utf-8")
     ours = results["ours"][0]
     table = format_table(ours + results["fixed"][0])
     summary = {
@@ -62,10 +63,23 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
         "final_parameters_ours": ours[-1].params,
         "wall_time_s": time.perf_counter() - start,
         "figures": files,
+        "table_markdown": "table.md",
         "table": table,
     }
     write_json(out / "summary.json", summary)
     return summary
+
+
+def markdown_table(ours: list[Any], fixed: list[Any]) -> str:
+    """The README's demo table: per cycle, ours beside the fixed Bezier path (from the cycle records)."""
+    lines = ["| cycle | ours: prediction F_R RMSE | ours: fill | ours: kJ/m³ | ours: path | "
+             "fixed Bézier: prediction F_R RMSE | fixed: fill | fixed: kJ/m³ |", "|" + "---|" * 8]
+    for a, b in zip(ours, fixed, strict=True):
+        path = "planned" if a.plan_ok else "plan failed its check → Bézier, model-placed"
+        lines.append(f"| {a.cycle} | {a.prediction_rmse_percent:.1f} % | {a.fill_fraction:.0%} | "
+                     f"{a.energy_per_m3 / 1e3:.1f} | {path} | {b.prediction_rmse_percent:.1f} % | "
+                     f"{b.fill_fraction:.0%} | {b.energy_per_m3 / 1e3:.1f} |")
+    return "\n".join(lines)
 
 
 def write_figures(out: Path, results: dict[str, Any]) -> list[str]:

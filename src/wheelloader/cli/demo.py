@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     print()
     print(summary["table"])
     print()
-    for name in ("summary.json", *summary["figures"]):
+    for name in ("summary.json", summary["table_markdown"], *summary["figures"]):
         print(f"wrote {out / name}")
     print(f"results written to {out.resolve()}")
     return 0
