@@ -30,8 +30,8 @@ class PlannerOptions:
     force_margin : float
         Fraction of the loader's force limits the plan may use (default 0.85).
     rho_margin : float
-        Margin kept from the validity domain's angle limits [rad] (default 5 deg: the smooth surface's
-        chord slope differs from the pile's by up to ~3 deg next to carved kinks).
+        Margin kept from the validity domain's angle limits [rad] (default 5 deg: next to carved kinks the
+        smooth surface's chord slope differs from the pile's).
     end_clearance : float
         Height of the final tip pose above the surface [m] (default 0.05 m).
     max_tilt_acceleration : float
