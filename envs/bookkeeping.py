@@ -66,7 +66,7 @@ class Backend:
     pos: Callable[[Any], Any] = exact_pos
 
 
-#: Python floats (the single env's fast path: ``math`` is several times faster than NumPy on scalars).
+#: Python floats (the single env's fast path: ``math`` functions, as NumPy's are slow on scalars).
 SCALAR = Backend(math.cos, math.sin)
 #: NumPy arrays (the batched env, :func:`~wheelloader.planner.verify_plan`).
 NUMPY = Backend(np.cos, np.sin)

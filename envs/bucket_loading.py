@@ -48,7 +48,7 @@ from .config import (
     make_config,
     next_pile,
 )
-from .truth import TruthOptions, as_truth, stone_decay
+from .truth import TruthOptions, as_truth, stone_decay, stone_size
 
 __all__ = ["RESET_OPTIONS", "BucketLoadingEnv"]
 
@@ -504,7 +504,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         if j >= 0:
             self._stone *= self._decay
             if depth > 0.0 and tr.stone_rate > 0.0 and self._noise_u[j, 0] < tr.stone_rate * dist:
-                self._stone += -tr.stone_force * math.log1p(-float(self._noise_u[j, 1]))
+                self._stone += stone_size(tr, float(self._noise_u[j, 1]))
         return f_t + self._stone, f_n + 0.5 * self._stone
 
     # ------------------------------------------------------------------ observation

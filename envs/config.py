@@ -63,7 +63,7 @@ class RewardWeights:
         full bucket is worth 1.
     energy : float
         Cost per joule of mechanical work on soil and payload [1/J]. Default
-        1e-5 (a default cycle costs about 0.2-0.3).
+        1e-5 (10 kJ of work cost as much as a tenth of a bucket).
     validity : float
         Cost per step with the tip in soil outside the force model's validity
         domain (clamped rho or alpha, tension). Default 0.01.

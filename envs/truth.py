@@ -24,7 +24,7 @@ with the tip in soil (depth ``d`` > 0):
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
@@ -98,11 +98,7 @@ def stone_decay(options: TruthOptions, dt: float) -> float:
     return math.exp(-dt / options.stone_duration)
 
 
-def stone_size(options: TruthOptions, u: float) -> float:
-    """Exponentially distributed spike size [N] from a uniform ``u`` in [0, 1)."""
-    return -options.stone_force * math.log1p(-u)
-
-
-def describe(options: TruthOptions) -> dict[str, Any]:
-    """Only the options that are on (for logs)."""
-    return {k: v for k, v in options.to_dict().items() if v and k not in ("stone_force", "stone_duration")}
+def stone_size(options: TruthOptions, u: Any, *, log1p: Callable[[Any], Any] = math.log1p) -> Any:
+    """Exponentially distributed spike size [N] from a uniform ``u`` in [0, 1) (``log1p``: the backend's,
+    ``math.log1p`` for a float, ``numpy.log1p`` for an array)."""
+    return -options.stone_force * log1p(-u)

@@ -63,7 +63,7 @@ from .config import (
     make_config,
     next_pile,
 )
-from .truth import stone_decay
+from .truth import stone_decay, stone_size
 
 __all__ = ["STEP_INFO_KEYS", "BucketLoadingVectorEnv"]
 
@@ -323,7 +323,7 @@ class BucketLoadingVectorEnv(VectorEnv):
             if tr.stone_rate > 0.0:
                 u = self._noise_u[rows, j]
                 hit = ins & (u[:, 0] < tr.stone_rate * dist)
-                stone = np.where(hit, stone - tr.stone_force * np.log1p(-u[:, 1]), stone)
+                stone = np.where(hit, stone + stone_size(tr, u[:, 1], log1p=np.log1p), stone)
             self._stone[g] = stone
         return f_t + stone, f_n + 0.5 * stone
 

@@ -19,7 +19,8 @@ from wheelloader.envs.bookkeeping import cycle_done, cycle_progress, outside_val
 from wheelloader.estimator import Bucket, BucketPath, Loader, Pile, SoilParams, as_soil, contact_state, soil_forces
 from wheelloader.estimator.errors import PlanningError
 
-from .trajectory import Plan, PlannerOptions
+from .options import PlannerOptions
+from .plan import Plan
 
 
 @dataclass(frozen=True)

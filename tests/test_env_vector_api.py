@@ -5,6 +5,8 @@
 from __future__ import annotations
 
 import inspect
+import subprocess
+import sys
 
 import gymnasium as gym
 import numpy as np
@@ -183,3 +185,11 @@ def test_single_env_keywords_are_typed_and_match_the_config():
     assert env.unwrapped.cfg.sensor_noise == 0.0 and env.unwrapped.cfg.stall_patience == 2
     with pytest.raises(TypeError, match="unexpected keyword"):
         BucketLoadingEnv(no_such_option=1)
+
+
+def test_sb3_adapter_without_stable_baselines3_says_what_to_install():
+    code = ("import sys; sys.modules['stable_baselines3'] = None\n"
+            "try:\n    import wheelloader.envs.sb3\n"
+            "except ImportError as exc:\n    print(exc)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert "wheelloader.envs.sb3 needs stable-baselines3" in out and "wheelloader[rl]" in out

@@ -1,17 +1,21 @@
-"""Smoke tests of the SB3 training and evaluation scripts in train/ (tiny budgets, no learning asserted).
+"""Smoke tests of the packaged SB3 adapter and the training and evaluation scripts in train/ (tiny budgets,
+no learning asserted).
 
-The scripts are not a package: they run as subprocesses, and ``train/common.py`` is loaded with runpy.
-Skipped without stable-baselines3 and torch, unless ``WHEELLOADER_REQUIRE_RL=1`` (then a missing install fails).
+The scripts are not a package: they run as subprocesses, and their modules are imported by name with
+``train/`` on ``sys.path`` (as the scripts see them). Skipped without stable-baselines3 and torch, unless
+``WHEELLOADER_REQUIRE_RL=1`` (then a missing install fails).
 """
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
-import runpy
 import subprocess
 import sys
+import warnings
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -34,16 +38,22 @@ def _run(script: str, *args: str) -> subprocess.CompletedProcess:
 
 
 @pytest.fixture(scope="module")
-def common() -> dict:
-    return runpy.run_path(str(TRAIN / "common.py"))
+def common() -> SimpleNamespace:
+    """The train/ modules' public names in one namespace (imported, not executed with runpy)."""
+    if str(TRAIN) not in sys.path:
+        sys.path.insert(0, str(TRAIN))
+    names: dict = {}
+    for module in ("common", "setups", "policies", "evaluation", "curves", "training"):
+        names.update({k: v for k, v in vars(importlib.import_module(module)).items() if not k.startswith("_")})
+    return SimpleNamespace(**names)
 
 
 def test_batched_adapter_matches_dummy_vec_env(common):
     """Same seeds and actions: the batched adapter and SB3's DummyVecEnv of single envs agree step by step,
     including same-step auto-reset, terminal observations and the time-limit flag."""
     kwargs = {"soil": "random", "max_episode_steps": 40}
-    batched = common["make_train_env"](kwargs, 3, 11, "batched")
-    dummy = common["make_train_env"](kwargs, 3, 11, "dummy")
+    batched = common.make_train_env(kwargs, 3, 11, "batched")
+    dummy = common.make_train_env(kwargs, 3, 11, "dummy")
     rng = np.random.default_rng(0)
     ob, od = batched.reset(), dummy.reset()
     np.testing.assert_allclose(ob, od, atol=1e-5)
@@ -68,14 +78,14 @@ def test_batched_adapter_matches_dummy_vec_env(common):
 
 def test_run_episode_metrics(common):
     """A fixed Bezier path fills the bucket on gravel; the random policy is reproducible per seed."""
-    ep = common["run_episode"](common["PathPolicy"](0), "gravel", 3)
+    ep = common.run_episode(common.PathPolicy(0), "gravel", 3)
     assert ep["fill_fraction"] > 0.5
     assert ep["energy_J"] > 0.0
     assert ep["energy_per_m3_J"] == pytest.approx(ep["energy_J"] / ep["fill_volume_m3"])
-    a = common["run_episode"](common["RandomPolicy"](), "sand", 4)
-    b = common["run_episode"](common["RandomPolicy"](), "sand", 4)
+    a = common.run_episode(common.RandomPolicy(), "sand", 4)
+    b = common.run_episode(common.RandomPolicy(), "sand", 4)
     assert a == b
-    s = common["summarize"]([ep, a])
+    s = common.summarize([ep, a])
     assert s["episodes"] == 2 and 0.0 <= s["stall_rate"] <= 1.0
 
 
@@ -122,10 +132,10 @@ def test_train_and_evaluate_smoke(tmp_path):
 
 def test_evaluate_seeds_by_policy(common):
     """``seeds_by_policy`` gives one policy (the slow MPC in the full run) fewer seeds than the others."""
-    random = common["RandomPolicy"]()
-    fewer = common["RandomPolicy"]()
+    random = common.RandomPolicy()
+    fewer = common.RandomPolicy()
     fewer.name = "mpc"
-    res = common["evaluate"]([random, fewer], ["sand"], [1, 2, 3], {"max_episode_steps": 20},
+    res = common.evaluate([random, fewer], ["sand"], [1, 2, 3], {"max_episode_steps": 20},
                              seeds_by_policy={"mpc": [2]})
     assert [e["seed"] for e in res["random"]["episodes"]] == [1, 2, 3]
     assert [e["seed"] for e in res["mpc"]["episodes"]] == [2]
@@ -152,10 +162,58 @@ def test_mpc_policy_uses_planner_make_env_policy(common, monkeypatch):
             return np.array([0.5, 0.0, 0.0], dtype=np.float32)
 
     monkeypatch.setattr(planner, "make_env_policy", Controller, raising=False)
-    policy = common["mpc_policy"]()
+    policy = common.mpc_policy()
     assert policy is not None and policy.name == "mpc"
-    ep = common["run_episode"](policy, "gravel", 1, {"max_episode_steps": 30})
+    ep = common.run_episode(policy, "gravel", 1, {"max_episode_steps": 30})
     assert calls["made"] == 1 and calls["reset"] == 1 and calls["act"] == ep["steps"] > 0
     monkeypatch.delattr(planner, "make_env_policy")
-    if not hasattr(planner, "MPCPolicy"):
-        assert common["mpc_policy"]() is None
+    assert common.mpc_policy() is None
+
+
+def test_packaged_adapter_uses_only_the_public_vector_api():
+    """The adapter lives in the package and reaches no private attribute of the batched env."""
+    import inspect
+
+    import wheelloader.envs.sb3 as adapter
+
+    source = inspect.getsource(adapter)
+    assert "venv._" not in source and "unwrapped._" not in source and "base._" not in source
+    from wheelloader.estimator import preset
+
+    env = adapter.make_sb3_vec_env(n_envs=2, seed=3, monitor=False, soil="sand")
+    assert isinstance(env, adapter.BatchedVecEnv)
+    env.reset()
+    assert env.get_attr("soil") == [preset("sand")] * 2
+    env.set_attr("soil", "gravel", indices=[1])
+    assert env.get_attr("soil") == [preset("sand"), preset("gravel")]
+    assert env.env_method("render") == [None, None]  # no render_mode
+    env.close()
+
+
+def test_evaluate_policy_and_video_recorder_run_without_warnings(tmp_path):
+    """SB3's evaluate_policy and VecVideoRecorder on the packaged adapter: no warning, a video written."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.evaluation import evaluate_policy
+
+    from wheelloader.envs.sb3 import make_sb3_vec_env
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        env = make_sb3_vec_env(n_envs=2, seed=0, max_episode_steps=20)
+        model = PPO("MlpPolicy", env, n_steps=16, batch_size=16, n_epochs=1, seed=0, device="cpu")
+        rewards, lengths = evaluate_policy(model, env, n_eval_episodes=4, return_episode_rewards=True)
+        assert len(rewards) == 4 and all(0 < n <= 20 for n in lengths)
+        env.close()
+    pytest.importorskip("moviepy", reason="VecVideoRecorder writes with moviepy (pip install moviepy)")
+    from stable_baselines3.common.vec_env import VecVideoRecorder
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        env = make_sb3_vec_env(n_envs=2, seed=0, max_episode_steps=10, render_mode="rgb_array")
+        rec = VecVideoRecorder(env, str(tmp_path), record_video_trigger=lambda step: step == 0, video_length=5)
+        rec.reset()
+        for _ in range(8):
+            rec.step(np.tile(env.action_space.sample(), (2, 1)))
+        rec.close()
+    videos = list(tmp_path.glob("*.mp4"))
+    assert len(videos) == 1 and videos[0].stat().st_size > 0

@@ -26,20 +26,10 @@ import json
 import time
 from pathlib import Path
 
-from common import (
-    PathPolicy,
-    RandomPolicy,
-    evaluate,
-    int_list,
-    load_sb3,
-    machine_info,
-    mpc_policy,
-    plot_learning_curves,
-    set_torch_threads,
-    str_list,
-    summarize,
-    write_json,
-)
+from common import int_list, machine_info, set_torch_threads, str_list, write_json
+from curves import plot_learning_curves
+from evaluation import evaluate, summarize
+from policies import PathPolicy, RandomPolicy, load_sb3, mpc_policy
 
 _COLUMNS = (("return", "return", "{:.3f}"), ("fill", "fill_fraction", "{:.3f}"), ("energy [kJ]", "energy_J", None),
             ("energy/m^3 [kJ/m^3]", "energy_per_m3_J", None), ("stall rate", "stall_rate", "{:.2f}"),
@@ -57,8 +47,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--mpc", action=argparse.BooleanOptionalAction, default=True,
                         help="include the MPC planner (skipped with a message if wheelloader.planner has none)")
     parser.add_argument("--mpc-seeds", type=int_list, default=None,
-                        help="env seeds for the MPC planner only (default: --seeds); one MPC episode takes "
-                             "~5-50 s on a shared 2-core CPU, so the full run uses fewer")
+                        help="env seeds for the MPC planner only (default: --seeds); the MPC is the "
+                             "slowest policy by far, so the full run gives it fewer")
     parser.add_argument("--bezier", type=int_list, default="1-4", help="fixed paper paths to include (1-4)")
     parser.add_argument("--random", action=argparse.BooleanOptionalAction, default=True,
                         help="include the random policy")
@@ -163,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.mpc:
         mpc = mpc_policy()
         if mpc is None:
-            msg = "mpc: skipped, wheelloader.planner offers no env policy (make_env_policy / MPCPolicy) yet"
+            msg = "mpc: skipped, wheelloader.planner offers no env policy (make_env_policy)"
             print(msg, flush=True)
             skipped.append(msg)
         else:

@@ -1,16 +1,15 @@
-"""The documented full run of the RL baseline (336 s measured on the 2-core CPU, 62 s of them the MPC).
+"""The documented full run of the RL baseline (timings in train/README.md and the run's full_run.json).
 
 1. PPO on the plant with randomised soils (domain randomisation);
 2. PPO on the digital twin (one plant cycle with the Bezier path,
    calibrated soil), to be evaluated on the plant: fine-tuned from the
    domain-randomised policy (``ppo_twin``) and from scratch
    (``ppo_twin_scratch``);
-3. SAC on the plant with randomised soils (small budget: SAC is ~7-10x slower
-   per env-step than PPO on a CPU);
+3. SAC on the plant with randomised soils (small budget: SAC is several times
+   slower per env-step than PPO on a CPU);
 4. evaluation of all of them against the MPC planner (if available; the
-   slowest part, ~18 s per MPC episode: ``--mpc-seeds`` gives it fewer
-   seeds), the four fixed Bezier paths and a random policy on every soil
-   preset and the same seeds.
+   slowest part: ``--mpc-seeds`` gives it fewer seeds), the four fixed
+   Bezier paths and a random policy on every soil preset and the same seeds.
 
 Writes into ``--out`` (default ``train/results``): one folder per training
 run (``model.zip``, ``config.json``, ``learning_curve.json``,
@@ -50,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--eval-seeds", default="2000-2004", help="evaluation env seeds")
     parser.add_argument("--mpc-seeds", default="same",
                         help="evaluation env seeds of the MPC planner only, e.g. 2000-2001 (default 'same': "
-                             "--eval-seeds); one MPC episode takes ~10-50 s on the shared 2-core CPU")
+                             "--eval-seeds); the MPC is the slowest policy by far")
     parser.add_argument("--soils", default="all", help="evaluation soils")
     parser.add_argument("--torch-threads", type=int, default=1)
     parser.add_argument("--progress-bar", action=argparse.BooleanOptionalAction, default=False)

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import argparse
 
-from common import add_training_args, train
+from training import add_training_args, train
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -33,7 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--n-steps", type=int, default=256, help="rollout length per sub-env")
     parser.add_argument("--batch-size", type=int, default=512, help="minibatch size")
     parser.add_argument("--n-epochs", type=int, default=10,
-                        help="epochs per update (10: measured to learn ~3x faster per env-step than 5 here)")
+                        help="epochs per update (train/README.md compares 10 with 5)")
     parser.add_argument("--learning-rate", type=float, default=3e-4)
     parser.add_argument("--gamma", type=float, default=0.995)
     parser.add_argument("--ent-coef", type=float, default=0.0)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import argparse
 
-from common import add_training_args, train
+from training import add_training_args, train
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -18,7 +18,8 @@ import os
 import time
 from pathlib import Path
 
-from common import machine_info, make_train_env, set_torch_threads, write_json
+from common import machine_info, set_torch_threads, write_json
+from setups import make_train_env
 
 TARGET = 1000.0
 
@@ -29,7 +30,7 @@ def measure(vec: str, n_envs: int, steps: int, seed: int, use_sde: bool, n_epoch
     Parameters
     ----------
     vec : str
-        ``"batched"`` or ``"dummy"`` (see :func:`common.make_train_env`).
+        ``"batched"`` or ``"dummy"`` (see :func:`setups.make_train_env`).
     n_envs : int
         Sub-envs.
     steps : int

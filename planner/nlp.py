@@ -1,0 +1,176 @@
+"""The NLP of the full-cycle trajectory optimisation (CasADi + IPOPT).
+
+Direct transcription on ``N`` intervals of length ``h`` (a parameter, so a
+solver serves any cycle duration). States at the nodes ``k = 0..N``: tip
+position ``x, z`` [m], blade angle ``theta`` [rad] and bucket fill ``V``
+[m^3]; controls on the intervals: tip velocity ``v_x, v_z`` [m/s] and tilt
+rate ``omega`` [rad/s], constant over an interval (so the tip path is
+piecewise linear and the env's kinematics reproduce it exactly up to the
+acceleration ramps).
+
+* Fill: the tip moves forward only (``v_x >= 0``), so the soil it removes
+  over an interval is the area between the start-of-cycle surface and the
+  segment, ``w * dx * max(z_s - z, 0)`` averaged over its end nodes (the
+  carving of :meth:`Pile.carve` for a forward path), and the bucket holds at
+  most its capacity.
+* Forces: :func:`~wheelloader.planner.casadi_model.casadi_forces` (eqs 1,
+  10-17) at every node with the node's fill as payload, as the env does.
+* Energy: the env's bookkeeping (:func:`~wheelloader.envs.bookkeeping.step_work`),
+  ``max(0, F_T ds_t + F_N ds_n)`` plus ``max(0, W_load dz)`` per interval
+  (with a smooth max).
+* Objective: ``- V_N / capacity + lambda * E / 1 kJ + mu * sum |du|^2``
+  (fill against energy; ``mu`` a small smoothing weight), optionally with a
+  lower bound on the final fill ("least energy for a fill target").
+* Constraints: dynamics; velocity and acceleration limits of the loader;
+  blade-angle and workspace limits; ``F_T <= margin * max_push_force`` and
+  ``F_N <= margin * max_lift_force``; the validity domain where the tip is in
+  soil, ``rho_min + rho_margin <= rho <= pi - eps1 - eps2 - delta - phi -
+  rho_margin`` and ``|alpha| <= alpha_max - rho_margin`` (relaxed by :data:`VALIDITY_RELAX` times the height above the
+  surface, so it binds only in soil); the start pose and velocity; and the end out of the pile,
+  ``z_N >= z_s(x_N) + end_clearance``, while past the face every earlier node
+  stays at most ``stay_clearance`` above the surface (no hop out and back in).
+
+The NLP is built once per (intervals, bucket, loader, options) and cached;
+each call only passes new parameters, bounds and the initial guess.
+"""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+
+from wheelloader.envs.bookkeeping import step_work
+from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, Loader
+
+from .casadi_model import casadi_forces, smooth_pos
+from .options import PlannerOptions
+
+__all__ = ["VALIDITY_RELAX", "build"]
+
+_CACHE: dict[tuple, tuple] = {}
+#: How fast the validity-domain limits on rho relax above the surface [rad/m]: the limits bind in soil
+#: and fade out within centimetres above it (a product ``depth * (rho - limit) >= 0`` would be degenerate
+#: out of soil and blow up IPOPT's multipliers).
+VALIDITY_RELAX = 30.0
+
+
+def _smooth_work(v):
+    """Smooth ``max(v, 0)`` of a step's work [J] (1 J wide)."""
+    return smooth_pos(v, 1.0)
+
+
+def build(bucket: Bucket, loader: Loader, options: PlannerOptions):
+    """The solver, its functions (``forces``, ``outputs``) and the constraint layout, built once per key."""
+    key = (bucket, loader, options)
+    if key not in _CACHE:
+        _CACHE[key] = _build_nlp(bucket, loader, options)
+    return _CACHE[key]
+
+
+def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
+    n = options.intervals
+    grid = options.surface
+    # parameters
+    p_start = ca.SX.sym("start", 4)
+    p_vel0 = ca.SX.sym("vel0", 3)
+    p_h = ca.SX.sym("h")
+    p_lam = ca.SX.sym("lam")
+    p_soil = ca.SX.sym("soil", 7)
+    p_surf = ca.SX.sym("surf", grid.window_size, n + 1)  # one surface window per node
+    p_ref = ca.SX.sym("ref", 2, n + 1)
+    p_wref = ca.SX.sym("wref")
+    p_face = ca.SX.sym("face")
+    p = ca.vertcat(p_start, p_vel0, p_h, p_lam, p_soil, ca.vec(p_surf), ca.vec(p_ref), p_wref, p_face)
+    # single-node force function (also used by predict)
+    xs, zs, ths, vs = ca.SX.sym("x"), ca.SX.sym("z"), ca.SX.sym("th"), ca.SX.sym("V")
+    p_win = ca.SX.sym("window", grid.window_size)
+    alpha = grid.window_slope_angle(xs, p_win)
+    vertical = grid.window_height(xs, p_win) - zs
+    w_load = p_soil[0] * GRAVITY * vs
+    out = casadi_forces(p_soil, vertical, alpha - ths, alpha, w_load, bucket, DEFAULT_OPTIONS)
+    rho = alpha - ths
+    forces = ca.Function("forces", [xs, zs, ths, vs, p_soil, p_win], [out["F_T"], out["F_N"]])
+    node = ca.Function("node", [xs, zs, ths, vs, p_soil, p_win], [out["F_T"], out["F_N"], rho, vertical, alpha])
+    # decision variables
+    X = ca.SX.sym("X", 4, n + 1)
+    U = ca.SX.sym("U", 3, n)
+    w = ca.vertcat(ca.vec(X), ca.vec(U))
+    h = p_h
+    g_eq, g_ineq = [], []
+    energy = 0.0
+    smooth = 0.0
+    ft_all, fn_all = [], []
+    ft0, fn0, _, vertical_prev, _ = node(X[0, 0], X[1, 0], X[2, 0], X[3, 0], p_soil, p_surf[:, 0])
+    ft_all.append(ft0)
+    fn_all.append(fn0)
+    phi, delta = p_soil[3], p_soil[4]
+    rho_lo = DEFAULT_OPTIONS.rho_min + options.rho_margin
+    rho_hi = math.pi - DEFAULT_OPTIONS.eps1 - DEFAULT_OPTIONS.eps2 - delta - phi - options.rho_margin
+    alpha_hi = DEFAULT_OPTIONS.alpha_max - options.rho_margin
+    f_push = options.force_margin * loader.max_push_force
+    f_lift = options.force_margin * loader.max_lift_force
+    acc = loader.max_acceleration
+    tilt_acc = options.max_tilt_acceleration
+    prev_u = p_vel0
+    for k in range(n):
+        xk, zk, tk, vk = X[0, k], X[1, k], X[2, k], X[3, k]
+        xn, zn, tn, vn = X[0, k + 1], X[1, k + 1], X[2, k + 1], X[3, k + 1]
+        u = U[:, k]
+        dx, dz = h * u[0], h * u[1]
+        # kinematics (exact for piecewise-constant velocity)
+        g_eq += [xn - xk - dx, zn - zk - dz, tn - tk - h * u[2]]
+        # forces at the new node (and its depth below the surface)
+        f_t, f_n, rho_n, vertical, alpha_n = node(xn, zn, tn, vn, p_soil, p_surf[:, k + 1])
+        # fill: area between the start surface and the segment (trapezoid rule on the node depths),
+        # capped by the bounds on V
+        removed = bucket.width * dx * smooth_pos(0.5 * (vertical_prev + vertical), 1e-3)
+        vertical_prev = vertical
+        g_eq.append(vn - vk - removed)
+        # acceleration limits
+        du = u - prev_u
+        g_ineq += [acc * h - du[0], acc * h + du[0], acc * h - du[1], acc * h + du[1],
+                   tilt_acc * h - du[2], tilt_acc * h + du[2]]
+        smooth = smooth + ca.sumsqr(du / ca.vertcat(acc, acc, tilt_acc))
+        prev_u = u
+        # force limits and validity domain at the new node
+        ft_all.append(f_t)
+        fn_all.append(f_n)
+        slack = VALIDITY_RELAX * smooth_pos(-vertical, 1e-3)
+        if k < n - 1:
+            # once past the face the tip stays in or just above the soil until the last interval: the env
+            # ends a cycle as soon as the tip has been in soil and is more than its exit clearance above
+            # the surface; before the face (the approach over the ground) the constraint is off
+            before_face = 0.5 * (1.0 + ca.tanh((p_face - xn) / 0.02))
+            g_ineq.append(options.stay_clearance + vertical + 10.0 * before_face)
+        g_ineq += [1.0 - f_t / f_push, 1.0 - f_n / f_lift, rho_n - rho_lo + slack, rho_hi - rho_n + slack,
+                   alpha_hi - alpha_n + slack, alpha_n + alpha_hi + slack]
+        # energy: the env's bookkeeping, with a smooth positive part (1 J wide)
+        e_soil, e_payload = step_work(f_t, f_n, dx, dz, tn, p_soil[0] * GRAVITY * vn, cos=ca.cos, sin=ca.sin,
+                                      pos=_smooth_work)
+        energy = energy + e_soil + e_payload
+    # end out of the pile
+    end_clear = X[1, n] - grid.window_height(X[0, n], p_surf[:, n]) - options.end_clearance
+    g_ineq.append(end_clear)
+    fill_end = X[3, n]
+    g = ca.vertcat(*g_eq, *g_ineq, fill_end)
+    n_eq, n_ineq = len(g_eq), len(g_ineq)
+    tracking = ca.sumsqr(X[0:2, 1:] - p_ref[:, 1:]) / n
+    objective = (-X[3, n] / bucket.capacity + p_lam * energy / 1000.0
+                 + options.smoothing_weight * smooth / n + p_wref * tracking)
+    nlp = {"x": w, "p": p, "f": objective, "g": g}
+    solver_opts = {
+        "ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
+        "ipopt.max_iter": options.max_iter, "ipopt.tol": options.tolerance,
+        "ipopt.acceptable_tol": 1e-3, "ipopt.acceptable_iter": 5,
+        "ipopt.mu_strategy": "adaptive", "error_on_fail": False,
+    }
+    if options.max_wall_time is not None:
+        solver_opts["ipopt.max_wall_time"] = float(options.max_wall_time)
+    if options.ipopt_warm_start:
+        solver_opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
+                            "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})
+    solver = ca.nlpsol("bucket_path", "ipopt", nlp, solver_opts)
+    outputs = ca.Function("outputs", [w, p], [ca.vertcat(*ft_all), ca.vertcat(*fn_all), energy])
+    layout = {"ng": n_eq + n_ineq + 1, "ineq": slice(n_eq, n_eq + n_ineq), "fill_end": n_eq + n_ineq}
+    return solver, {"forces": forces, "outputs": outputs}, layout

@@ -1,0 +1,143 @@
+"""Settings of the trajectory optimiser and the start state of a plan."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from wheelloader.estimator.errors import PlanningError
+
+from .surface import SurfaceGrid
+
+__all__ = ["PlannerOptions", "StartState"]
+
+
+@dataclass(frozen=True)
+class PlannerOptions:
+    """Settings of the trajectory optimiser (SI units).
+
+    Parameters
+    ----------
+    intervals : int
+        Number of intervals N of the transcription (default 40).
+    energy_weight : float
+        lambda: cost per kJ of energy, in bucket-fills (default 0.02/kJ: 1 kJ
+        is worth 2 % of a bucket).
+    smoothing_weight : float
+        mu: weight of the squared control changes (default 1e-3).
+    force_margin : float
+        Fraction of the loader's force limits the plan may use (default 0.85).
+    rho_margin : float
+        Margin kept from the validity domain's angle limits [rad] (default 5 deg: next to carved kinks the
+        smooth surface's chord slope differs from the pile's).
+    end_clearance : float
+        Height of the final tip pose above the surface [m] (default 0.05 m).
+    max_tilt_acceleration : float
+        Tilt acceleration limit [rad/s^2] (default 4, the env's).
+    blade_angle_limits : tuple of float
+        Blade-angle range [rad] (default -45 to 75 deg, the env's).
+    lift_headroom : float
+        How far above the highest surface point the tip may go [m] (default 1 m).
+    fill_limit : float
+        Largest planned fill as a fraction of the bucket capacity (default 0.95: the
+        planner's fill model is the midpoint rule on a smoothed surface; the margin keeps
+        the real carving from spilling).
+    stay_clearance : float
+        Past the face, the tip stays at most this high above the surface until the last
+        interval [m] (default 0.01 m; the env ends a cycle at 0.02 m).
+    max_iter : int
+        IPOPT iteration limit (default 300).
+    max_wall_time : float, optional
+        IPOPT wall-time limit per solve [s] (default None: none). A solve stopped by it returns
+        its last iterate (status ``Maximum_WallTime_Exceeded``): check it with
+        :func:`~wheelloader.planner.verify_plan` before use.
+    ipopt_warm_start : bool
+        Build IPOPT with its warm-start settings (``warm_start_init_point``, ``mu_init`` 1e-4): a
+        ``solve(..., warm=True)`` then starts from the previous primal *and* dual solution. For MPC,
+        where successive problems differ little (default False).
+    tolerance : float
+        IPOPT tolerance (default 1e-4; the objective is O(1)).
+    surface : SurfaceGrid
+        Layout of the smooth surface.
+    """
+
+    intervals: int = 40
+    energy_weight: float = 0.02
+    smoothing_weight: float = 1e-3
+    force_margin: float = 0.85
+    rho_margin: float = math.radians(5.0)
+    end_clearance: float = 0.05
+    max_tilt_acceleration: float = 4.0
+    blade_angle_limits: tuple[float, float] = (math.radians(-45.0), math.radians(75.0))
+    lift_headroom: float = 1.0
+    fill_limit: float = 0.95
+    stay_clearance: float = 0.01
+    max_iter: int = 300
+    max_wall_time: float | None = None
+    ipopt_warm_start: bool = False
+    tolerance: float = 1e-4
+    surface: SurfaceGrid = field(default_factory=SurfaceGrid)
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.intervals, int) and 4 <= self.intervals <= 400):
+            raise PlanningError(f"PlannerOptions.intervals must be an integer in [4, 400], got {self.intervals!r}")
+        for name in ("energy_weight", "smoothing_weight", "rho_margin", "end_clearance", "lift_headroom"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
+                raise PlanningError(f"PlannerOptions.{name} must be a finite number >= 0, got {value!r}")
+        if not (0.0 < self.fill_limit <= 1.0):
+            raise PlanningError(f"PlannerOptions.fill_limit must be in (0, 1], got {self.fill_limit!r}")
+        if not (0.0 < self.force_margin <= 1.0):
+            raise PlanningError(f"PlannerOptions.force_margin must be in (0, 1], got {self.force_margin!r}")
+        if not self.max_tilt_acceleration > 0.0:
+            raise PlanningError("PlannerOptions.max_tilt_acceleration must be > 0 rad/s^2")
+        lo, hi = self.blade_angle_limits
+        if not (-math.pi / 2 < lo < hi < math.pi / 2):
+            raise PlanningError(f"PlannerOptions.blade_angle_limits must be (low, high) in (-pi/2, pi/2) rad, "
+                                f"got {self.blade_angle_limits!r}")
+        if not (isinstance(self.max_iter, int) and self.max_iter >= 1) or not self.tolerance > 0.0:
+            raise PlanningError("PlannerOptions.max_iter must be a positive integer and tolerance > 0")
+        if self.max_wall_time is not None and not (isinstance(self.max_wall_time, (int, float))
+                                                   and math.isfinite(self.max_wall_time) and self.max_wall_time > 0):
+            raise PlanningError(f"PlannerOptions.max_wall_time must be None or a number of seconds > 0, "
+                                f"got {self.max_wall_time!r}")
+
+
+@dataclass(frozen=True)
+class StartState:
+    """Where a plan starts: tip pose, velocity and fill.
+
+    Parameters
+    ----------
+    x, z, blade_angle : float
+        Tip pose [m, m, rad].
+    vx, vz, omega : float
+        Tip velocity and tilt rate [m/s, m/s, rad/s] (default at rest).
+    fill : float
+        Soil already in the bucket [m^3] (default 0).
+    """
+
+    x: float
+    z: float
+    blade_angle: float
+    vx: float = 0.0
+    vz: float = 0.0
+    omega: float = 0.0
+    fill: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("x", "z", "blade_angle", "vx", "vz", "omega", "fill"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise PlanningError(f"StartState.{name} must be a finite number, got {value!r}")
+            object.__setattr__(self, name, float(value))
+        if self.fill < 0.0:
+            raise PlanningError(f"StartState.fill must be >= 0 m^3, got {self.fill!r}")
+
+    @classmethod
+    def from_observation(cls, obs: np.ndarray, capacity: float) -> StartState:
+        """From a ``BucketLoadingEnv`` observation (indices 0-5 pose and rates, 9 fill fraction)."""
+        o = [float(v) for v in np.asarray(obs, dtype=float).ravel()[:10]]
+        return cls(o[0], o[1], o[2], o[3], o[4], o[5], max(o[9], 0.0) * capacity)
