@@ -1,10 +1,18 @@
-"""Test set-up: matplotlib draws off-screen (Agg) in every test."""
+"""Test set-up: matplotlib draws off-screen (Agg) in every test; hypothesis has no time deadline.
+
+Tests assert behaviour, never wall time: hypothesis's default 200 ms deadline per example would make a
+property test's verdict depend on how busy the machine is, so the profile loaded here has none.
+"""
 
 from __future__ import annotations
 
 import os
 
 import matplotlib
+from hypothesis import settings
 
 matplotlib.use("Agg")
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+settings.register_profile("wheelloader", deadline=None)
+settings.load_profile("wheelloader")
