@@ -28,3 +28,18 @@ def test_render_replaces_only_the_block(tmp_path):
     text = "intro\n<!-- BEGIN generated: t.md -->\nold\n<!-- END generated -->\nrest\n"
     assert tool.render(text, tmp_path) == "intro\n<!-- BEGIN generated: t.md -->\n| a |\n|---|\n| 1 |\n" \
                                           "<!-- END generated -->\nrest\n"
+
+
+def test_every_import_in_the_docs_works():
+    """The import lines of the README's (and the dem/ and train/ READMEs') Python blocks run as written."""
+    import re
+
+    lines = []
+    for doc in ("README.md", "dem/README.md", "train/README.md"):
+        text = (ROOT / doc).read_text(encoding="utf-8")
+        for block in re.findall(r"```python\n(.*?)```", text, re.S):
+            lines += [ln.split("#")[0].rstrip() for ln in block.splitlines()
+                      if re.match(r"(from wheelloader[\w.]* import |import wheelloader)", ln)]
+    assert lines, "no import lines found"
+    for line in lines:
+        exec(line, {})  # noqa: S102 - our own README's import lines
