@@ -66,6 +66,8 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _machine import machine_info  # noqa: E402
 
+from wheelloader.estimator.jsonable import to_jsonable  # noqa: E402
+
 DEFAULT_SOILS = ("gravel", "sand", "dirt", "lean_clay", "modified_sand")
 QUICK_SOILS = ("gravel", "sand", "dirt")
 ENV_ID = "wheelloader/BucketLoading-v0"
@@ -102,21 +104,6 @@ def _per_m3(energy: float, fill_volume: float) -> float:
 def _load() -> list[float]:
     """1, 5 and 15 min load averages."""
     return [round(v, 2) for v in os.getloadavg()]
-
-
-def _clean(value: Any) -> Any:
-    """JSON-safe copy (NaN and inf become None, numpy scalars become Python numbers)."""
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    if isinstance(value, (np.floating, float)):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.bool_):
-        return bool(value)
-    return value
 
 
 def numpy_metrics(path, soil, pile, bucket, loader) -> dict[str, Any]:
@@ -423,7 +410,8 @@ def main(argv: list[str] | None = None) -> int:
     results.update({
         "benchmark": "planner", "machine": machine_info(), "env_id": ENV_ID, "pile": "Pile.trapezoid()",
         "nominal_soil": NOMINAL_SOIL, "seed": args.seed, "repeats": args.repeats, "quick": args.quick,
-        "planner_options": _clean({k: v for k, v in dataclasses.asdict(PlannerOptions()).items() if k != "surface"}),
+        "planner_options": to_jsonable({k: v for k, v in dataclasses.asdict(PlannerOptions()).items()
+                                        if k != "surface"}),
         "blas_threads_env": {k: os.environ.get(k) for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
                                                               "MKL_NUM_THREADS")},
         "nlp_build_seconds": {"full_cycle": build_full, "mpc": build_mpc},
@@ -432,7 +420,7 @@ def main(argv: list[str] | None = None) -> int:
     })
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "results.json").write_text(json.dumps(_clean(results), indent=2))
+    (out / "results.json").write_text(json.dumps(to_jsonable(results), indent=2))
     print_table(results)
     if not args.no_plots:
         plot(results, out)

@@ -15,16 +15,14 @@ script's folder first on ``sys.path``; the tests add it). By role:
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from wheelloader.estimator import PRESET_NAMES, SoilParams, as_soil
+from wheelloader.estimator import PRESET_NAMES, as_soil
+from wheelloader.estimator.jsonable import to_jsonable
 from wheelloader.provenance import machine_info
 
-__all__ = ["DEFAULT_PLANT_SOIL", "ENV_ID", "SETUPS", "int_list", "jsonable", "machine_info", "set_torch_threads",
+__all__ = ["DEFAULT_PLANT_SOIL", "ENV_ID", "SETUPS", "int_list", "machine_info", "set_torch_threads",
            "str_list", "weights", "write_json"]
 
 #: The env trained and evaluated on (one digging cycle, 600 steps at 60 Hz).
@@ -45,29 +43,10 @@ def set_torch_threads(threads: int) -> int:
     return torch.get_num_threads()
 
 
-def jsonable(value: Any) -> Any:
-    """Convert NumPy scalars/arrays, SoilParams and non-finite floats (-> None) for ``json.dump``."""
-    if isinstance(value, dict):
-        return {str(k): jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [jsonable(v) for v in value]
-    if isinstance(value, SoilParams):
-        return value.to_dict()
-    if isinstance(value, np.ndarray):
-        return jsonable(value.tolist())
-    if isinstance(value, Path):
-        return str(value)
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
 def write_json(path: Path, data: Any) -> None:
     """Write ``data`` as indented JSON (creates the folder)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(jsonable(data), indent=2) + "\n")
+    path.write_text(json.dumps(to_jsonable(data), indent=2, allow_nan=False) + "\n")
 
 
 # ------------------------------------------------------------------ argparse types
