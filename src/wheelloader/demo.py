@@ -98,9 +98,10 @@ def write_figures(out: Path, results: dict[str, Any]) -> list[str]:
         plotting.plot_forces(log.path.t, {"measured F_R": log.resultant, "predicted F_R": pred.forces.resultant},
                             ax=ax, styles={"measured F_R": "-", "predicted F_R": "--"})
         ax.set_title(f"cycle {k + 1}: RMSE {rec.prediction_rmse_percent:.1f} %", fontsize=9)
-    plotting.finish_figure(fig, out / "forces.png")
+    plotting.finish_figure(fig, out / "forces.png",
+                           title="strategy 'ours': measured F_R and the F_R predicted before each cycle")
 
-    fig, ax = plotting.new_figure(1, 1, (8, 4))
+    fig, ax = plotting.new_figure(1, 1, (9.5, 4))
     paths = [log.path.shifted(name=f"cycle {k + 1}") for k, log in enumerate(logs)]
     plotting.plot_pile_and_paths(logs[0].pile, paths, ax=ax,
                                 carved=[log.pile_after for log in logs], x_range=(-0.5, 3.5))
@@ -113,8 +114,9 @@ def write_figures(out: Path, results: dict[str, Any]) -> list[str]:
         axes[0].plot(c, [r.prediction_rmse_percent for r in recs], "o-", label=name)
         axes[1].plot(c, [100 * r.fill_fraction for r in recs], "o-", label=name)
         axes[2].plot(c, [r.energy_per_m3 / 1e3 for r in recs], "o-", label=name)
-        axes[3].plot(c, [r.between_cycles_s for r in recs], "o-", label=name)
-    for ax, label in zip(axes, ("prediction F_R RMSE [%]", "bucket fill [%]", "energy per m^3 [kJ/m^3]",
+        if name != "fixed":  # the fixed strategy neither calibrates nor plans
+            axes[3].plot(c, [r.between_cycles_s for r in recs], "o-", label=name)
+    for ax, label in zip(axes, ("prediction F_R RMSE [%]", "bucket fill [%]", "energy per m³ [kJ/m³]",
                                 "calibration + planning [s]"), strict=True):
         ax.set_xlabel("cycle")
         ax.set_ylabel(label)

@@ -32,27 +32,37 @@ def _pyplot() -> Any:
 
 def plot_pile_and_paths(pile: Pile, paths: Sequence[BucketPath], ax: Any = None, carved: Sequence[Pile] = (),
                         x_range: tuple[float, float] | None = None) -> Any:
-    """Pile surface (and carved surfaces) with tip paths, in metres, equal aspect."""
+    """Pile surface, the soil each cycle removed and each cycle's tip path, in metres, equal aspect.
+
+    ``carved[k]`` is the surface after path ``k``: the soil between it and the surface before is filled
+    in path ``k``'s colour, so a path and what it removed read as one; the legend sits outside the axes.
+    """
     plt = _pyplot()
     if ax is None:
-        _, ax = plt.subplots(figsize=(6, 4))
+        _, ax = plt.subplots(figsize=(7, 4))
     lo, hi = x_range or (pile.x0, min(pile.x_end, max(float(np.max(p.x)) for p in paths) + 0.5) if paths else
                          pile.x_end)
-    xs = np.linspace(lo, hi, 600)
-    ax.fill_between(xs, pile.surface_height(xs), -0.05, color="#c8a165", alpha=0.5, lw=0)
-    ax.plot(xs, pile.surface_height(xs), color="#7a5c2e", lw=1.5, label="pile surface")
+    xs = np.linspace(lo, hi, 800)
+    ground = min(0.0, float(pile.heights.min())) - 0.05
+    final = carved[-1].surface_height(xs) if carved else pile.surface_height(xs)
+    ax.fill_between(xs, final, ground, color="#d9c4a0", lw=0, label="soil left")
+    ax.plot(xs, pile.surface_height(xs), color="#5c4424", lw=1.2, ls="--", label="surface before cycle 1")
     top = pile.surface_height(xs)
     for k, surface in enumerate(carved):
         below = surface.surface_height(xs)
-        ax.fill_between(xs, below, top, where=below < top - 1e-9, color=f"C{k + 3}", alpha=0.35, lw=0,
-                        label=f"soil removed (cycle {k + 1})")
+        ax.fill_between(xs, below, top, where=below < top - 1e-9, color=f"C{k % 10}", alpha=0.28, lw=0)
         top = below
-    for path in paths:
-        ax.plot(path.x, path.z, lw=1.8, label=path.name)
+    for k, path in enumerate(paths):
+        label = path.name + (" (path, soil removed)" if k < len(carved) else "")
+        ax.plot(path.x, path.z, color=f"C{k % 10}", lw=2.0 if k == len(paths) - 1 else 1.4, label=label)
+    ax.plot(xs, final, color="#5c4424", lw=1.2, label="surface after" if carved else None)
+    z_top = max([float(np.max(pile.surface_height(xs)))] + [float(np.max(p.z)) for p in paths])
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(ground - 0.05, z_top + 0.15)
     ax.set_xlabel("x [m]")
     ax.set_ylabel("z [m]")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.legend(fontsize=7, loc="upper left")
+    ax.set_aspect("equal", adjustable="box")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     return ax
 
 
