@@ -344,12 +344,9 @@ class BucketLoadingVectorEnv(VectorEnv):
         reward = np.zeros(n)
         terminated = np.zeros(n, dtype=bool)
         truncated = np.zeros(n, dtype=bool)
-        values = {k: np.zeros(n) for k in STEP_INFO_KEYS}
-        for key in ("flags", "cycle"):
-            values[key] = np.zeros(n, dtype=int)
-        for key in ("stalled", "cycle_done"):
-            values[key] = np.zeros(n, dtype=bool)
-        if done.any():
+        info: dict[str, Any] = {}
+        any_done = bool(done.any())
+        if any_done:
             request = parse_reset_options(None, self.cfg)
             for i in np.nonzero(done)[0]:
                 self._reset_env(int(i), request)
@@ -358,25 +355,26 @@ class BucketLoadingVectorEnv(VectorEnv):
             rows = np.arange(n)
         if rows.size:
             out, term = self._step_rows(rows, acts[rows])
-            for key, val in out.items():
-                values[key][rows] = val
+            stepped = ~done
+            for key in STEP_INFO_KEYS:
+                value = out[key]
+                if any_done:  # scatter into full-size arrays (zeros where a sub-env was reset instead)
+                    full = np.zeros(n, dtype=value.dtype)
+                    full[rows] = value
+                    value = full
+                info[key] = value
+                info["_" + key] = stepped.copy()
             reward[rows] = out["reward_fill"] + out["reward_energy"] + out["reward_validity"] + \
                 out["reward_stall"] + out["reward_force"]
             self._steps[rows] += 1
             terminated[rows] = term
             truncated[rows] = self._steps[rows] >= self.max_episode_steps
         self._prev_done = terminated | truncated
-        stepped = ~done
-        info: dict[str, Any] = {}
-        if rows.size:
-            for key in STEP_INFO_KEYS:
-                info[key] = values[key]
-                info["_" + key] = stepped.copy()
-        if done.any():
+        if any_done:
             reset = self._reset_info(done)
             info["soil"], info["_soil"] = reset["soil"], reset["_soil"]
+            info["cycle"] = info.get("cycle", reset["cycle"])
             info["_cycle"] = np.ones(n, dtype=bool)
-            info["cycle"] = values["cycle"]
         return self._observation(), reward, terminated, truncated, info
 
     def _step_rows(self, r: np.ndarray, a: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
@@ -453,10 +451,12 @@ class BucketLoadingVectorEnv(VectorEnv):
         done = cycle_done(touched, entered, zn, zn - h_surf, self._crest[g], cfg.exit_clearance)
         terminated = done | (self._stall[g] >= cfg.stall_patience)
         out = dict(zip(REWARD_TERMS, terms, strict=True))
-        out.update(fill_volume=fill, fill_fraction=fill / cap, spilled=self._spilled[g], force_tangential=f_t,
-                   force_normal=f_n, measured_tangential=self._mt[g], measured_normal=self._mn[g],
-                   energy_soil=self._e_soil[g], energy_payload=self._e_pay[g], depth=depth, flags=flags,
-                   stalled=stalled, cycle_done=done)
+        # fresh arrays only (the env's state arrays change at the next step)
+        out.update(fill_volume=fill, fill_fraction=fill / cap, spilled=self._spilled[g].copy(), force_tangential=f_t,
+                   force_normal=f_n, measured_tangential=self._mt[g].copy(), measured_normal=self._mn[g].copy(),
+                   energy_soil=self._e_soil[g].copy(), energy_payload=self._e_pay[g].copy(), depth=depth,
+                   flags=np.asarray(flags, dtype=int), stalled=stalled, cycle_done=done,
+                   cycle=np.zeros(r.size, dtype=int))
         return out, terminated
 
     def _carve(self, r: np.ndarray, xa, za, xb, zb):
