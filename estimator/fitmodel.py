@@ -31,10 +31,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import CalibrationError
+from .failure_angle import BETA_AT_RHO_LIMIT, BETA_AT_SLOPE_LIMIT, BETA_INTERIOR, optimal_beta
 from .force_model import DEFAULT_OPTIONS, GRAVITY, ModelOptions
 from .kinematics import ContactState
 from .machine import Bucket
 from .soil import PAPER_BOUNDS, SoilParams
+from .validity import clamp_details
 
 #: Names of the seven identifiable fit parameters (K = k_c / b + k_phi).
 FIT_NAMES: tuple[str, ...] = ("gamma", "cohesion", "adhesion", "phi", "delta", "K", "n")
@@ -97,64 +99,6 @@ def fit_to_soil(p: np.ndarray, edge_thickness: float, bounds: dict[str, tuple[fl
                       delta=float(p[4]), k_c=kc, k_phi=kp, n=float(p[6]))
 
 
-# ------------------------------------------------------------------- beta*
-def _clamped_angles(alpha, rho, phi, delta, options: ModelOptions):
-    """Clamp like :func:`force_model.clamp_angles`, broadcasting phi/delta; also d rho_eff / d(phi or delta)."""
-    rho_hi = math.pi - options.eps1 - options.eps2 - delta - phi
-    alpha_eff = np.clip(alpha, -options.alpha_max, options.alpha_max)
-    high = rho > rho_hi
-    rho_eff = np.where(rho < options.rho_min, options.rho_min, np.where(high, rho_hi, rho))
-    return alpha_eff, rho_eff, high
-
-
-def batched_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS, tol: float = 1e-12,
-                 max_iter: int = 60):
-    """beta* for broadcast arrays (same algorithm as :func:`force_model.optimal_beta`).
-
-    Returns ``(beta, where)`` with ``where`` = 0 interior root, 1 at the lower
-    bound eps1, 2 at the upper bound ``pi - (rho+delta+phi) - eps2``, 3 at
-    ``pi/2 - alpha``. ``alpha``, ``rho`` must be clamped.
-    """
-    alpha, rho, phi, delta = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (alpha, rho, phi, delta)))
-    s = rho + delta + phi
-    hi_a = math.pi - s - options.eps2
-    hi_b = 0.5 * math.pi - alpha
-    hi = np.minimum(hi_a, hi_b)
-    lo = np.full_like(hi, options.eps1)
-
-    def slope(b):
-        t1 = np.tan(alpha + b)
-        c2 = 1.0 / np.tan(alpha + b + phi)
-        c3 = 1.0 / np.tan(b)
-        c4 = 1.0 / np.tan(b + s)
-        return -t1 + c2 - c3 - c4, -t1 * t1 - c2 * c2 + c3 * c3 + c4 * c4
-
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        g_lo, _ = slope(lo)
-        g_hi, _ = slope(hi)
-        at_lo = g_lo >= 0.0
-        at_hi = (g_hi <= 0.0) & ~at_lo
-        inner = ~(at_lo | at_hi)
-        a, b = lo.copy(), hi.copy()
-        x = 0.5 * (a + b)
-        active = inner.copy()
-        for _ in range(max_iter):
-            g, dg = slope(x)
-            pos = g > 0.0
-            b = np.where(pos, x, b)
-            a = np.where(pos, a, x)
-            newton = x - g / dg
-            ok = (dg > 0.0) & (newton > a) & (newton < b)
-            x_new = np.where(ok, newton, 0.5 * (a + b))
-            step = np.where(active, np.abs(x_new - x), 0.0)
-            x = x_new
-            if not np.any(step >= tol):
-                break
-    beta = np.where(at_lo, lo, np.where(at_hi, hi, x))
-    where = np.where(at_lo, 1, np.where(at_hi, np.where(hi_a <= hi_b, 2, 3), 0))
-    return beta, where
-
-
 # ----------------------------------------------------------------- factors
 @dataclass(frozen=True, eq=False)
 class Factors:
@@ -179,11 +123,10 @@ def factors(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS, der
     The envelope theorem makes ``dN_gamma/dbeta = 0`` at interior roots, but
     N_c, N_a, N_q do depend on beta, so their beta terms are kept.
     """
-    alpha = np.asarray(alpha, dtype=float)
-    rho = np.asarray(rho, dtype=float)
-    alpha_e, rho_e, rho_high = _clamped_angles(alpha, rho, phi, delta, options)
-    flags_rho = (rho < options.rho_min) | rho_high
-    beta, where = batched_beta(alpha_e, rho_e, phi, delta, options)
+    clamps = clamp_details(alpha, rho, phi, delta, options)
+    alpha_e, rho_e, rho_high = clamps.alpha, clamps.rho, clamps.rho_high
+    flags_rho = clamps.rho_low | rho_high
+    beta, where = optimal_beta(alpha_e, rho_e, phi, delta, options, return_where=True)
     u = rho_e + delta + beta + phi
     S = np.sin(u)
     CU = np.cos(u)
@@ -225,6 +168,11 @@ def factors(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS, der
     dnq_dp = dnq_db
     dnq_dd = -nq * cot_u
     dnq_dr = dnq_dd
+    # partial derivatives in the slope alpha (N_c and N_a do not depend on it)
+    dng_da = np.where(ng_pos, (-np.sin(alpha_e + beta) * A2 + A1 * A2c) / D + ng_raw * np.tan(alpha_e), 0.0)
+    dnq_da = A2c / S
+    # d alpha_eff / d phi = -1 where the slope is clamped at -phi (validity.alpha_lower_limit)
+    dalpha = np.where(clamps.alpha_at_phi, -1.0, 0.0)
     # d rho_eff / d phi = d rho_eff / d delta = -1 where clamped at the upper limit
     drho = np.where(rho_high, -1.0, 0.0)
     # d beta* / d phi and / d delta
@@ -240,20 +188,23 @@ def factors(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS, der
         dg_dp = -csc2_p + csc2_s
         dg_dd = csc2_s
         dg_dr = csc2_s
-        db_dp_in = -(dg_dp + dg_dr * drho) / dg_db
+        dg_da = -1.0 - t1 * t1 - csc2_p
+        db_dp_in = -(dg_dp + dg_dr * drho + dg_da * dalpha) / dg_db
         db_dd_in = -(dg_dd + dg_dr * drho) / dg_db
     # where the implicit-function derivative is not finite (a pole of d ln N_gamma / d beta), hold beta*
     # fixed: N_gamma is stationary in beta there (envelope theorem), so only N_c, N_a, N_q lose a term
     db_dp_in = np.where(np.isfinite(db_dp_in), db_dp_in, 0.0)
     db_dd_in = np.where(np.isfinite(db_dd_in), db_dd_in, 0.0)
-    db_dp = np.select([where == 0, where == 2], [db_dp_in, -(1.0 + drho)], 0.0)
-    db_dd = np.select([where == 0, where == 2], [db_dd_in, -(1.0 + drho)], 0.0)
+    # on a bound beta* moves with it: pi - s - eps2 (s = rho_eff + delta + phi) or pi/2 - alpha_eff
+    interior, rho_limit, slope_limit = where == BETA_INTERIOR, where == BETA_AT_RHO_LIMIT, where == BETA_AT_SLOPE_LIMIT
+    db_dp = np.select([interior, rho_limit, slope_limit], [db_dp_in, -(1.0 + drho), -dalpha], 0.0)
+    db_dd = np.select([interior, rho_limit], [db_dd_in, -(1.0 + drho)], 0.0)
 
-    def total(dd_b, dd_x, dd_r, db_dx):
-        return dd_x + dd_b * db_dx + dd_r * drho
+    def total(dd_b, dd_x, dd_r, db_dx, dd_a=0.0, da_dx=0.0):
+        return dd_x + dd_b * db_dx + dd_r * drho + dd_a * da_dx
 
-    d_phi = (total(dng_db, dng_dp, dng_dr, db_dp), total(dnc_db, dnc_dp, dnc_dr, db_dp),
-             total(dna_db, dna_dp, dna_dr, db_dp), total(dnq_db, dnq_dp, dnq_dr, db_dp))
+    d_phi = (total(dng_db, dng_dp, dng_dr, db_dp, dng_da, dalpha), total(dnc_db, dnc_dp, dnc_dr, db_dp),
+             total(dna_db, dna_dp, dna_dr, db_dp), total(dnq_db, dnq_dp, dnq_dr, db_dp, dnq_da, dalpha))
     d_delta = (total(dng_db, dng_dd, dng_dr, db_dd), total(dnc_db, dnc_dd, dnc_dr, db_dd),
                total(dna_db, dna_dd, dna_dr, db_dd), total(dnq_db, dnq_dd, dnq_dr, db_dd))
     return Factors(ng, nc, na, nq, flags_rho, d_phi, d_delta)

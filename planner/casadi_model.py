@@ -13,7 +13,8 @@ that IPOPT can differentiate them twice:
   closely; the gap in the forces is measured by ``tests/test_planner.py`` and
   ``benchmarks/planner.py``.
 * The clamps of the validity domain become smooth: the blade angle rho is
-  clipped into ``[rho_min, rho_hi]`` with a smooth clamp before the factors
+  clipped into ``[rho_min, rho_hi]`` and the slope alpha into
+  ``[-min(phi - slope_margin, alpha_max), alpha_max]`` with smooth clamps before the factors
   are evaluated, depth is a smooth positive part, and ``F >= 0`` and
   ``L_t <= floor length`` are smooth max/min, and a tanh gate over the first
   millimetre of depth switches every term off above the surface. Inside the validity domain
@@ -29,7 +30,8 @@ import casadi as ca
 import numpy as np
 
 from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, ModelOptions, SoilParams
-from wheelloader.estimator.force_model import log_ngamma_slope
+from wheelloader.estimator.failure_angle import beta_bounds, unrolled_beta
+from wheelloader.estimator.validity import alpha_lower_limit
 
 #: Guarded Newton steps from the middle of the valid branch.
 NEWTON_STEPS = 8
@@ -60,6 +62,12 @@ def smooth_pos(v, eps):
 def smooth_max(a, b, eps):
     """Smooth ``max(a, b)``."""
     return b + smooth_pos(a - b, eps)
+
+
+def local_max(a, b, eps):
+    """C1 ``max(a, b)`` that equals it exactly where ``|a - b| >= eps`` (a quadratic blend in between)."""
+    d = a - b
+    return ca.if_else(d >= eps, a, ca.if_else(d <= -eps, b, b + (d + eps) ** 2 / (4.0 * eps)))
 
 
 def smooth_min(a, b, eps):
@@ -93,17 +101,17 @@ def casadi_forces(soil, vertical_depth, rho, alpha, load_weight, bucket: Bucket,
     """
     gamma, cohesion, adhesion, phi, delta, modulus, n = (soil[i] for i in range(7))
     w, b = bucket.width, bucket.edge_thickness
-    alpha_c = smooth_min(smooth_max(alpha, -options.alpha_max, SMOOTH_ANGLE), options.alpha_max, SMOOTH_ANGLE)
+    # the down-slope limit follows phi; its clamp is exact (C1) beyond SMOOTH_ANGLE so slopes far from it are untouched
+    alpha_lo = alpha_lower_limit(phi, options, minimum=lambda a, b: smooth_min(a, b, SMOOTH_ANGLE))
+    alpha_c = smooth_min(local_max(alpha, alpha_lo, SMOOTH_ANGLE), options.alpha_max, SMOOTH_ANGLE)
     rho_hi = math.pi - options.eps1 - options.eps2 - delta - phi
     rho_c = smooth_min(smooth_max(rho, options.rho_min, SMOOTH_ANGLE), rho_hi, SMOOTH_ANGLE)
     depth = smooth_pos(vertical_depth, SMOOTH_DEPTH) * ca.cos(alpha)
     s = rho_c + delta + phi
-    lo = options.eps1
-    hi = smooth_min(math.pi - s - options.eps2, 0.5 * math.pi - alpha_c, SMOOTH_ANGLE)
-    beta = 0.5 * (lo + hi)
-    for _ in range(NEWTON_STEPS):
-        g, dg = log_ngamma_slope(beta, alpha_c, phi, s, tan=ca.tan)
-        beta = smooth_min(smooth_max(beta - g / smooth_max(dg, 1.0, 0.1), lo, SMOOTH_ANGLE), hi, SMOOTH_ANGLE)
+    lo, hi = beta_bounds(alpha_c, rho_c, phi, delta, options, minimum=lambda a, b: smooth_min(a, b, SMOOTH_ANGLE))
+    beta = unrolled_beta(alpha_c, phi, s, lo, hi, NEWTON_STEPS, tan=ca.tan,
+                         clip=lambda v, a, b: smooth_min(smooth_max(v, a, SMOOTH_ANGLE), b, SMOOTH_ANGLE),
+                         positive=lambda dg: smooth_max(dg, 1.0, 0.1))
     s_beta = ca.sin(s + beta)
     sin_beta = ca.sin(beta)
     sab = ca.sin(alpha_c + beta + phi)

@@ -1,0 +1,188 @@
+"""The failure angle beta* of the FEE (eq 14): one solver, used by every backend.
+
+beta* minimises N_gamma (eq 10) on the valid branch
+
+    eps1 <= beta <= min(pi - (rho + delta + phi) - eps2, pi/2 - alpha)
+
+for angles clamped into the validity domain (:func:`~wheelloader.estimator.validity.clamp_angles`,
+which keeps ``alpha >= slope_margin - phi``). On that branch ``sin(alpha + beta + phi) > 0``, so N_gamma, N_c and
+N_q are non-negative and finite, and N_gamma is unimodal (checked on a grid of 1 000 angles for 10^5
+random configurations over the whole parameter box, ``tests/test_force_model.py`` checks it by
+hypothesis): beta* is the unique root of ``d ln N_gamma / d beta`` (:func:`log_ngamma_slope`) or a
+bound, and it moves continuously with the angles. At ``beta = pi/2 - alpha`` N_gamma = 0.
+
+Three front ends share the branch and the slope:
+
+* :func:`optimal_beta`: NumPy arrays, safeguarded Newton inside a bisection bracket (forces, fits);
+* :func:`optimal_beta_scalar`: one sample in pure ``math`` (environment steps);
+* :func:`unrolled_beta`: a fixed number of guarded Newton steps for symbolic backends (the
+  planner's CasADi model passes ``casadi.tan`` and smooth clamps).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .validity import DEFAULT_OPTIONS, ModelOptions
+
+#: ``where`` code of :func:`optimal_beta`: beta* is an interior root of d ln N_gamma / d beta.
+BETA_INTERIOR = 0
+#: ``where`` code: beta* is on the lower bound eps1.
+BETA_AT_EPS1 = 1
+#: ``where`` code: beta* is on the upper bound ``pi - (rho + delta + phi) - eps2``.
+BETA_AT_RHO_LIMIT = 2
+#: ``where`` code: beta* is on the upper bound ``pi/2 - alpha`` (N_gamma = 0 there).
+BETA_AT_SLOPE_LIMIT = 3
+
+
+def beta_bounds(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS, minimum=np.minimum):
+    """Valid branch ``(lo, hi)`` of beta for clamped angles (module docstring).
+
+    ``minimum`` is the array library's element-wise minimum (the CasADi model passes a smooth one);
+    with NumPy both bounds are arrays of the broadcast shape.
+    """
+    hi = minimum(math.pi - (rho + delta + phi) - options.eps2, 0.5 * math.pi - alpha)
+    lo = np.full_like(hi, options.eps1) if isinstance(hi, np.ndarray) else options.eps1
+    return lo, hi
+
+
+def log_ngamma_slope(beta, alpha, phi, s, tan=np.tan):
+    """``g = d ln N_gamma / d beta`` and ``dg / d beta`` (eq 10), with ``s = rho + delta + phi``.
+
+    ``tan`` is the tangent of the array library (NumPy by default; ``math.tan`` for scalars,
+    ``casadi.tan`` for the planner's symbolic Newton steps).
+    """
+    t1 = tan(alpha + beta)
+    c2 = 1.0 / tan(alpha + beta + phi)
+    c3 = 1.0 / tan(beta)
+    c4 = 1.0 / tan(beta + s)
+    g = -t1 + c2 - c3 - c4
+    dg = -t1 * t1 - c2 * c2 + c3 * c3 + c4 * c4
+    return g, dg
+
+
+def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS,
+                 tol: float = 1e-11, max_iter: int = 60, guess=None, return_where: bool = False):
+    """Failure angle beta* minimising N_gamma (eq 10) under eq 14, on the valid branch.
+
+    Parameters
+    ----------
+    alpha, rho : array_like
+        Slope and blade angle [rad], already clamped (:func:`~wheelloader.estimator.validity.clamp_angles`).
+    phi, delta : float or array_like
+        Friction angles [rad]; scalars or one per sample (a batch of environments). All inputs broadcast.
+    options : ModelOptions
+        Margins eps1, eps2.
+    tol : float
+        Step size [rad] below which the Newton iteration stops.
+    max_iter : int
+        Largest number of iterations.
+    guess : array_like, optional
+        Warm start (e.g. the previous step's beta*), used where it lies inside the bracket.
+    return_where : bool
+        Also return where beta* lies (``BETA_*`` codes).
+
+    Returns
+    -------
+    numpy.ndarray or tuple
+        beta* [rad]; with ``return_where`` also the ``BETA_*`` code per sample.
+    """
+    alpha, rho, phi, delta = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (alpha, rho, phi, delta)))
+    s = rho + delta + phi
+    lo, hi = beta_bounds(alpha, rho, phi, delta, options)
+    g_lo, _ = log_ngamma_slope(lo, alpha, phi, s)
+    g_hi, _ = log_ngamma_slope(hi, alpha, phi, s)
+    at_lo = g_lo >= 0.0
+    at_hi = (g_hi <= 0.0) & ~at_lo
+    inner = ~(at_lo | at_hi)
+    beta = np.array(np.where(at_lo, lo, hi), dtype=float)
+    if np.any(inner):
+        a, b, al, ph, ss = lo[inner], hi[inner], alpha[inner], phi[inner], s[inner]
+        x = 0.5 * (a + b)
+        if guess is not None:
+            g0 = np.broadcast_to(np.asarray(guess, dtype=float), alpha.shape)[inner]
+            x = np.where((g0 > a) & (g0 < b), g0, x)
+        # iterate only on the samples that have not converged yet (a batch is as slow as its slowest sample)
+        out = np.empty_like(x)
+        active = np.arange(x.size)
+        for _ in range(max_iter):
+            g, dg = log_ngamma_slope(x, al, ph, ss)
+            pos = g > 0.0
+            b = np.where(pos, x, b)
+            a = np.where(pos, a, x)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                newton = x - g / dg
+            ok = (dg > 0.0) & (newton > a) & (newton < b)
+            x_new = np.where(ok, newton, 0.5 * (a + b))
+            going = np.abs(x_new - x) >= tol
+            out[active] = x_new
+            if not going.any():
+                break
+            if not going.all():
+                active, x_new, a, b, al, ph, ss = (v[going] for v in (active, x_new, a, b, al, ph, ss))
+            x = x_new
+        beta[inner] = out
+    if not return_where:
+        return beta
+    at_rho_limit = (math.pi - s - options.eps2) <= (0.5 * math.pi - alpha)
+    where = np.where(at_lo, BETA_AT_EPS1,
+                     np.where(at_hi, np.where(at_rho_limit, BETA_AT_RHO_LIMIT, BETA_AT_SLOPE_LIMIT), BETA_INTERIOR))
+    return beta, where
+
+
+def optimal_beta_scalar(alpha: float, rho: float, phi: float, delta: float,
+                        options: ModelOptions = DEFAULT_OPTIONS, guess: float | None = None) -> float:
+    """Scalar fast path of :func:`optimal_beta` (pure ``math``), optionally warm-started."""
+    s = rho + delta + phi
+    lo = options.eps1
+    hi = min(math.pi - s - options.eps2, 0.5 * math.pi - alpha)
+    tan = math.tan
+    g, _ = log_ngamma_slope(lo, alpha, phi, s, tan)
+    if g >= 0.0:
+        return lo
+    g, _ = log_ngamma_slope(hi, alpha, phi, s, tan)
+    if g <= 0.0:
+        return hi
+    a, b = lo, hi
+    x = guess if guess is not None and lo < guess < hi else 0.5 * (lo + hi)
+    for _ in range(60):
+        g, dg = log_ngamma_slope(x, alpha, phi, s, tan)
+        if g > 0.0:
+            b = x
+        else:
+            a = x
+        xn = x - g / dg if dg > 0.0 else a - 1.0
+        if not a < xn < b:
+            xn = 0.5 * (a + b)
+        if abs(xn - x) < 1e-11:
+            return xn
+        x = xn
+    return x
+
+
+def unrolled_beta(alpha, phi, s, lo, hi, steps: int, *, tan, clip, positive):
+    """beta* by ``steps`` guarded Newton steps from the middle of the branch, for symbolic backends.
+
+    Parameters
+    ----------
+    alpha, phi, s : expression
+        Clamped slope, friction angle and ``s = rho + delta + phi`` [rad].
+    lo, hi : expression
+        Branch bounds (:func:`beta_bounds`).
+    steps : int
+        Number of unrolled Newton steps.
+    tan : callable
+        Tangent of the backend.
+    clip : callable
+        ``clip(value, lo, hi)``: (smooth) clamp into the branch after each step; a step that runs past
+        a bound is returned there, as the bracketed NumPy solver does.
+    positive : callable
+        (Smooth) floor of the curvature ``dg`` that keeps each step a descent step.
+    """
+    beta = 0.5 * (lo + hi)
+    for _ in range(steps):
+        g, dg = log_ngamma_slope(beta, alpha, phi, s, tan=tan)
+        beta = clip(beta - g / positive(dg), lo, hi)
+    return beta

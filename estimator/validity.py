@@ -1,0 +1,154 @@
+"""Validity domain of the modified FEE: numerical options, flags and the angle clamps.
+
+The FEE's soil wedge exists only for some geometries (paper Section II-A and
+eq 14). Outside them the force model clamps the angles into the domain and
+flags the sample (README, "Validity domain"):
+
+* ``rho`` is clamped to ``[rho_min, pi - eps1 - eps2 - delta - phi]``: below
+  ``rho_min`` (10 deg, paper Section II-A) the blade is nearly parallel to
+  the surface and the wedge vanishes; above the upper limit the feasible
+  range of beta in eq 14 is empty (:data:`FLAG_RHO_LOW`, :data:`FLAG_RHO_HIGH`).
+* ``alpha`` is clamped to ``[-min(phi - slope_margin, alpha_max), alpha_max]``
+  (:data:`FLAG_ALPHA_CLAMPED`). The upper limit (60 deg) is a modelling
+  choice. The lower limit follows the friction angle, because beta* (eq 14)
+  is not defined on steeper down-slopes:
+
+  - for ``alpha < -phi`` the factor ``sin(alpha + beta + phi)`` of N_gamma
+    and N_q (eqs 10, 13) is negative for every ``beta < -alpha - phi`` (the
+    wedge's weight would pull the blade), N_gamma has two zeros and is not
+    unimodal on what is left of the branch, and its minimiser jumps between
+    them: the forces jumped by up to 0.8 MN there;
+  - at ``alpha = -phi`` and ``rho + delta + phi = pi/2 - phi`` N_gamma does not
+    depend on beta at all, and near that point beta* sweeps the whole branch
+    within a fraction of a degree (a jump in practice). ``slope_margin`` (5 deg,
+    like the margins eps1, eps2 of eq 14) keeps the domain that far away.
+
+  A soil surface steeper than its friction angle does not stand (angle of
+  repose). For soils with ``phi < slope_margin`` the limit is an up-slope: flat
+  ground counts as a slope of ``slope_margin - phi`` and is flagged.
+
+Every clamp is continuous, so forces stay continuous along smooth paths.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from .errors import ParameterError
+
+#: Flag bit: the tip is out of soil (depth <= 0), every force is zero.
+FLAG_OUT_OF_SOIL = 1
+#: Flag bit: rho below rho_min, clamped.
+FLAG_RHO_LOW = 2
+#: Flag bit: rho + delta + phi above pi - eps1 - eps2, clamped (no valid beta).
+FLAG_RHO_HIGH = 4
+#: Flag bit: alpha outside ``[-min(phi - slope_margin, alpha_max), alpha_max]``, clamped.
+FLAG_ALPHA_CLAMPED = 8
+#: Flag bit: eq 1 negative (adhesion would pull the blade), clamped to 0.
+FLAG_TENSION = 16
+
+#: Human-readable names of the flag bits.
+FLAG_NAMES: dict[int, str] = {
+    FLAG_OUT_OF_SOIL: "tip out of soil",
+    FLAG_RHO_LOW: "rho below rho_min (blade too flat)",
+    FLAG_RHO_HIGH: "rho + delta + phi too close to pi (no valid beta)",
+    FLAG_ALPHA_CLAMPED: "slope angle clamped",
+    FLAG_TENSION: "FEE force clamped at 0 (adhesion would pull)",
+}
+
+
+@dataclass(frozen=True)
+class ModelOptions:
+    """Numerical options of the force model.
+
+    Parameters
+    ----------
+    eps1, eps2 : float
+        Margins of eq 14 [rad]; default 5 deg each (paper).
+    rho_min : float
+        Smallest blade angle relative to the surface [rad]; default 10 deg (paper).
+    alpha_max : float
+        Largest |slope angle| used [rad]; default 60 deg.
+    slope_margin : float
+        Down-slopes are limited to ``alpha >= -(phi - slope_margin)`` [rad]; default 5 deg
+        (module docstring).
+    contact_depth : float
+        Depth over which the surcharge ``W_load N_q`` ramps in [m]; default 0.02 m.
+    """
+
+    eps1: float = math.radians(5.0)
+    eps2: float = math.radians(5.0)
+    rho_min: float = math.radians(10.0)
+    alpha_max: float = math.radians(60.0)
+    contact_depth: float = 0.02
+    slope_margin: float = math.radians(5.0)
+
+    def __post_init__(self) -> None:
+        for name in ("eps1", "eps2", "rho_min", "alpha_max", "contact_depth", "slope_margin"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
+                raise ParameterError(f"ModelOptions.{name} must be a finite number > 0, got {value!r}")
+        if self.eps1 + self.eps2 + self.rho_min >= math.pi / 2 or self.alpha_max >= math.pi / 2 - self.eps1:
+            raise ParameterError("ModelOptions: eps1 + eps2 + rho_min must be < 90 deg and alpha_max < 90 deg - eps1")
+
+
+DEFAULT_OPTIONS = ModelOptions()
+
+
+class AngleClamps(NamedTuple):
+    """Clamped angles and where each clamp acted (boolean arrays, broadcast shape)."""
+
+    alpha: np.ndarray
+    rho: np.ndarray
+    rho_low: np.ndarray
+    rho_high: np.ndarray
+    alpha_high: np.ndarray
+    alpha_low: np.ndarray
+    alpha_at_phi: np.ndarray
+    """Where alpha was raised to ``slope_margin - phi`` (so d alpha_eff / d phi = -1 there)."""
+
+    @property
+    def flags(self) -> np.ndarray:
+        """Bitwise OR of the ``FLAG_*`` of the clamps that acted."""
+        flags = np.where(self.rho_low, FLAG_RHO_LOW, 0) | np.where(self.rho_high, FLAG_RHO_HIGH, 0)
+        flags |= np.where(self.alpha_high | self.alpha_low, FLAG_ALPHA_CLAMPED, 0)
+        return flags.astype(np.int64)
+
+
+def rho_upper_limit(phi, delta, options: ModelOptions = DEFAULT_OPTIONS):
+    """Largest blade angle of the domain, ``pi - eps1 - eps2 - delta - phi`` [rad]."""
+    return math.pi - options.eps1 - options.eps2 - delta - phi
+
+
+def alpha_lower_limit(phi, options: ModelOptions = DEFAULT_OPTIONS, minimum=np.minimum):
+    """Steepest down-slope of the domain, ``-min(phi - slope_margin, alpha_max)`` [rad] (module docstring).
+
+    ``minimum`` is the array library's element-wise minimum (the CasADi model passes a smooth one).
+    """
+    return -minimum(phi - options.slope_margin, options.alpha_max)
+
+
+def clamp_details(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS) -> AngleClamps:
+    """Clamp (alpha, rho) into the validity domain and say where each clamp acted (all inputs broadcast)."""
+    alpha = np.asarray(alpha, dtype=float)
+    rho = np.asarray(rho, dtype=float)
+    rho_hi = rho_upper_limit(phi, delta, options)
+    alpha_lo = alpha_lower_limit(phi, options)
+    rho_low = rho < options.rho_min
+    rho_high = ~rho_low & (rho > rho_hi)
+    alpha_high = alpha > options.alpha_max
+    alpha_low = alpha < alpha_lo
+    alpha_at_phi = alpha_low & (np.asarray(phi) - options.slope_margin < options.alpha_max)
+    rho_eff = np.where(rho_low, options.rho_min, np.where(rho_high, rho_hi, rho))
+    alpha_eff = np.where(alpha_high, options.alpha_max, np.where(alpha_low, alpha_lo, alpha))
+    return AngleClamps(alpha_eff, rho_eff, rho_low, rho_high, alpha_high, alpha_low, alpha_at_phi)
+
+
+def clamp_angles(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS):
+    """Clamp (alpha, rho) into the validity domain; return ``(alpha_eff, rho_eff, flags)``."""
+    c = clamp_details(alpha, rho, phi, delta, options)
+    return c.alpha, c.rho, c.flags
