@@ -211,9 +211,9 @@ class Calibration:
         }
 
     def save_json(self, path: str | Path) -> Path:
-        """Write :meth:`to_dict` as JSON to ``path``."""
+        """Write :meth:`to_dict` as strict JSON to ``path`` (NaN and infinities become ``null``)."""
         path = Path(path)
-        path.write_text(json.dumps(self.to_dict(), indent=1, default=_json_default))
+        path.write_text(json.dumps(jsonable(self.to_dict()), indent=1, allow_nan=False))
         return path
 
     def summary(self) -> str:
@@ -233,11 +233,20 @@ class Calibration:
         return "\n".join(lines)
 
 
-def _json_default(obj: Any) -> Any:
+def jsonable(obj: Any) -> Any:
+    """``obj`` with NumPy arrays and scalars as lists and numbers, and NaN/infinities as ``None`` (strict JSON)."""
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
     if isinstance(obj, np.ndarray):
-        return obj.tolist()
+        return jsonable(obj.tolist())
     if isinstance(obj, np.generic):
-        return obj.item()
+        return jsonable(obj.item())
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if obj is None or isinstance(obj, (str, int, float, bool)):
+        return obj
     raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
 
 
