@@ -2,10 +2,22 @@
 
 Everything the estimator, the environments and the planner share lives here:
 soil parameters, bucket and loader, pile geometry, bucket paths, contact
-kinematics, the force model and cycle logs.
+kinematics, the validity domain and failure angle, the force model and cycle
+logs. Calibration and prediction are the subpackage
+:mod:`wheelloader.estimator.calibration`, re-exported here.
 """
 
-from .calibration import METHODS, Calibration, FitQuality, StageResult, calibrate, load_params
+from .calibration import (
+    METHODS,
+    Calibration,
+    FitQuality,
+    Prediction,
+    StageResult,
+    Uncertainty,
+    calibrate,
+    load_params,
+    predict,
+)
 from .cyclelog import CycleLog, load_path_csv, save_path_csv
 from .errors import CalibrationError, CycleLogError, ParameterError, PlanningError, WheelloaderError
 from .force_model import (
@@ -23,10 +35,8 @@ from .kinematics import ContactState, contact_single, contact_state
 from .machine import Bucket, Loader
 from .paths import BucketPath, bezier_path, default_path, paper_paths, polyline_path
 from .pile import CarveResult, Pile, SurfaceCarver
-from .prediction import Prediction, predict
 from .soil import PAPER_BOUNDS, PARAMETER_NAMES, PRESET_NAMES, SoilParams, as_soil, preset
 from .synthetic import random_bezier_path, random_soil, synthetic_cycle
-from .uncertainty import Uncertainty
 
 __all__ = [
     "CycleLog", "load_path_csv", "save_path_csv",

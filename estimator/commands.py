@@ -136,9 +136,8 @@ def run_predict(args: argparse.Namespace) -> int:
     """Handler of ``wheelloader predict``."""
     import time
 
-    from wheelloader.estimator.calibration import load_params
+    from wheelloader.estimator.calibration import load_params, predict
     from wheelloader.estimator.cyclelog import CycleLog, load_path_csv
-    from wheelloader.estimator.prediction import predict
 
     _check_output(args.output, args.overwrite)
     _check_output(args.plot, args.overwrite)

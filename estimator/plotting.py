@@ -11,9 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from .calibration import Calibration
+from .calibration import Calibration, Prediction
 from .cyclelog import CycleLog
-from .prediction import Prediction
 
 
 def _pyplot():

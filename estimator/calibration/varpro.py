@@ -1,10 +1,10 @@
 """The default calibration: variable projection + global grid + analytic local refinement.
 
 For fixed nonlinear parameters ``(phi, delta, n)`` the forces are linear in
-``theta_lin = (gamma, C, C_a, K)`` (see :mod:`wheelloader.estimator.fitmodel`),
+``theta_lin = (gamma, C, C_a, K)`` (see :mod:`wheelloader.estimator.calibration.fitmodel`),
 so the eq-19 cost can be minimised exactly over ``theta_lin`` inside its
 bounds (a 4-variable box-constrained least-squares problem,
-:func:`wheelloader.estimator.boxqp.solve_box_qp`). What remains is a
+:func:`wheelloader.estimator.calibration.boxqp.solve_box_qp`). What remains is a
 3-parameter problem (the *projected* cost), which is searched globally on a
 coarse grid:
 
@@ -45,7 +45,7 @@ the negative log posterior (times ``2 nu``) of independent Gaussian priors
 
 * ``m``: the warm start ``initial`` when given, else the mid-range of the
   bounds (the paper's methods' initial guess,
-  :func:`~wheelloader.estimator.paper_methods.mid_range_guess`, in the fit
+  :func:`~wheelloader.estimator.calibration.paper_methods.mid_range_guess`, in the fit
   space);
 * ``s_i = (hi_i - lo_i) / sqrt(12)``: the standard deviation of a uniform
   distribution over the bounds (eq 19j), i.e. the prior says no more than
@@ -53,7 +53,7 @@ the negative log posterior (times ``2 nu``) of independent Gaussian priors
 * ``nu``: the noise variance per *independent* residual, estimated from the
   exact fit's residuals: ``nu = tau * sum r^2 / (M - p)``, with ``tau`` the
   integrated autocorrelation time of the residual series
-  (:func:`~wheelloader.estimator.uncertainty.noise_per_effective_sample`);
+  (:func:`~wheelloader.estimator.calibration.uncertainty.noise_per_effective_sample`);
   ``M / tau`` is the effective sample size, so correlated misfit is not
   mistaken for many independent measurements.
 

@@ -4,7 +4,7 @@ Both use ``scipy.optimize.minimize(method="L-BFGS-B")`` on the raw (unscaled)
 parameters with finite-difference gradients (scipy's default forward
 differences, absolute step 1e-8), ``options={"maxiter": 1000, "gtol": 1e-5}``
 and the paper's bounds (eq 19j). The force model is the same vectorised
-model as the default method's (:class:`~wheelloader.estimator.fitmodel.FitData`,
+model as the default method's (:class:`~wheelloader.estimator.calibration.fitmodel.FitData`,
 identical to :func:`~wheelloader.estimator.force_model.soil_forces`) and
 runs on the same in-soil samples, so speed comparisons are like for like.
 
@@ -34,8 +34,8 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 from scipy.optimize import minimize
 
+from ..soil import PARAMETER_NAMES, SoilParams
 from .fitmodel import FitData
-from .soil import PARAMETER_NAMES, SoilParams
 
 #: L-BFGS-B options of the paper's methods.
 PAPER_OPTIONS = {"maxiter": 1000, "gtol": 1e-5}

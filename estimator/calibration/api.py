@@ -3,14 +3,14 @@
 Methods
 -------
 ``"default"`` (alias ``"varpro"``)
-    Our method (:mod:`wheelloader.estimator.varpro`): variable projection on
+    Our method (:mod:`wheelloader.estimator.calibration.varpro`): variable projection on
     the model's linear structure, a global grid over ``(phi, delta, n)``,
     analytic-Jacobian bounded least squares, optional warm start; with
     ``regularize=True`` the MAP estimate under a weak prior (mid-range or
     warm start, bound range / sqrt(12); noise per effective sample from the
     residual autocorrelation) resolves directions the cycle leaves undetermined.
 ``"single-stage"``, ``"multi-stage"``
-    The paper's baselines (:mod:`wheelloader.estimator.paper_methods`),
+    The paper's baselines (:mod:`wheelloader.estimator.calibration.paper_methods`),
     L-BFGS-B with finite differences, as in Section III.
 
 Fit quality (same definition for every method)
@@ -34,13 +34,13 @@ from typing import Any
 
 import numpy as np
 
-from .cyclelog import CycleLog
-from .errors import CalibrationError, ParameterError
+from ..cyclelog import CycleLog
+from ..errors import CalibrationError, ParameterError
+from ..force_model import DEFAULT_OPTIONS, ModelOptions, soil_forces
+from ..kinematics import DEFAULT_SLOPE_WINDOW
+from ..soil import PARAMETER_NAMES, SoilParams, as_soil, validate_bounds
 from .fitmodel import FIT_NAMES, MIN_SAMPLES, FitData, fit_bounds, fit_to_soil, soil_to_fit
-from .force_model import DEFAULT_OPTIONS, ModelOptions, soil_forces
-from .kinematics import DEFAULT_SLOPE_WINDOW
 from .paper_methods import fit_multi_stage, fit_single_stage
-from .soil import PARAMETER_NAMES, SoilParams, as_soil, validate_bounds
 from .uncertainty import Uncertainty, analyse
 from .varpro import fit_default
 
@@ -177,7 +177,7 @@ class Calibration:
 
     @property
     def identifiability(self) -> dict[str, Any]:
-        """The identifiability report (see :mod:`wheelloader.estimator.uncertainty`)."""
+        """The identifiability report (see :mod:`wheelloader.estimator.calibration.uncertainty`)."""
         return self.uncertainty.to_dict()
 
     @property
@@ -346,7 +346,7 @@ def calibrate(
         estimate under a weak prior (mean ``initial`` or the mid-range of the
         bounds, standard deviation range / sqrt(12)) with the noise per
         independent sample estimated from the residuals' autocorrelation
-        (:mod:`wheelloader.estimator.varpro`, step 6).
+        (:mod:`wheelloader.estimator.calibration.varpro`, step 6).
 
     Returns
     -------

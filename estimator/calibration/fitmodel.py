@@ -30,13 +30,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import CalibrationError
-from .failure_angle import BETA_AT_RHO_LIMIT, BETA_AT_SLOPE_LIMIT, BETA_INTERIOR, optimal_beta
-from .force_model import DEFAULT_OPTIONS, GRAVITY, ModelOptions
-from .kinematics import ContactState
-from .machine import Bucket
-from .soil import PAPER_BOUNDS, SoilParams
-from .validity import clamp_details
+from ..errors import CalibrationError
+from ..failure_angle import BETA_AT_RHO_LIMIT, BETA_AT_SLOPE_LIMIT, BETA_INTERIOR, optimal_beta
+from ..force_model import DEFAULT_OPTIONS, GRAVITY, ModelOptions
+from ..kinematics import ContactState
+from ..machine import Bucket
+from ..soil import PAPER_BOUNDS, SoilParams
+from ..validity import clamp_details
 
 #: Names of the seven identifiable fit parameters (K = k_c / b + k_phi).
 FIT_NAMES: tuple[str, ...] = ("gamma", "cohesion", "adhesion", "phi", "delta", "K", "n")

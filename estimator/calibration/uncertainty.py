@@ -1,6 +1,6 @@
 """Covariance, standard errors and an identifiability report from the fit Jacobian.
 
-Works on the seven identifiable fit parameters :data:`~wheelloader.estimator.fitmodel.FIT_NAMES`
+Works on the seven identifiable fit parameters :data:`~wheelloader.estimator.calibration.fitmodel.FIT_NAMES`
 (``K = k_c / b + k_phi`` instead of k_c, k_phi, which forces cannot separate).
 
 * Covariance: ``s^2 (J^T J)^-1`` over the parameters not held by a bound,
