@@ -59,3 +59,69 @@ def test_all_zero_forces_write_strict_json(tmp_path, method):
     text = out.read_text()
     assert "Infinity" not in text and "NaN" not in text
     json.loads(text, parse_constant=lambda name: pytest.fail(f"non-standard JSON constant {name}"))
+
+
+# ------------------------------------------------------------------ fit verdict (issue #13, item 7)
+def _degenerate_cycles() -> dict[str, CycleLog]:
+    """The eight kinds of data that cannot determine the soil, on the default gravel path."""
+    base = synthetic_cycle("gravel", noise=0.05, seed=0)
+    n = len(base)
+    rng = np.random.default_rng(7)
+    peak = float(np.max(np.hypot(base.tangential, base.normal)))
+    short = synthetic_cycle("gravel", random_bezier_path(np.random.default_rng(3)), noise=0.05, seed=1)
+    keep = np.flatnonzero(short.contact_state().depth > 0.0)[:30]  # 30 samples in soil, then the log ends
+    cut = slice(0, int(keep[-1]) + 1)
+    from wheelloader.estimator import BucketPath
+
+    short_path = BucketPath(short.path.t[cut], short.path.x[cut], short.path.z[cut], short.path.blade_angle[cut])
+    return {
+        "all zero": _variant(base, np.zeros(n), np.zeros(n)),
+        "near zero": _variant(base, 1e-6 * base.tangential, 1e-6 * base.normal),
+        "constant": _variant(base, np.full(n, 2e4), np.full(n, 3e4)),
+        "1e30": _variant(base, 1e30 * base.tangential, 1e30 * base.normal),
+        "pure noise": _variant(base, np.abs(rng.normal(0.0, 0.3 * peak, n)), np.abs(rng.normal(0.0, 0.3 * peak, n))),
+        "snr 0.1": synthetic_cycle("gravel", noise=10.0, seed=4),
+        "x10 (parameters on bounds)": _variant(base, 10.0 * base.tangential, 10.0 * base.normal),
+        "too few samples in soil": CycleLog(short_path, short.tangential[cut], short.normal[cut], short.pile,
+                                            short.bucket, fill_volume=short.fill_volume[cut]),
+    }
+
+
+@pytest.mark.parametrize("method", ["default", "single-stage"])
+def test_degenerate_data_are_not_trustworthy(method):
+    for kind, cycle in _degenerate_cycles().items():
+        cal = calibrate(cycle, method, min_samples=12)
+        assert not cal.trustworthy, kind
+        assert cal.warnings and all(w.code and w.message for w in cal.warnings), kind
+        data = cal.to_dict()["calibration"]
+        assert data["trustworthy"] is False and data["warnings"], kind
+        assert "NOT TRUSTWORTHY" in cal.summary(), kind
+
+
+def test_degenerate_data_name_their_reason():
+    expected = {"all zero": "forces_near_zero", "near zero": "forces_near_zero", "constant": "constant_forces",
+                "1e30": "forces_implausible", "pure noise": "unexplained", "snr 0.1": "unexplained",
+                "x10 (parameters on bounds)": "parameters_on_bounds",
+                "too few samples in soil": "too_few_samples"}
+    for kind, cycle in _degenerate_cycles().items():
+        codes = {w.code for w in calibrate(cycle, min_samples=12).warnings}
+        assert expected[kind] in codes, (kind, codes)
+
+
+def test_good_synthetic_cycles_are_trustworthy():
+    for name in ("gravel", "sand", "dirt", "modified_sand", "dry_sand", "lean_clay", "fat_clay"):
+        for noise in (0.0, 0.05):
+            cal = calibrate(synthetic_cycle(name, noise=noise, vibration=noise / 2, seed=3))
+            assert cal.success and cal.trustworthy, (name, noise, [str(w) for w in cal.warnings])
+    rng = np.random.default_rng(11)
+    trusted = sum(calibrate(synthetic_cycle(random_soil(rng), random_bezier_path(rng), noise=0.05, seed=rng))
+                  .trustworthy for _ in range(30))
+    assert trusted >= 27  # about 3 % of uniform soils have two parameters at the bounds (verdict docstring)
+
+
+def test_physical_warnings_name_the_parameter():
+    from wheelloader.estimator import PRESET_NAMES, SoilParams, preset
+
+    assert all(preset(name).physical_warnings() == [] for name in PRESET_NAMES)
+    odd = SoilParams(1e6, 1e9, 0.0, 1.5, 0.3, 0.0, 0.0, 5.0).physical_warnings()
+    assert [w.split(" ")[0] for w in odd] == ["gamma", "cohesion", "phi", "n"]

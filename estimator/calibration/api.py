@@ -36,13 +36,14 @@ import numpy as np
 
 from ..cyclelog import CycleLog
 from ..errors import CalibrationError, ParameterError
-from ..force_model import DEFAULT_OPTIONS, ModelOptions, soil_forces
+from ..force_model import DEFAULT_OPTIONS, FLAG_TENSION, ModelOptions, soil_forces
 from ..kinematics import DEFAULT_SLOPE_WINDOW
 from ..soil import PARAMETER_NAMES, SoilParams, as_soil, validate_bounds
 from .fitmodel import FIT_NAMES, MIN_SAMPLES, FitData, fit_bounds, fit_to_soil, soil_to_fit
 from .paper_methods import fit_multi_stage, fit_single_stage
 from .uncertainty import Uncertainty, analyse
 from .varpro import fit_default
+from .verdict import FitWarning, assess
 
 #: Calibration methods.
 METHODS: tuple[str, ...] = ("default", "single-stage", "multi-stage")
@@ -152,6 +153,12 @@ class Calibration:
         In-soil samples where the FEE force is clamped at 0 at ``params``.
     settings : dict
         Method settings (lambda, sigma, grid, ...).
+    warnings : list of FitWarning
+        Why the data may not have determined the soil (forces near zero,
+        constant or implausible forces, large error, little variation
+        explained, parameters on bounds, too few samples in soil, no
+        convergence); see :mod:`wheelloader.estimator.calibration.verdict`.
+        Empty for a trustworthy fit.
     """
 
     params: SoilParams
@@ -174,6 +181,12 @@ class Calibration:
     in_soil: np.ndarray = field(repr=False)
     tension_samples: int = 0
     settings: dict[str, Any] = field(default_factory=dict)
+    warnings: list[FitWarning] = field(default_factory=list)
+
+    @property
+    def trustworthy(self) -> bool:
+        """True when no :attr:`warnings` fired: the data could determine the soil (``success`` is separate)."""
+        return not self.warnings
 
     @property
     def identifiability(self) -> dict[str, Any]:
@@ -194,6 +207,8 @@ class Calibration:
                 "sinkage_modulus_K": self.sinkage_modulus,
                 "cost": self.cost,
                 "success": self.success,
+                "trustworthy": self.trustworthy,
+                "warnings": [w.to_dict() for w in self.warnings],
                 "status": self.status,
                 "message": self.message,
                 "nfev": self.nfev,
@@ -219,8 +234,10 @@ class Calibration:
     def summary(self) -> str:
         """Multi-line human-readable summary."""
         flag = "converged" if self.success else "NOT CONVERGED"
+        verdict = "trustworthy" if self.trustworthy else "NOT TRUSTWORTHY"
         lines = [f"method {self.method}: {flag} ({self.message}); {self.time_s * 1e3:.1f} ms, "
                  f"{self.nfev} model evaluations, cost {self.cost:.4g} N^2",
+                 f"  fit verdict: {verdict}" + "".join(f"\n    warning {w}" for w in self.warnings),
                  "  " + self.quality.describe(), self.params.describe(),
                  f"  K = k_c/b + k_phi = {self.sinkage_modulus:.6g} N/m^(n+2)"]
         for s in self.stages:
@@ -449,10 +466,13 @@ def calibrate(
     jac = np.vstack([wt * jt, wn * jn])
     unc = analyse(jac, resid, x, lo, hi, float(np.mean(np.hypot(data.y_t, data.y_n))))
     cost = float(0.5 * np.sum((f_t - data.y_t) ** 2) + 0.5 * np.sum((f_n - data.y_n) ** 2))
-    tension = int(np.count_nonzero(forces.flags[data.index] & 16))
+    tension = int(np.count_nonzero(forces.flags[data.index] & FLAG_TENSION))
+    warnings = assess(success=bool(success), obs_t=data.y_t, obs_n=data.y_n, pred_t=forces.tangential[data.index],
+                      pred_n=forces.normal[data.index], percent_r=quality.percent_r, names=FIT_NAMES, values=x,
+                      lower=lo, upper=hi)
     return Calibration(soil, method, float(x[5]), cost, bool(success), int(status), message, int(nfev), int(njev),
                        time_s, quality, stages, unc, prior, bnds, forces.tangential, forces.normal, in_soil,
-                       tension, settings)
+                       tension, settings, warnings)
 
 
 def _stage(name: str, data: FitData, x: np.ndarray, lam: float, time_s: float, nfev: int, success: bool,
