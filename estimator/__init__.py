@@ -36,6 +36,7 @@ from .machine import Bucket, Loader
 from .paths import BucketPath, bezier_path, default_path, paper_paths, polyline_path
 from .pile import CarveResult, Pile, SurfaceCarver
 from .soil import PAPER_BOUNDS, PARAMETER_NAMES, PRESET_NAMES, SoilParams, as_soil, preset
+from .soil_vector import SOIL_VECTOR_NAMES, soil_from_vector, soil_vector
 from .synthetic import random_bezier_path, random_soil, synthetic_cycle
 
 __all__ = [
@@ -44,7 +45,8 @@ __all__ = [
     "predict", "random_bezier_path", "random_soil", "synthetic_cycle",
     "Bucket", "BucketPath", "CalibrationError", "CarveResult", "ContactState", "CycleLogError",
     "DEFAULT_OPTIONS", "FLAG_NAMES", "GRAVITY", "Loader", "ModelOptions", "PAPER_BOUNDS", "PARAMETER_NAMES",
-    "PRESET_NAMES", "ParameterError", "Pile", "PlanningError", "SoilForces", "SoilParams", "SurfaceCarver",
+    "PRESET_NAMES", "ParameterError", "Pile", "PlanningError", "SOIL_VECTOR_NAMES", "SoilForces", "SoilParams",
+    "SurfaceCarver", "soil_from_vector", "soil_vector",
     "WheelloaderError", "as_soil", "bearing_factors", "bezier_path", "contact_single", "contact_state",
     "default_path", "optimal_beta", "paper_paths", "polyline_path", "preset", "soil_forces",
     "soil_forces_single",

@@ -39,7 +39,9 @@ from ..errors import CalibrationError, ParameterError
 from ..force_model import DEFAULT_OPTIONS, FLAG_TENSION, ModelOptions, soil_forces
 from ..kinematics import DEFAULT_SLOPE_WINDOW
 from ..soil import PARAMETER_NAMES, SoilParams, as_soil, validate_bounds
-from .fitmodel import FIT_NAMES, MIN_SAMPLES, FitData, fit_bounds, fit_to_soil, soil_to_fit
+from ..soil_vector import SOIL_VECTOR_NAMES as FIT_NAMES
+from ..soil_vector import soil_from_vector, soil_vector, vector_bounds
+from .fitmodel import MIN_SAMPLES, FitData
 from .paper_methods import fit_multi_stage, fit_single_stage
 from .uncertainty import Uncertainty, analyse
 from .varpro import fit_default
@@ -404,7 +406,7 @@ def calibrate(
     b = bucket.edge_thickness
     state = cycle.contact_state(slope_window)
     data = FitData.from_state(state, cycle.tangential, cycle.normal, bucket, options, min_samples)
-    lo, hi = fit_bounds(bnds, b)
+    lo, hi = vector_bounds(bnds, b)
 
     t0 = time.perf_counter()
     stages: list[StageResult] = []
@@ -412,7 +414,7 @@ def calibrate(
     settings: dict[str, Any] = {"lambda": lam}
     if method == "default":
         settings.update(grid=list(grid), n_starts=n_starts, max_nfev=max_iter or 100, regularize=regularize)
-        x0 = None if prior is None else soil_to_fit(prior, b)
+        x0 = None if prior is None else soil_vector(prior, b)
         fit = fit_default(data, lo, hi, lam, x0, tuple(int(g) for g in grid), n_starts, max_iter or 100,
                           regularize=regularize)
         if fit.prior is not None:
@@ -437,7 +439,7 @@ def calibrate(
             settings["sigma"] = sigma
             pf = fit_multi_stage(data, bnds, prior, sigma, cycle.normal, maxiter)
         theta = pf.theta
-        x = np.array([*theta[:5], theta[5] / b + theta[6], theta[7]])
+        x = soil_vector(theta, b)
         nfev = sum(s.nfev for s in pf.stages)
         success = all(s.success for s in pf.stages)
         failed = [s for s in pf.stages if not s.success]
@@ -452,7 +454,7 @@ def calibrate(
 
     # Soil parameters: the paper's methods estimate k_c, k_phi directly; the default splits K.
     if method == "default":
-        soil = fit_to_soil(x, b, bnds, prior)
+        soil = soil_from_vector(x, b, bnds, prior)
     else:
         soil = SoilParams.from_array(np.clip(pf.theta, [bnds[k][0] for k in PARAMETER_NAMES],
                                              [bnds[k][1] for k in PARAMETER_NAMES]))
@@ -504,7 +506,7 @@ def _paper_stage(stage, data: FitData, b: float) -> StageResult:
         rmse["F_T"] = [r, 100.0 * r / scale if scale > 0 else float("inf")]
     else:
         x = stage.x
-        f_t, f_n, _ = data.forces(np.array([*x[:5], x[5] / b + x[6], x[7]]))
+        f_t, f_n, _ = data.forces(soil_vector(x, b))
         q = FitQuality.from_forces(data.y_t, data.y_n, f_t, f_n)
         rmse = {"F_T": [q.rmse_t, q.percent_t], "F_N": [q.rmse_n, q.percent_n], "F_R": [q.rmse_r, q.percent_r]}
     return StageResult(stage.name, params, stage.cost, rmse, stage.time_s, stage.nfev, stage.success, stage.message)

@@ -35,6 +35,7 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.optimize import minimize
 
 from ..soil import PARAMETER_NAMES, SoilParams
+from ..soil_vector import soil_vector
 from .fitmodel import FitData
 
 #: L-BFGS-B options of the paper's methods.
@@ -46,11 +47,6 @@ DEFAULT_SIGMA = 3.0
 def mid_range_guess(bounds: dict[str, tuple[float, float]]) -> np.ndarray:
     """Mid-point of every bound, in :data:`PARAMETER_NAMES` order."""
     return np.array([0.5 * (bounds[k][0] + bounds[k][1]) for k in PARAMETER_NAMES])
-
-
-def _fit_vector(theta: np.ndarray, b: float) -> np.ndarray:
-    """Eight soil parameters -> the seven-entry fit vector (K = k_c / b + k_phi)."""
-    return np.array([theta[0], theta[1], theta[2], theta[3], theta[4], theta[5] / b + theta[6], theta[7]])
 
 
 @dataclass
@@ -108,7 +104,7 @@ def fit_single_stage(data: FitData, bounds: dict[str, tuple[float, float]],
     x0 = _clip_guess(initial.to_array() if initial is not None else mid_range_guess(bounds), bounds)
 
     def cost(theta):
-        f_t, f_n, _ = data.forces(_fit_vector(theta, b))
+        f_t, f_n, _ = data.forces(soil_vector(theta, b))
         return 0.5 * float(np.sum((data.y_t - f_t) ** 2)) + 0.5 * float(np.sum((data.y_n - f_n) ** 2))  # eq 19a
 
     stage = _run_lbfgsb("single-stage", PARAMETER_NAMES, cost, x0, [bounds[k] for k in PARAMETER_NAMES],
@@ -175,7 +171,7 @@ def fit_multi_stage(data: FitData, bounds: dict[str, tuple[float, float]], initi
     def fee2(t2):
         th = theta.copy()
         th[[i[k] for k in names2]] = t2
-        f_t, f_n, _ = data.forces(_fit_vector(th, b))
+        f_t, f_n, _ = data.forces(soil_vector(th, b))
         return f_n / math.cos(delta_s)  # F of eq 27b (F_N = F cos delta)
 
     def cost2(t2):
@@ -193,7 +189,7 @@ def fit_multi_stage(data: FitData, bounds: dict[str, tuple[float, float]], initi
     def ft3(t3):
         th = theta.copy()
         th[[i[k] for k in names3]] = t3
-        return data.forces(_fit_vector(th, b))[0]
+        return data.forces(soil_vector(th, b))[0]
 
     def cost3(t3):
         return float(np.sum((data.y_t - ft3(t3)) ** 2))  # eq 19a, lambda = 1
