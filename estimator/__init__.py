@@ -11,6 +11,7 @@ from .calibration import (
     METHODS,
     Calibration,
     FitQuality,
+    FitWarning,
     Prediction,
     StageResult,
     Uncertainty,
@@ -41,8 +42,8 @@ from .synthetic import random_bezier_path, random_soil, synthetic_cycle
 
 __all__ = [
     "CycleLog", "load_path_csv", "save_path_csv",
-    "METHODS", "Calibration", "FitQuality", "Prediction", "StageResult", "Uncertainty", "calibrate", "load_params",
-    "predict", "random_bezier_path", "random_soil", "synthetic_cycle",
+    "METHODS", "Calibration", "FitQuality", "FitWarning", "Prediction", "StageResult", "Uncertainty", "calibrate",
+    "load_params", "predict", "random_bezier_path", "random_soil", "synthetic_cycle",
     "Bucket", "BucketPath", "CalibrationError", "CarveResult", "ContactState", "CycleLogError",
     "DEFAULT_OPTIONS", "FLAG_NAMES", "GRAVITY", "Loader", "ModelOptions", "PAPER_BOUNDS", "PARAMETER_NAMES",
     "PRESET_NAMES", "ParameterError", "Pile", "PlanningError", "SOIL_VECTOR_NAMES", "SoilForces", "SoilParams",

@@ -17,7 +17,7 @@ from wheelloader.estimator.calibration.boxqp import solve_box_qp
 from wheelloader.estimator.calibration.fitmodel import FIT_NAMES, FitData, fit_bounds, soil_to_fit, split_sinkage
 from wheelloader.estimator.calibration.prediction import predict
 from wheelloader.estimator.calibration.uncertainty import integrated_autocorrelation_time, noise_per_effective_sample
-from wheelloader.estimator.calibration.varpro import fit_default
+from wheelloader.estimator.calibration.varpro import fit_varpro
 from wheelloader.estimator.cyclelog import CycleLog
 from wheelloader.estimator.errors import CalibrationError, CycleLogError
 from wheelloader.estimator.force_model import soil_forces
@@ -213,8 +213,8 @@ def test_weak_prior_resolves_an_unidentifiable_direction(soil_name):
     """K and n not separately identifiable: the MAP lands on the prior-nearest point of the K d0^n valley."""
     data, d0 = _flat_depth_data(soil_name, noise=0.05, seed=3)
     lo, hi = fit_bounds(PAPER_BOUNDS, 0.02)
-    exact = fit_default(data, lo, hi)
-    fit = fit_default(data, lo, hi, regularize=True)
+    exact = fit_varpro(data, lo, hi)
+    fit = fit_varpro(data, lo, hi, regularize=True)
     prior = fit.prior
     assert prior is not None and prior.nu > 0.0
     np.testing.assert_allclose(prior.mean, 0.5 * (lo + hi))

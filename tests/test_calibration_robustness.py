@@ -125,3 +125,20 @@ def test_physical_warnings_name_the_parameter():
     assert all(preset(name).physical_warnings() == [] for name in PRESET_NAMES)
     odd = SoilParams(1e6, 1e9, 0.0, 1.5, 0.3, 0.0, 0.0, 5.0).physical_warnings()
     assert [w.split(" ")[0] for w in odd] == ["gamma", "cohesion", "phi", "n"]
+
+
+def test_method_names_and_aliases():
+    from wheelloader.estimator.calibration import METHODS, canonical_method
+
+    assert METHODS == ("varpro", "single-stage", "multi-stage")
+    assert canonical_method("default") == "varpro" and canonical_method(" Multi ") == "multi-stage"
+    cycle = synthetic_cycle("dirt", noise=0.0)
+    assert calibrate(cycle).method == "varpro" and calibrate(cycle, "default").method == "varpro"
+    with pytest.raises(CalibrationError, match="unknown calibration method"):
+        calibrate(cycle, "lbfgs")
+
+
+def test_huge_filter_sigma_is_refused_at_once():
+    """--sigma 1e9 with the multi-stage method tried to allocate 60 GiB (issue #13, item 5)."""
+    with pytest.raises(CalibrationError, match="wider than the cycle"):
+        calibrate(synthetic_cycle("dirt", noise=0.0), "multi-stage", sigma=1e9)

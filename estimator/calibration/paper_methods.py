@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
@@ -37,6 +36,7 @@ from scipy.optimize import minimize
 from ..soil import PARAMETER_NAMES, SoilParams
 from ..soil_vector import soil_vector
 from .fitmodel import FitData
+from .result import SolverResult
 
 #: L-BFGS-B options of the paper's methods.
 PAPER_OPTIONS = {"maxiter": 1000, "gtol": 1e-5}
@@ -49,34 +49,24 @@ def mid_range_guess(bounds: dict[str, tuple[float, float]]) -> np.ndarray:
     return np.array([0.5 * (bounds[k][0] + bounds[k][1]) for k in PARAMETER_NAMES])
 
 
-@dataclass
-class PaperStage:
-    """One L-BFGS-B run of a paper method."""
-
-    name: str
-    names: tuple[str, ...]
-    x: np.ndarray
-    cost: float
-    success: bool
-    status: int
-    message: str
-    nfev: int
-    nit: int
-    time_s: float
-    extra: dict = field(default_factory=dict)
+#: Result of one L-BFGS-B run (a stage): :class:`SolverResult` with ``name`` (stage), ``names`` (its
+#: parameters), ``extra`` (per-stage data: predictions, filtered signal) besides the common keys.
+PaperStage = SolverResult
 
 
-@dataclass
-class PaperFit:
-    """Result of a paper method: final eight parameters and its stages."""
-
-    theta: np.ndarray
-    stages: list[PaperStage]
-    initial: np.ndarray
+def paper_fit(theta: np.ndarray, stages: list[SolverResult], initial: np.ndarray) -> SolverResult:
+    """Result of a paper method: :class:`SolverResult` with ``theta`` (the eight parameters, eq 18), ``stages``
+    and ``initial``; ``cost``, ``success``, ``nfev``, ``nit``, ``time_s`` summarise the stages (status and
+    message of the first stage that failed, else of the last)."""
+    failed = [s for s in stages if not s.success]
+    last = failed[0] if failed else stages[-1]
+    return SolverResult(theta, stages[-1].cost, not failed, last.status, last.message,
+                        sum(s.nfev for s in stages), 0, sum(s.nit for s in stages), sum(s.time_s for s in stages),
+                        theta=np.asarray(theta, dtype=float), stages=stages, initial=np.asarray(initial, dtype=float))
 
 
 def _run_lbfgsb(name: str, names: tuple[str, ...], fun, x0: np.ndarray, bounds, maxiter: int = 1000,
-                **extra) -> PaperStage:
+                **extra) -> SolverResult:
     calls = [0]
 
     def counted(x):
@@ -87,8 +77,8 @@ def _run_lbfgsb(name: str, names: tuple[str, ...], fun, x0: np.ndarray, bounds, 
     res = minimize(counted, x0, method="L-BFGS-B", bounds=bounds, options={**PAPER_OPTIONS, "maxiter": int(maxiter)})
     dt = time.perf_counter() - t0
     msg = res.message if isinstance(res.message, str) else res.message.decode()
-    return PaperStage(name, names, np.asarray(res.x, float), float(res.fun), bool(res.success), int(res.status),
-                      msg, calls[0], int(res.nit), dt, dict(extra))
+    return SolverResult(res.x, float(res.fun), bool(res.success), int(res.status), msg, calls[0], 0, int(res.nit), dt,
+                        name=name, names=names, extra=dict(extra))
 
 
 def _clip_guess(x0: np.ndarray, bounds: dict[str, tuple[float, float]]) -> np.ndarray:
@@ -98,7 +88,7 @@ def _clip_guess(x0: np.ndarray, bounds: dict[str, tuple[float, float]]) -> np.nd
 
 
 def fit_single_stage(data: FitData, bounds: dict[str, tuple[float, float]],
-                     initial: SoilParams | None = None, maxiter: int = 1000) -> PaperFit:
+                     initial: SoilParams | None = None, maxiter: int = 1000) -> SolverResult:
     """Section III-A: eq 19 with lambda = 0.5 over all eight parameters."""
     b = data.edge_thickness
     x0 = _clip_guess(initial.to_array() if initial is not None else mid_range_guess(bounds), bounds)
@@ -109,12 +99,12 @@ def fit_single_stage(data: FitData, bounds: dict[str, tuple[float, float]],
 
     stage = _run_lbfgsb("single-stage", PARAMETER_NAMES, cost, x0, [bounds[k] for k in PARAMETER_NAMES],
                         maxiter)
-    return PaperFit(stage.x, [stage], x0)
+    return paper_fit(stage.x, [stage], x0)
 
 
 def fit_multi_stage(data: FitData, bounds: dict[str, tuple[float, float]], initial: SoilParams | None = None,
                     sigma: float = DEFAULT_SIGMA, observed_normal_full: np.ndarray | None = None,
-                    maxiter: int = 1000) -> PaperFit:
+                    maxiter: int = 1000) -> SolverResult:
     """Section III-B: stages 1-3 (eqs 20-28).
 
     Parameters
@@ -198,4 +188,4 @@ def fit_multi_stage(data: FitData, bounds: dict[str, tuple[float, float]], initi
     for k, v in zip(names3, s3.x, strict=True):
         theta[i[k]] = v
     s3.extra["prediction"] = ft3(s3.x)
-    return PaperFit(theta, [s1, s2, s3], x0)
+    return paper_fit(theta, [s1, s2, s3], x0)

@@ -16,7 +16,7 @@ from ..machine import Bucket
 from ..paths import BucketPath
 from ..pile import Pile
 from ..soil import SoilParams
-from .api import Calibration, FitQuality, load_params
+from .result import Calibration, FitQuality, load_params
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,4 +1,4 @@
-"""The default calibration: variable projection + global grid + analytic local refinement.
+"""The ``"varpro"`` calibration (the default method): variable projection + global grid + analytic refinement.
 
 For fixed nonlinear parameters ``(phi, delta, n)`` the forces are linear in
 ``theta_lin = (gamma, C, C_a, K)`` (see :mod:`wheelloader.estimator.calibration.fitmodel`),
@@ -86,13 +86,15 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..errors import CalibrationError
 from .boxqp import solve_box_qp
 from .fitmodel import LINEAR_INDEX, FitData, factors
+from .result import SolverResult
 from .uncertainty import noise_per_effective_sample
 
 #: Default grid sizes over (phi, delta, n).
@@ -211,34 +213,20 @@ def weak_prior(lo: np.ndarray, hi: np.ndarray, nu: float, mean: np.ndarray | Non
     return Prior(centre, (hi - lo) / math.sqrt(12.0), float(nu))
 
 
-@dataclass
-class RefineResult:
-    """Outcome of one bounded nonlinear least-squares refinement.
-
-    ``cost`` is eq 19a (data only); ``objective`` adds the prior term when
-    the refinement had a prior (else equals ``cost``).
-    """
-
-    x: np.ndarray
-    cost: float
-    success: bool
-    status: int
-    message: str
-    nfev: int
-    njev: int
-    start: np.ndarray = field(repr=False)
-    objective: float = float("nan")
-
-
 def refine(data: FitData, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5,
            counter: Evaluations | None = None, max_nfev: int = 100, xtol: float = 1e-8,
-           ftol: float = 1e-10, gtol: float = 1e-10, prior: Prior | None = None) -> RefineResult:
+           ftol: float = 1e-10, gtol: float = 1e-10, prior: Prior | None = None) -> SolverResult:
     """Joint bounded least squares on the seven fit parameters with the analytic Jacobian.
 
-    Parameters whose bounds coincide are held fixed. ``cost`` is eq 19a
-    (sum of weighted squared residuals) at the result. With a ``prior`` the
+    Parameters whose bounds coincide are held fixed. With a ``prior`` the
     residual gets one row ``sqrt(nu) (x_i - mean_i) / scale_i`` per free
     parameter (see :class:`Prior`).
+
+    Returns
+    -------
+    SolverResult
+        ``cost`` is eq 19a (sum of weighted squared residuals, data only) at ``x``; also ``start`` (the
+        start point) and ``objective`` (``cost`` plus the prior term, equal to ``cost`` without a prior).
     """
     wt, wn = weights(lam)
     free = hi > lo
@@ -290,8 +278,8 @@ def refine(data: FitData, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, lam: f
     x = full(res.x)
     objective = float(2.0 * res.cost)
     cost = objective if prior is None else float(np.sum(res.fun[:2 * m] ** 2))
-    return RefineResult(x, cost, bool(res.success), int(res.status), str(res.message),
-                        int(res.nfev), int(res.njev), np.asarray(x0, float), objective)
+    return SolverResult(x, cost, bool(res.success), int(res.status), str(res.message), int(res.nfev),
+                        int(res.njev), start=np.asarray(x0, float), objective=objective)
 
 
 def polish_linear(data: FitData, x: np.ndarray, lo: np.ndarray, hi: np.ndarray, lam: float,
@@ -313,27 +301,6 @@ def polish_linear(data: FitData, x: np.ndarray, lo: np.ndarray, hi: np.ndarray, 
     return x_new, float(lam * np.sum((f_t - data.y_t) ** 2) + (1.0 - lam) * np.sum((f_n - data.y_n) ** 2))
 
 
-@dataclass
-class DefaultFit:
-    """Result of :func:`fit_default` (internal; wrapped into a Calibration)."""
-
-    x: np.ndarray
-    cost: float
-    success: bool
-    status: int
-    message: str
-    evaluations: Evaluations
-    grid_time: float
-    refine_time: float
-    grid_best: np.ndarray
-    grid_cost: float
-    refinements: list[RefineResult]
-    exact: np.ndarray | None = None
-    exact_cost: float = float("nan")
-    prior: Prior | None = None
-    tau: float = float("nan")
-
-
 def _starts_from_grid(cost, theta, axes, count):
     starts = []
     for ijk in grid_local_minima(cost, count):
@@ -344,9 +311,9 @@ def _starts_from_grid(cost, theta, axes, count):
     return starts
 
 
-def fit_default(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5, initial: np.ndarray | None = None,
-                grid: tuple[int, int, int] = DEFAULT_GRID, n_starts: int = 3, max_nfev: int = 100,
-                zoom: int = 7, regularize: bool = False) -> DefaultFit:
+def fit_varpro(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5, initial: np.ndarray | None = None,
+               grid: tuple[int, int, int] = DEFAULT_GRID, n_starts: int = 3, max_nfev: int = 100,
+               zoom: int = 7, regularize: bool = False) -> SolverResult:
     """Variable-projection grid search, analytic refinement, then a zoomed grid (module docstring).
 
     The zoom step re-grids ``(phi, delta)`` with ``zoom x zoom`` points over
@@ -356,6 +323,20 @@ def fit_default(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5,
     whose projected cost undercuts the best solution so far. With
     ``regularize`` the exact least-squares solution then starts the MAP
     refinement under :func:`weak_prior` (module docstring, step 6).
+
+    Returns
+    -------
+    SolverResult
+        The best refinement's ``x``, ``cost`` (eq 19a), ``success``, ``status``, ``message``; ``nfev`` and
+        ``njev`` count all model work (every grid point). Also ``evaluations`` (:class:`Evaluations`),
+        ``grid_time``, ``refine_time`` [s], ``grid_best``, ``grid_cost`` (best grid point and its projected
+        cost), ``refinements`` (every refinement's :class:`SolverResult`), ``exact``, ``exact_cost`` (the
+        least-squares solution before the prior), ``prior`` (:class:`Prior` or None) and ``tau``.
+
+    Raises
+    ------
+    CalibrationError
+        If the projected cost is not finite anywhere on the grid.
     """
     counter = Evaluations()
     t0 = time.perf_counter()
@@ -365,7 +346,8 @@ def fit_default(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5,
     counter.nfev += cost.size
     starts = [x for _, x in _starts_from_grid(cost, theta, axes, n_starts)]
     if not starts:
-        raise RuntimeError("projected cost is not finite anywhere on the grid")
+        raise CalibrationError("projected cost is not finite anywhere on the grid: the forces or the geometry "
+                               "cannot be fit by any soil on the grid")
     grid_best, grid_cost = starts[0].copy(), float(np.min(cost))
     if initial is not None:
         starts.insert(0, np.clip(np.asarray(initial, float), lo, hi))
@@ -389,9 +371,9 @@ def fit_default(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5,
                     best = r
     polished = polish_linear(data, best.x, lo, hi, lam, counter)
     if polished is not None and polished[1] < best.cost:
-        best = RefineResult(polished[0], polished[1], best.success, best.status,
+        best = SolverResult(polished[0], polished[1], best.success, best.status,
                             best.message + " (linear parameters polished by the exact bounded solve)",
-                            best.nfev, best.njev, best.start)
+                            best.nfev, best.njev, start=best.start, objective=polished[1])
     exact, exact_cost, prior, tau = best.x, best.cost, None, float("nan")
     if regularize:
         f_t, f_n, _ = data.forces(best.x)
@@ -402,9 +384,11 @@ def fit_default(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5,
             prior = weak_prior(lo, hi, nu, initial)
             r = refine(data, best.x, lo, hi, lam, counter, max_nfev=max_nfev, prior=prior)
             results.append(r)
-            best = RefineResult(r.x, r.cost, r.success, r.status,
+            best = SolverResult(r.x, r.cost, r.success, r.status,
                                 f"{r.message} (MAP under the weak prior, nu {nu:.4g} N^2, tau {tau:.3g})",
-                                r.nfev, r.njev, r.start, r.objective)
+                                r.nfev, r.njev, start=r.start, objective=r.objective)
     t2 = time.perf_counter()
-    return DefaultFit(best.x, best.cost, best.success, best.status, best.message, counter, t1 - t0, t2 - t1,
-                      grid_best, grid_cost, results, exact, exact_cost, prior, tau)
+    return SolverResult(best.x, best.cost, best.success, best.status, best.message, counter.nfev, counter.njev,
+                        time_s=t2 - t0, evaluations=counter, grid_time=t1 - t0, refine_time=t2 - t1,
+                        grid_best=grid_best, grid_cost=grid_cost, refinements=results, exact=exact,
+                        exact_cost=exact_cost, prior=prior, tau=tau)
