@@ -142,3 +142,57 @@ def test_huge_filter_sigma_is_refused_at_once():
     """--sigma 1e9 with the multi-stage method tried to allocate 60 GiB (issue #13, item 5)."""
     with pytest.raises(CalibrationError, match="wider than the cycle"):
         calibrate(synthetic_cycle("dirt", noise=0.0), "multi-stage", sigma=1e9)
+
+
+# ------------------------------------------------------------------ long logs (issue #13, item 4)
+def test_grid_in_chunks_equals_grid_at_once(monkeypatch):
+    from wheelloader.estimator import PAPER_BOUNDS
+    from wheelloader.estimator.calibration import varpro
+    from wheelloader.estimator.calibration.fitmodel import FitData
+    from wheelloader.estimator.soil_vector import vector_bounds
+
+    cycle = synthetic_cycle("dirt", noise=0.05, seed=2)
+    data = FitData.from_state(cycle.contact_state(), cycle.tangential, cycle.normal, cycle.bucket)
+    lo, hi = vector_bounds(PAPER_BOUNDS, cycle.bucket.edge_thickness)
+    axes = (np.linspace(0.0, 0.78, 5), np.linspace(0.0, 0.78, 4), np.linspace(0.11, 1.53, 3))
+    whole = varpro.projected_grid(data, lo, hi, *axes)
+    monkeypatch.setattr(varpro, "GRID_CHUNK_ELEMENTS", 3 * len(data))  # three (phi, delta) pairs per chunk
+    chunked = varpro.projected_grid(data, lo, hi, *axes)
+    np.testing.assert_allclose(chunked[0], whole[0], rtol=1e-9)
+    np.testing.assert_allclose(chunked[1], whole[1], rtol=1e-7, atol=1e-6)
+
+
+def test_long_logs_are_searched_and_fitted_on_a_uniform_subsample(monkeypatch, caplog):
+    """Above the limits the grid and then the whole fit use every k-th in-soil sample; noise-free data still
+    give the exact soil, and the decimation is reported (settings and a log record)."""
+    from wheelloader.estimator import preset
+    from wheelloader.estimator.calibration import api, varpro
+
+    cycle = synthetic_cycle("lean_clay", noise=0.0)
+    full = calibrate(cycle)
+    monkeypatch.setattr(varpro, "GRID_MAX_SAMPLES", 60)
+    grid_sub = calibrate(cycle)
+    assert "decimation" not in grid_sub.settings
+    assert grid_sub.params.gamma == pytest.approx(preset("lean_clay").gamma, rel=1e-6)
+    assert grid_sub.cost == pytest.approx(full.cost, abs=1e-6 * max(full.cost, 1.0))
+    monkeypatch.setattr(api, "MAX_FIT_SAMPLES", 100)
+    with caplog.at_level("WARNING"):
+        sub = calibrate(cycle)
+    stride = sub.settings["decimation"]["stride"]
+    assert stride >= 2 and "MAX_FIT_SAMPLES" in caplog.text
+    assert sub.quality.samples == -(-int(full.in_soil.sum()) // stride)
+    assert sub.params.gamma == pytest.approx(preset("lean_clay").gamma, rel=1e-6)
+    assert sub.predicted_tangential.shape == (len(cycle),)
+    json.dumps(sub.to_dict(), allow_nan=False, default=float)
+
+
+def test_forces_along_a_long_log_in_blocks_equal_one_evaluation(monkeypatch):
+    from wheelloader.estimator.calibration import api
+
+    cycle = synthetic_cycle("gravel", noise=0.05, seed=5)
+    whole = calibrate(cycle)
+    monkeypatch.setattr(api, "FORCE_CHUNK", 37)
+    blocks = calibrate(cycle)
+    np.testing.assert_array_equal(blocks.predicted_tangential, whole.predicted_tangential)
+    np.testing.assert_array_equal(blocks.predicted_normal, whole.predicted_normal)
+    assert blocks.tension_samples == whole.tension_samples

@@ -19,6 +19,7 @@ Fit quality: :mod:`wheelloader.estimator.calibration.result`; fit verdict:
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from typing import Any
@@ -28,7 +29,7 @@ import numpy as np
 from ..cyclelog import CycleLog
 from ..errors import CalibrationError, ParameterError
 from ..force_model import DEFAULT_OPTIONS, FLAG_TENSION, ModelOptions, soil_forces
-from ..kinematics import DEFAULT_SLOPE_WINDOW
+from ..kinematics import DEFAULT_SLOPE_WINDOW, ContactState
 from ..soil import PARAMETER_NAMES, SoilParams, as_soil, validate_bounds
 from ..soil_vector import SOIL_VECTOR_NAMES as FIT_NAMES
 from ..soil_vector import soil_from_vector, soil_vector, vector_bounds
@@ -45,6 +46,15 @@ METHODS: tuple[str, ...] = ("varpro", "single-stage", "multi-stage")
 METHOD_ALIASES: dict[str, str] = {"default": "varpro", "single": "single-stage", "multi": "multi-stage"}
 #: The method :func:`calibrate` uses unless told otherwise.
 DEFAULT_METHOD = "varpro"
+#: Largest number of in-soil samples a calibration fits. A longer log (about 3 hours of digging at 60 Hz,
+#: or a log sampled far faster than the forces change) is fitted on a uniform subsample, every k-th
+#: in-soil sample, and ``settings["decimation"]`` says so; memory then stays bounded (about 1.5 kB per
+#: fitted sample at the peak, plus the log itself). The predicted forces cover every sample.
+MAX_FIT_SAMPLES = 200_000
+#: Samples per block when the fitted model's forces are evaluated along the whole log.
+FORCE_CHUNK = 200_000
+
+_log = logging.getLogger(__name__)
 
 
 def canonical_method(method: str) -> str:
@@ -171,11 +181,18 @@ def calibrate(
     state = cycle.contact_state(slope_window)
     data = FitData.from_state(state, cycle.tangential, cycle.normal, bucket, options, min_samples)
     lo, hi = vector_bounds(bnds, b)
+    settings: dict[str, Any] = {"lambda": lam}
+    stride = -(-len(data) // MAX_FIT_SAMPLES)
+    if stride > 1:
+        _log.warning("calibrate: %d in-soil samples exceed MAX_FIT_SAMPLES = %d; fitting every %d-th sample",
+                     len(data), MAX_FIT_SAMPLES, stride)
+        settings["decimation"] = {"stride": stride, "in_soil_samples": len(data), "max_fit_samples": MAX_FIT_SAMPLES}
+        data = data.every(stride)
+    _log.info("calibrate: method %s on %d in-soil samples of %d", method, len(data), len(cycle))
 
     t0 = time.perf_counter()
     stages: list[StageResult] = []
     njev = 0
-    settings: dict[str, Any] = {"lambda": lam}
     if method == "varpro":
         settings.update(grid=list(grid), n_starts=n_starts, max_nfev=max_iter or 100, regularize=regularize)
         x0 = None if prior is None else soil_vector(prior, b)
@@ -215,6 +232,7 @@ def calibrate(
         for s in pf.stages:
             stages.append(_paper_stage(s, data, b))
     time_s = time.perf_counter() - t0
+    _log.info("calibrate: %s fit in %.2f s (%d model evaluations)", method, time_s, nfev)
 
     # Soil parameters: the paper's methods estimate k_c, k_phi directly; varpro splits K.
     if method == "varpro":
@@ -222,23 +240,39 @@ def calibrate(
     else:
         soil = SoilParams.from_array(np.clip(pf.theta, [bnds[k][0] for k in PARAMETER_NAMES],
                                              [bnds[k][1] for k in PARAMETER_NAMES]))
-    forces = soil_forces(soil, state, bucket, options)
+    pred_t, pred_n, flags = _forces_along(soil, state, bucket, options)
     in_soil = np.zeros(len(cycle), dtype=bool)
     in_soil[data.index] = True
-    quality = FitQuality.from_forces(data.y_t, data.y_n, forces.tangential[data.index], forces.normal[data.index])
+    quality = FitQuality.from_forces(data.y_t, data.y_n, pred_t[data.index], pred_n[data.index])
     f_t, f_n, jt, jn = data.forces_and_jacobian(x)
     wt, wn = math.sqrt(lam), math.sqrt(1.0 - lam)
     resid = np.concatenate([wt * (f_t - data.y_t), wn * (f_n - data.y_n)])
     jac = np.vstack([wt * jt, wn * jn])
     unc = analyse(jac, resid, x, lo, hi, float(np.mean(np.hypot(data.y_t, data.y_n))))
     cost = float(0.5 * np.sum((f_t - data.y_t) ** 2) + 0.5 * np.sum((f_n - data.y_n) ** 2))
-    tension = int(np.count_nonzero(forces.flags[data.index] & FLAG_TENSION))
-    warnings = assess(success=bool(success), obs_t=data.y_t, obs_n=data.y_n, pred_t=forces.tangential[data.index],
-                      pred_n=forces.normal[data.index], percent_r=quality.percent_r, names=FIT_NAMES, values=x,
+    tension = int(np.count_nonzero(flags[data.index] & FLAG_TENSION))
+    warnings = assess(success=bool(success), obs_t=data.y_t, obs_n=data.y_n, pred_t=pred_t[data.index],
+                      pred_n=pred_n[data.index], percent_r=quality.percent_r, names=FIT_NAMES, values=x,
                       lower=lo, upper=hi)
     return Calibration(soil, method, float(x[5]), cost, bool(success), int(status), message, int(nfev), int(njev),
-                       time_s, quality, stages, unc, prior, bnds, forces.tangential, forces.normal, in_soil,
-                       tension, settings, warnings)
+                       time_s, quality, stages, unc, prior, bnds, pred_t, pred_n, in_soil, tension, settings, warnings)
+
+
+def _forces_along(soil: SoilParams, state: ContactState, bucket, options: ModelOptions):
+    """``(F_T, F_N, flags)`` of the model along the whole log, in blocks of :data:`FORCE_CHUNK` samples."""
+    n = len(state)
+    if n <= FORCE_CHUNK:
+        f = soil_forces(soil, state, bucket, options)
+        return f.tangential, f.normal, f.flags
+    f_t, f_n, flags = np.empty(n), np.empty(n), np.empty(n, dtype=np.int64)
+    for s in range(0, n, FORCE_CHUNK):
+        sl = slice(s, min(s + FORCE_CHUNK, n))
+        load = None if state.measured_load is None else np.asarray(state.measured_load)[sl]
+        part = ContactState(state.depth[sl], state.rho[sl], state.alpha[sl], state.blade_length[sl],
+                            state.fill_volume[sl], load)
+        f = soil_forces(soil, part, bucket, options)
+        f_t[sl], f_n[sl], flags[sl] = f.tangential, f.normal, f.flags
+    return f_t, f_n, flags
 
 
 def _stage(name: str, data: FitData, x: np.ndarray, lam: float, time_s: float, nfev: int, success: bool,

@@ -237,6 +237,16 @@ class FitData:
     def __len__(self) -> int:
         return int(self.index.size)
 
+    def every(self, stride: int) -> FitData:
+        """Every ``stride``-th sample (a uniform subsample in time; ``self`` for ``stride <= 1``)."""
+        if stride <= 1:
+            return self
+        sl = slice(0, None, int(stride))
+        ml = None if self.measured_load is None else self.measured_load[sl]
+        return FitData(self.index[sl], self.depth[sl], self.alpha[sl], self.rho[sl], self.blade_length[sl],
+                       self.fill_volume[sl], ml, self.y_t[sl], self.y_n[sl], self.width, self.edge_thickness,
+                       self.options)
+
     @property
     def ramp(self) -> np.ndarray:
         """Surcharge ramp ``min(d / contact_depth, 1)`` (force_model)."""

@@ -84,6 +84,7 @@ of solutions).
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from dataclasses import dataclass
@@ -99,6 +100,16 @@ from .uncertainty import noise_per_effective_sample
 
 #: Default grid sizes over (phi, delta, n).
 DEFAULT_GRID = (9, 9, 8)
+#: Largest number of in-soil samples the grid search uses; longer cycles are searched on a uniform
+#: subsample (every k-th sample), the refinement always runs on all of them. The grid only picks the
+#: start points, so this bounds its time on long logs without changing where the refinement converges
+#: for cycles of ordinary length.
+GRID_MAX_SAMPLES = 20_000
+#: Largest number of (phi, delta) pair x sample elements the grid evaluates at once: the grid's memory is
+#: about 250 bytes per element, whatever the length of the cycle.
+GRID_CHUNK_ELEMENTS = 400_000
+
+_log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -141,18 +152,24 @@ def projected_grid(data: FitData, lo: np.ndarray, hi: np.ndarray, phis: np.ndarr
     wt, wn = weights(lam)
     pp, dd = np.meshgrid(phis, deltas, indexing="ij")
     pp, dd = pp.ravel(), dd.ravel()
-    at, an, ot, on = _linear_columns(data, pp, dd)
-    at, an = wt * at, wn * an
-    yt = wt * (data.y_t[None, :] - ot)  # (P, N)
-    yn = wn * (data.y_n[None, :] - on)
     sk = wt * data.sinkage_basis(ns)  # (M, N)
     P, M = pp.size, len(ns)
-    h33 = np.einsum("pni,pnj->pij", at, at) + np.einsum("pni,pnj->pij", an, an)  # (P, 3, 3)
-    h3k = np.einsum("pni,mn->pmi", at, sk)  # (P, M, 3)
     hkk = np.einsum("mn,mn->m", sk, sk)  # (M,)
-    g3 = np.einsum("pni,pn->pi", at, yt) + np.einsum("pni,pn->pi", an, yn)  # (P, 3)
-    gk = yt @ sk.T  # (P, M)
-    c = np.einsum("pn,pn->p", yt, yt) + np.einsum("pn,pn->p", yn, yn)
+    h33, h3k, g3, gk, c = np.empty((P, 3, 3)), np.empty((P, M, 3)), np.empty((P, 3)), np.empty((P, M)), np.empty(P)
+    # the normal equations are sums over samples: build them a few (phi, delta) pairs at a time so that the
+    # memory stays bounded on long cycles (one chunk holds every pair for cycles of ordinary length)
+    step = max(1, GRID_CHUNK_ELEMENTS // max(len(data), 1))
+    for s in range(0, P, step):
+        sl = slice(s, min(s + step, P))
+        at, an, ot, on = _linear_columns(data, pp[sl], dd[sl])
+        at, an = wt * at, wn * an
+        yt = wt * (data.y_t[None, :] - ot)  # (p, N)
+        yn = wn * (data.y_n[None, :] - on)
+        h33[sl] = np.einsum("pni,pnj->pij", at, at) + np.einsum("pni,pnj->pij", an, an)  # (p, 3, 3)
+        h3k[sl] = np.einsum("pni,mn->pmi", at, sk)  # (p, M, 3)
+        g3[sl] = np.einsum("pni,pn->pi", at, yt) + np.einsum("pni,pn->pi", an, yn)  # (p, 3)
+        gk[sl] = yt @ sk.T  # (p, M)
+        c[sl] = np.einsum("pn,pn->p", yt, yt) + np.einsum("pn,pn->p", yn, yn)
     H = np.empty((P, M, 4, 4))
     H[:, :, :3, :3] = h33[:, None]
     H[:, :, :3, 3] = h3k
@@ -342,7 +359,12 @@ def fit_varpro(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5, 
     t0 = time.perf_counter()
     nl = (3, 4, 6)
     axes = [np.linspace(lo[i], hi[i], m) if hi[i] > lo[i] else np.array([lo[i]]) for i, m in zip(nl, grid, strict=True)]
-    cost, theta = projected_grid(data, lo, hi, axes[0], axes[1], axes[2], lam)
+    stride = -(-len(data) // GRID_MAX_SAMPLES)
+    grid_data = data.every(stride)
+    if stride > 1:
+        _log.info("varpro: grid search on every %d-th of %d in-soil samples (GRID_MAX_SAMPLES %d)", stride,
+                  len(data), GRID_MAX_SAMPLES)
+    cost, theta = projected_grid(grid_data, lo, hi, axes[0], axes[1], axes[2], lam)
     counter.nfev += cost.size
     starts = [x for _, x in _starts_from_grid(cost, theta, axes, n_starts)]
     if not starts:
@@ -352,6 +374,8 @@ def fit_varpro(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5, 
     if initial is not None:
         starts.insert(0, np.clip(np.asarray(initial, float), lo, hi))
     t1 = time.perf_counter()
+    _log.info("varpro: %d grid points in %.2f s; refining %d start(s) on %d samples", cost.size, t1 - t0,
+              len(starts), len(data))
     results = [refine(data, x0, lo, hi, lam, counter, max_nfev=max_nfev) for x0 in starts]
     best = min(results, key=lambda r: r.cost)
     if zoom > 1:
@@ -361,7 +385,7 @@ def fit_varpro(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5, 
             a, b = max(lo[i], best.x[i] - step), min(hi[i], best.x[i] + step)
             zaxes.append(np.linspace(a, b, zoom) if b > a else np.array([a]))
         zaxes.append(axes[2])
-        zcost, ztheta = projected_grid(data, lo, hi, zaxes[0], zaxes[1], zaxes[2], lam)
+        zcost, ztheta = projected_grid(grid_data, lo, hi, zaxes[0], zaxes[1], zaxes[2], lam)
         counter.nfev += zcost.size
         for c, x0 in _starts_from_grid(zcost, ztheta, zaxes, 2):
             if c < best.cost:
