@@ -35,7 +35,7 @@ DEFAULT_SOILS = ("gravel", "dirt", "modified_sand", "lean_clay")
 
 def floor_rmse(cycle, soil, percent: bool = False) -> float:
     """F_R RMSE of the true parameters on the cycle's in-soil samples (the noise floor) [N] (or [%])."""
-    from wheelloader.estimator.prediction import predict
+    from wheelloader.estimator.calibration import predict
 
     q = predict(soil, cycle).quality
     return q.percent_r if percent else q.rmse_r
@@ -46,8 +46,7 @@ def run_soil(name: str, args, rng_seed: int) -> dict:
     import numpy as np
 
     from wheelloader.estimator import paper_paths, preset
-    from wheelloader.estimator.calibration import calibrate
-    from wheelloader.estimator.prediction import predict
+    from wheelloader.estimator.calibration import calibrate, predict
     from wheelloader.estimator.synthetic import synthetic_cycle
 
     soil = preset(name)

@@ -43,7 +43,7 @@ DEM_VALUES = {
 
 def rmse_pair(params, log_raw, log_filt, pile=None) -> dict:
     """F_R RMSE against the filtered and the unfiltered record: {"filtered": [N, %], "unfiltered": [N, %]}."""
-    from wheelloader.estimator.prediction import predict
+    from wheelloader.estimator.calibration import predict
 
     qf = predict(params, log_filt, pile=pile).quality
     qr = predict(params, log_raw, pile=pile).quality
@@ -206,7 +206,7 @@ def plots(results: dict, args, out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from wheelloader.estimator.prediction import predict
+    from wheelloader.estimator.calibration import predict
     from wheelloader.references import dem
 
     data = Path(args.data)

@@ -32,6 +32,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -228,35 +229,40 @@ def _read_columns(csv_path: Path, required: tuple[str, ...]) -> dict[str, np.nda
         raise FileNotFoundError(2, "No such file", str(csv_path))
     if csv_path.is_dir():
         raise CycleLogError(f"{csv_path}: is a directory, expected a CSV file")
+    # streamed: one row at a time into typed arrays (8 bytes a value), so a 200 MB log does not become
+    # gigabytes of Python strings
     try:  # utf-8-sig: a byte-order mark (spreadsheet exports) is not part of the first column name
         with open(csv_path, newline="", encoding="utf-8-sig") as fh:
-            rows = [row for row in csv.reader(line for line in fh
-                                              if line.strip() and not line.lstrip().startswith("#"))]
+            reader = csv.reader(line for line in fh if line.strip() and not line.lstrip().startswith("#"))
+            first = next(reader, None)
+            if first is None:
+                raise CycleLogError(f"{csv_path}: empty file (expected a header row with {', '.join(required)})")
+            header = [h.strip() for h in first]
+            missing = [c for c in required if c not in header]
+            if missing:
+                raise CycleLogError(f"{csv_path}: missing column(s) {missing}; found {header}")
+            if len(set(header)) != len(header):
+                raise CycleLogError(f"{csv_path}: duplicate column names in {header}")
+            wanted = [c for c in header if c in PATH_COLUMNS + FORCE_COLUMNS + OPTIONAL_COLUMNS]
+            columns = [(col, header.index(col), array("d")) for col in wanted]
+            count = 0
+            for i, row in enumerate(reader):
+                if len(row) != len(header):
+                    raise CycleLogError(f"{csv_path}: row {i + 2} has {len(row)} fields, header has {len(header)}")
+                for col, j, buf in columns:
+                    try:
+                        buf.append(float(row[j]))
+                    except ValueError:
+                        raise CycleLogError(f"{csv_path}: row {i + 2}, column {col!r}: not a number: "
+                                            f"{row[j]!r}") from None
+                count += 1
     except UnicodeDecodeError as exc:
         raise CycleLogError(f"{csv_path}: not a UTF-8 text CSV file ({exc.reason} at byte {exc.start})") from None
-    if not rows:
-        raise CycleLogError(f"{csv_path}: empty file (expected a header row with {', '.join(required)})")
-    header = [h.strip() for h in rows[0]]
-    missing = [c for c in required if c not in header]
-    if missing:
-        raise CycleLogError(f"{csv_path}: missing column(s) {missing}; found {header}")
-    if len(set(header)) != len(header):
-        raise CycleLogError(f"{csv_path}: duplicate column names in {header}")
-    body = rows[1:]
-    if len(body) < 2:
-        raise CycleLogError(f"{csv_path}: needs at least 2 data rows, found {len(body)}")
-    wanted = [c for c in header if c in PATH_COLUMNS + FORCE_COLUMNS + OPTIONAL_COLUMNS]
+    if count < 2:
+        raise CycleLogError(f"{csv_path}: needs at least 2 data rows, found {count}")
     out: dict[str, np.ndarray] = {}
-    for col in wanted:
-        j = header.index(col)
-        values = np.empty(len(body))
-        for i, row in enumerate(body):
-            if len(row) != len(header):
-                raise CycleLogError(f"{csv_path}: row {i + 2} has {len(row)} fields, header has {len(header)}")
-            try:
-                values[i] = float(row[j])
-            except ValueError:
-                raise CycleLogError(f"{csv_path}: row {i + 2}, column {col!r}: not a number: {row[j]!r}") from None
+    for col, _, buf in columns:
+        values = np.frombuffer(buf, dtype=float).copy()
         if not np.all(np.isfinite(values)):
             i = int(np.flatnonzero(~np.isfinite(values))[0])
             raise CycleLogError(f"{csv_path}: column {col!r} has NaN/inf (first at row {i + 2})")

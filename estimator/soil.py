@@ -52,6 +52,21 @@ PAPER_BOUNDS: dict[str, tuple[float, float]] = {
     "n": (0.11, 1.53),
 }
 
+#: Physical domain of each parameter, wider than the paper's calibration bounds: values outside are not
+#: impossible for the model but are not soil (bulk densities of peat to dense rock fill; cohesion and adhesion
+#: up to very stiff clay; friction angles up to the steepest granular soils; Bekker moduli and exponents over
+#: the ranges of Wong's tables, paper Table A2, with a wide margin). :meth:`SoilParams.physical_warnings`.
+PHYSICAL_RANGES: dict[str, tuple[float, float]] = {
+    "gamma": (800.0, 3000.0),
+    "cohesion": (0.0, 500_000.0),
+    "adhesion": (0.0, 500_000.0),
+    "phi": (0.0, math.radians(55.0)),
+    "delta": (0.0, math.radians(55.0)),
+    "k_c": (0.0, 1e6),
+    "k_phi": (0.0, 1e8),
+    "n": (0.05, 2.0),
+}
+
 # Relative slack when checking bounds, so values printed and read back with
 # rounding (e.g. 45 deg written as 0.7854 rad) are still accepted.
 _BOUND_SLACK = 1e-6
@@ -192,6 +207,27 @@ class SoilParams:
             details = ", ".join(f"{name}={getattr(self, name):g} not in {bounds[name]}" for name in bad)
             raise ParameterError(f"soil parameters outside bounds: {details}")
         return self
+
+    def physical_warnings(self) -> list[str]:
+        """One message per parameter outside :data:`PHYSICAL_RANGES` (empty list: a plausible soil).
+
+        The constructor only rejects what the model cannot evaluate (negative
+        moduli, angles outside [0, pi/2), n <= 0); a density of 1e6 kg/m^3 or a
+        cohesion of 1 GPa pass it but describe no soil. Callers decide whether
+        a warning is an error (the CLI's ``--strict``).
+        """
+        out = []
+        for name, (lo, hi) in PHYSICAL_RANGES.items():
+            value = getattr(self, name)
+            if not lo <= value <= hi:
+                if name in ("phi", "delta"):
+                    deg = math.degrees
+                    shown = f"{deg(value):.4g} deg, physical range {deg(lo):g}-{deg(hi):g} deg"
+                else:
+                    unit = "" if PARAMETER_UNITS[name] == "-" else " " + PARAMETER_UNITS[name]
+                    shown = f"{value:.4g}{unit}, physical range {lo:g}-{hi:g}{unit}"
+                out.append(f"{name} = {shown}")
+        return out
 
     def describe(self) -> str:
         """Human-readable one-parameter-per-line summary (angles in degrees)."""

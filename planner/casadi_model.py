@@ -31,12 +31,14 @@ import numpy as np
 
 from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, ModelOptions, SoilParams
 from wheelloader.estimator.failure_angle import beta_bounds, unrolled_beta
+from wheelloader.estimator.soil_vector import SOIL_VECTOR_NAMES
+from wheelloader.estimator.soil_vector import soil_vector as estimator_soil_vector
 from wheelloader.estimator.validity import alpha_lower_limit
 
 #: Guarded Newton steps from the middle of the valid branch.
 NEWTON_STEPS = 8
-#: Order of the soil parameter vector the CasADi model takes.
-SOIL_VECTOR = ("gamma", "cohesion", "adhesion", "phi", "delta", "sinkage_modulus", "n")
+#: Order of the soil parameter vector the CasADi model takes (the estimator's soil vector; K = k_c/b + k_phi).
+SOIL_VECTOR = SOIL_VECTOR_NAMES
 #: Smoothing widths: depth [m], angle clamps [rad], force clamp [N], length clamp [m].
 SMOOTH_DEPTH = 1e-4
 #: Regularisation depth of d^n in eq 15 [m].
@@ -50,8 +52,7 @@ SMOOTH_LENGTH = 1e-3
 
 def soil_vector(soil: SoilParams, bucket: Bucket) -> np.ndarray:
     """The soil as the planner's parameter vector (order :data:`SOIL_VECTOR`); only ``k_c/b + k_phi`` enters."""
-    return np.array([soil.gamma, soil.cohesion, soil.adhesion, soil.phi, soil.delta,
-                     soil.sinkage_modulus(bucket.edge_thickness), soil.n])
+    return estimator_soil_vector(soil, bucket.edge_thickness)
 
 
 def smooth_pos(v, eps):

@@ -12,16 +12,16 @@ import pytest
 from scipy.optimize import lsq_linear, minimize_scalar
 
 from wheelloader.estimator import PAPER_BOUNDS, Bucket, Pile, bezier_path, contact_state, default_path, preset
-from wheelloader.estimator.boxqp import solve_box_qp
 from wheelloader.estimator.calibration import Calibration, FitQuality, calibrate, load_params
+from wheelloader.estimator.calibration.boxqp import solve_box_qp
+from wheelloader.estimator.calibration.fitmodel import FIT_NAMES, FitData, fit_bounds, soil_to_fit, split_sinkage
+from wheelloader.estimator.calibration.prediction import predict
+from wheelloader.estimator.calibration.uncertainty import integrated_autocorrelation_time, noise_per_effective_sample
+from wheelloader.estimator.calibration.varpro import fit_varpro
 from wheelloader.estimator.cyclelog import CycleLog
 from wheelloader.estimator.errors import CalibrationError, CycleLogError
-from wheelloader.estimator.fitmodel import FIT_NAMES, FitData, fit_bounds, soil_to_fit, split_sinkage
 from wheelloader.estimator.force_model import soil_forces
-from wheelloader.estimator.prediction import predict
 from wheelloader.estimator.synthetic import synthetic_cycle
-from wheelloader.estimator.uncertainty import integrated_autocorrelation_time, noise_per_effective_sample
-from wheelloader.estimator.varpro import fit_default
 
 #: Presets used for the known-answer tests.
 KNOWN_ANSWER_PRESETS = ("gravel", "sand", "dirt", "modified_sand", "dry_sand", "lean_clay", "fat_clay")
@@ -213,8 +213,8 @@ def test_weak_prior_resolves_an_unidentifiable_direction(soil_name):
     """K and n not separately identifiable: the MAP lands on the prior-nearest point of the K d0^n valley."""
     data, d0 = _flat_depth_data(soil_name, noise=0.05, seed=3)
     lo, hi = fit_bounds(PAPER_BOUNDS, 0.02)
-    exact = fit_default(data, lo, hi)
-    fit = fit_default(data, lo, hi, regularize=True)
+    exact = fit_varpro(data, lo, hi)
+    fit = fit_varpro(data, lo, hi, regularize=True)
     prior = fit.prior
     assert prior is not None and prior.nu > 0.0
     np.testing.assert_allclose(prior.mean, 0.5 * (lo + hi))
@@ -379,7 +379,7 @@ def test_inverted_bounds_and_unknown_method():
 def test_factor_derivatives_finite_on_down_slopes():
     """Regression: where sin(alpha + beta* + phi) = 0 (a down-slope of a carved pile) the analytic
     Jacobian of the default method was NaN and crashed least_squares inside the adaptation loop."""
-    from wheelloader.estimator.fitmodel import factors
+    from wheelloader.estimator.calibration.fitmodel import factors
 
     alpha = np.linspace(-1.05, 0.3, 4001)
     for rho in np.linspace(0.2, 1.5, 14):

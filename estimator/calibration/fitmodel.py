@@ -19,8 +19,9 @@ combination. So for fixed ``(phi, delta, n)`` the forces are linear in
 (variable projection). The tension clamp ``F >= 0`` breaks linearity; the
 full model here applies it exactly as :func:`~wheelloader.estimator.force_model.soil_forces`.
 
-The fit parameter vector used throughout the estimator is
-:data:`FIT_NAMES` = ``(gamma, C, C_a, phi, delta, K, n)``.
+The fit parameter vector used throughout the estimator is the soil vector
+:data:`FIT_NAMES` = ``(gamma, C, C_a, phi, delta, K, n)``
+(:mod:`wheelloader.estimator.soil_vector`, also the planner's).
 """
 
 from __future__ import annotations
@@ -30,73 +31,35 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import CalibrationError
-from .failure_angle import BETA_AT_RHO_LIMIT, BETA_AT_SLOPE_LIMIT, BETA_INTERIOR, optimal_beta
-from .force_model import DEFAULT_OPTIONS, GRAVITY, ModelOptions
-from .kinematics import ContactState
-from .machine import Bucket
-from .soil import PAPER_BOUNDS, SoilParams
-from .validity import clamp_details
+from ..errors import CalibrationError
+from ..failure_angle import BETA_AT_RHO_LIMIT, BETA_AT_SLOPE_LIMIT, BETA_INTERIOR, optimal_beta
+from ..force_model import DEFAULT_OPTIONS, GRAVITY, ModelOptions
+from ..kinematics import ContactState
+from ..machine import Bucket
+from ..soil_vector import (
+    LINEAR_INDEX,
+    NONLINEAR_INDEX,
+    SOIL_VECTOR_NAMES,
+    soil_from_vector,
+    soil_vector,
+    split_sinkage,
+    vector_bounds,
+)
+from ..validity import clamp_details
 
-#: Names of the seven identifiable fit parameters (K = k_c / b + k_phi).
-FIT_NAMES: tuple[str, ...] = ("gamma", "cohesion", "adhesion", "phi", "delta", "K", "n")
-#: Indices of the parameters the forces are linear in (for fixed phi, delta, n).
-LINEAR_INDEX = (0, 1, 2, 5)
-#: Indices of the nonlinear parameters.
-NONLINEAR_INDEX = (3, 4, 6)
+__all__ = ["FIT_NAMES", "LINEAR_INDEX", "MIN_SAMPLES", "NONLINEAR_INDEX", "Factors", "FitData", "factors", "fit_bounds",
+           "fit_to_soil", "soil_to_fit", "split_sinkage"]
+
+#: Names of the fit vector: the soil vector (:mod:`wheelloader.estimator.soil_vector`).
+FIT_NAMES: tuple[str, ...] = SOIL_VECTOR_NAMES
 
 #: Smallest number of in-soil samples a calibration accepts.
 MIN_SAMPLES = 12
 
-
-def fit_bounds(bounds: dict[str, tuple[float, float]], edge_thickness: float) -> tuple[np.ndarray, np.ndarray]:
-    """Bounds of :data:`FIT_NAMES` from bounds on the eight soil parameters (K from k_c, k_phi)."""
-    lo = np.array([bounds["gamma"][0], bounds["cohesion"][0], bounds["adhesion"][0], bounds["phi"][0],
-                   bounds["delta"][0], bounds["k_c"][0] / edge_thickness + bounds["k_phi"][0], bounds["n"][0]])
-    hi = np.array([bounds["gamma"][1], bounds["cohesion"][1], bounds["adhesion"][1], bounds["phi"][1],
-                   bounds["delta"][1], bounds["k_c"][1] / edge_thickness + bounds["k_phi"][1], bounds["n"][1]])
-    return lo, hi
-
-
-def soil_to_fit(soil: SoilParams, edge_thickness: float) -> np.ndarray:
-    """Fit vector ``(gamma, C, C_a, phi, delta, K, n)`` of a :class:`SoilParams`."""
-    return np.array([soil.gamma, soil.cohesion, soil.adhesion, soil.phi, soil.delta,
-                     soil.sinkage_modulus(edge_thickness), soil.n])
-
-
-def split_sinkage(K: float, edge_thickness: float, bounds: dict[str, tuple[float, float]] = PAPER_BOUNDS,
-                  prior: SoilParams | None = None) -> tuple[float, float]:
-    """Split the identifiable ``K = k_c / b + k_phi`` into ``(k_c, k_phi)``.
-
-    Forces determine only K (eq 15). The split is a convention, not an
-    estimate: with a ``prior`` whose K is positive, keep its share of
-    ``k_c / b`` in K; otherwise put everything into ``k_phi``. The result is
-    then moved inside the bounds keeping K exact whenever the bounds allow.
-    """
-    b = edge_thickness
-    kc_lo, kc_hi = bounds["k_c"]
-    kp_lo, kp_hi = bounds["k_phi"]
-    share = 0.0
-    if prior is not None and prior.sinkage_modulus(b) > 0.0:
-        share = (prior.k_c / b) / prior.sinkage_modulus(b)
-    kc = share * K * b
-    kc = min(max(kc, kc_lo), kc_hi)
-    kp = K - kc / b
-    if kp > kp_hi:  # move the excess back into k_c
-        kp = kp_hi
-        kc = min(max((K - kp) * b, kc_lo), kc_hi)
-    elif kp < kp_lo:
-        kp = kp_lo
-        kc = min(max((K - kp) * b, kc_lo), kc_hi)
-    return float(kc), float(kp)
-
-
-def fit_to_soil(p: np.ndarray, edge_thickness: float, bounds: dict[str, tuple[float, float]] = PAPER_BOUNDS,
-                prior: SoilParams | None = None) -> SoilParams:
-    """:class:`SoilParams` from a fit vector, splitting K with :func:`split_sinkage`."""
-    kc, kp = split_sinkage(float(p[5]), edge_thickness, bounds, prior)
-    return SoilParams(gamma=float(p[0]), cohesion=float(p[1]), adhesion=float(p[2]), phi=float(p[3]),
-                      delta=float(p[4]), k_c=kc, k_phi=kp, n=float(p[6]))
+#: The soil-vector converters under their calibration names.
+fit_bounds = vector_bounds
+soil_to_fit = soil_vector
+fit_to_soil = soil_from_vector
 
 
 # ----------------------------------------------------------------- factors
@@ -273,6 +236,16 @@ class FitData:
 
     def __len__(self) -> int:
         return int(self.index.size)
+
+    def every(self, stride: int) -> FitData:
+        """Every ``stride``-th sample (a uniform subsample in time; ``self`` for ``stride <= 1``)."""
+        if stride <= 1:
+            return self
+        sl = slice(0, None, int(stride))
+        ml = None if self.measured_load is None else self.measured_load[sl]
+        return FitData(self.index[sl], self.depth[sl], self.alpha[sl], self.rho[sl], self.blade_length[sl],
+                       self.fill_volume[sl], ml, self.y_t[sl], self.y_n[sl], self.width, self.edge_thickness,
+                       self.options)
 
     @property
     def ramp(self) -> np.ndarray:

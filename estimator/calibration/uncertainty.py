@@ -1,6 +1,6 @@
 """Covariance, standard errors and an identifiability report from the fit Jacobian.
 
-Works on the seven identifiable fit parameters :data:`~wheelloader.estimator.fitmodel.FIT_NAMES`
+Works on the seven identifiable fit parameters :data:`~wheelloader.estimator.calibration.fitmodel.FIT_NAMES`
 (``K = k_c / b + k_phi`` instead of k_c, k_phi, which forces cannot separate).
 
 * Covariance: ``s^2 (J^T J)^-1`` over the parameters not held by a bound,
@@ -114,7 +114,10 @@ class Uncertainty:
             lines.append(f"  {n:>9} = {self.values[i]:12.6g}  +- {se_txt}  {self.status[n]}")
         for c in self.weak_combinations:
             terms = " ".join(f"{v:+.2f}*{k}" for k, v in c["combination"].items())
-            lines.append(f"  weak combination (rel. std {c['relative_std']:.2g}): {terms}")
+            rel = c["relative_std"]
+            # None: a direction the data do not see at all (zero singular value, infinite standard error)
+            rel_txt = "infinite: not seen by the data" if rel is None else f"{rel:.2g}"
+            lines.append(f"  weak combination (rel. std {rel_txt}): {terms}")
         lines.append("  " + KC_KPHI_NOTE)
         return "\n".join(lines)
 

@@ -1,10 +1,10 @@
-"""The default calibration: variable projection + global grid + analytic local refinement.
+"""The ``"varpro"`` calibration (the default method): variable projection + global grid + analytic refinement.
 
 For fixed nonlinear parameters ``(phi, delta, n)`` the forces are linear in
-``theta_lin = (gamma, C, C_a, K)`` (see :mod:`wheelloader.estimator.fitmodel`),
+``theta_lin = (gamma, C, C_a, K)`` (see :mod:`wheelloader.estimator.calibration.fitmodel`),
 so the eq-19 cost can be minimised exactly over ``theta_lin`` inside its
 bounds (a 4-variable box-constrained least-squares problem,
-:func:`wheelloader.estimator.boxqp.solve_box_qp`). What remains is a
+:func:`wheelloader.estimator.calibration.boxqp.solve_box_qp`). What remains is a
 3-parameter problem (the *projected* cost), which is searched globally on a
 coarse grid:
 
@@ -45,7 +45,7 @@ the negative log posterior (times ``2 nu``) of independent Gaussian priors
 
 * ``m``: the warm start ``initial`` when given, else the mid-range of the
   bounds (the paper's methods' initial guess,
-  :func:`~wheelloader.estimator.paper_methods.mid_range_guess`, in the fit
+  :func:`~wheelloader.estimator.calibration.paper_methods.mid_range_guess`, in the fit
   space);
 * ``s_i = (hi_i - lo_i) / sqrt(12)``: the standard deviation of a uniform
   distribution over the bounds (eq 19j), i.e. the prior says no more than
@@ -53,7 +53,7 @@ the negative log posterior (times ``2 nu``) of independent Gaussian priors
 * ``nu``: the noise variance per *independent* residual, estimated from the
   exact fit's residuals: ``nu = tau * sum r^2 / (M - p)``, with ``tau`` the
   integrated autocorrelation time of the residual series
-  (:func:`~wheelloader.estimator.uncertainty.noise_per_effective_sample`);
+  (:func:`~wheelloader.estimator.calibration.uncertainty.noise_per_effective_sample`);
   ``M / tau`` is the effective sample size, so correlated misfit is not
   mistaken for many independent measurements.
 
@@ -84,19 +84,32 @@ of solutions).
 
 from __future__ import annotations
 
+import logging
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..errors import CalibrationError
 from .boxqp import solve_box_qp
 from .fitmodel import LINEAR_INDEX, FitData, factors
+from .result import SolverResult
 from .uncertainty import noise_per_effective_sample
 
 #: Default grid sizes over (phi, delta, n).
 DEFAULT_GRID = (9, 9, 8)
+#: Largest number of in-soil samples the grid search uses; longer cycles are searched on a uniform
+#: subsample (every k-th sample), the refinement always runs on all of them. The grid only picks the
+#: start points, so this bounds its time on long logs without changing where the refinement converges
+#: for cycles of ordinary length.
+GRID_MAX_SAMPLES = 20_000
+#: Largest number of (phi, delta) pair x sample elements the grid evaluates at once: the grid's memory is
+#: about 250 bytes per element, whatever the length of the cycle.
+GRID_CHUNK_ELEMENTS = 400_000
+
+_log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -139,18 +152,24 @@ def projected_grid(data: FitData, lo: np.ndarray, hi: np.ndarray, phis: np.ndarr
     wt, wn = weights(lam)
     pp, dd = np.meshgrid(phis, deltas, indexing="ij")
     pp, dd = pp.ravel(), dd.ravel()
-    at, an, ot, on = _linear_columns(data, pp, dd)
-    at, an = wt * at, wn * an
-    yt = wt * (data.y_t[None, :] - ot)  # (P, N)
-    yn = wn * (data.y_n[None, :] - on)
     sk = wt * data.sinkage_basis(ns)  # (M, N)
     P, M = pp.size, len(ns)
-    h33 = np.einsum("pni,pnj->pij", at, at) + np.einsum("pni,pnj->pij", an, an)  # (P, 3, 3)
-    h3k = np.einsum("pni,mn->pmi", at, sk)  # (P, M, 3)
     hkk = np.einsum("mn,mn->m", sk, sk)  # (M,)
-    g3 = np.einsum("pni,pn->pi", at, yt) + np.einsum("pni,pn->pi", an, yn)  # (P, 3)
-    gk = yt @ sk.T  # (P, M)
-    c = np.einsum("pn,pn->p", yt, yt) + np.einsum("pn,pn->p", yn, yn)
+    h33, h3k, g3, gk, c = np.empty((P, 3, 3)), np.empty((P, M, 3)), np.empty((P, 3)), np.empty((P, M)), np.empty(P)
+    # the normal equations are sums over samples: build them a few (phi, delta) pairs at a time so that the
+    # memory stays bounded on long cycles (one chunk holds every pair for cycles of ordinary length)
+    step = max(1, GRID_CHUNK_ELEMENTS // max(len(data), 1))
+    for s in range(0, P, step):
+        sl = slice(s, min(s + step, P))
+        at, an, ot, on = _linear_columns(data, pp[sl], dd[sl])
+        at, an = wt * at, wn * an
+        yt = wt * (data.y_t[None, :] - ot)  # (p, N)
+        yn = wn * (data.y_n[None, :] - on)
+        h33[sl] = np.einsum("pni,pnj->pij", at, at) + np.einsum("pni,pnj->pij", an, an)  # (p, 3, 3)
+        h3k[sl] = np.einsum("pni,mn->pmi", at, sk)  # (p, M, 3)
+        g3[sl] = np.einsum("pni,pn->pi", at, yt) + np.einsum("pni,pn->pi", an, yn)  # (p, 3)
+        gk[sl] = yt @ sk.T  # (p, M)
+        c[sl] = np.einsum("pn,pn->p", yt, yt) + np.einsum("pn,pn->p", yn, yn)
     H = np.empty((P, M, 4, 4))
     H[:, :, :3, :3] = h33[:, None]
     H[:, :, :3, 3] = h3k
@@ -211,34 +230,20 @@ def weak_prior(lo: np.ndarray, hi: np.ndarray, nu: float, mean: np.ndarray | Non
     return Prior(centre, (hi - lo) / math.sqrt(12.0), float(nu))
 
 
-@dataclass
-class RefineResult:
-    """Outcome of one bounded nonlinear least-squares refinement.
-
-    ``cost`` is eq 19a (data only); ``objective`` adds the prior term when
-    the refinement had a prior (else equals ``cost``).
-    """
-
-    x: np.ndarray
-    cost: float
-    success: bool
-    status: int
-    message: str
-    nfev: int
-    njev: int
-    start: np.ndarray = field(repr=False)
-    objective: float = float("nan")
-
-
 def refine(data: FitData, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5,
            counter: Evaluations | None = None, max_nfev: int = 100, xtol: float = 1e-8,
-           ftol: float = 1e-10, gtol: float = 1e-10, prior: Prior | None = None) -> RefineResult:
+           ftol: float = 1e-10, gtol: float = 1e-10, prior: Prior | None = None) -> SolverResult:
     """Joint bounded least squares on the seven fit parameters with the analytic Jacobian.
 
-    Parameters whose bounds coincide are held fixed. ``cost`` is eq 19a
-    (sum of weighted squared residuals) at the result. With a ``prior`` the
+    Parameters whose bounds coincide are held fixed. With a ``prior`` the
     residual gets one row ``sqrt(nu) (x_i - mean_i) / scale_i`` per free
     parameter (see :class:`Prior`).
+
+    Returns
+    -------
+    SolverResult
+        ``cost`` is eq 19a (sum of weighted squared residuals, data only) at ``x``; also ``start`` (the
+        start point) and ``objective`` (``cost`` plus the prior term, equal to ``cost`` without a prior).
     """
     wt, wn = weights(lam)
     free = hi > lo
@@ -290,8 +295,8 @@ def refine(data: FitData, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, lam: f
     x = full(res.x)
     objective = float(2.0 * res.cost)
     cost = objective if prior is None else float(np.sum(res.fun[:2 * m] ** 2))
-    return RefineResult(x, cost, bool(res.success), int(res.status), str(res.message),
-                        int(res.nfev), int(res.njev), np.asarray(x0, float), objective)
+    return SolverResult(x, cost, bool(res.success), int(res.status), str(res.message), int(res.nfev),
+                        int(res.njev), start=np.asarray(x0, float), objective=objective)
 
 
 def polish_linear(data: FitData, x: np.ndarray, lo: np.ndarray, hi: np.ndarray, lam: float,
@@ -313,27 +318,6 @@ def polish_linear(data: FitData, x: np.ndarray, lo: np.ndarray, hi: np.ndarray, 
     return x_new, float(lam * np.sum((f_t - data.y_t) ** 2) + (1.0 - lam) * np.sum((f_n - data.y_n) ** 2))
 
 
-@dataclass
-class DefaultFit:
-    """Result of :func:`fit_default` (internal; wrapped into a Calibration)."""
-
-    x: np.ndarray
-    cost: float
-    success: bool
-    status: int
-    message: str
-    evaluations: Evaluations
-    grid_time: float
-    refine_time: float
-    grid_best: np.ndarray
-    grid_cost: float
-    refinements: list[RefineResult]
-    exact: np.ndarray | None = None
-    exact_cost: float = float("nan")
-    prior: Prior | None = None
-    tau: float = float("nan")
-
-
 def _starts_from_grid(cost, theta, axes, count):
     starts = []
     for ijk in grid_local_minima(cost, count):
@@ -344,9 +328,9 @@ def _starts_from_grid(cost, theta, axes, count):
     return starts
 
 
-def fit_default(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5, initial: np.ndarray | None = None,
-                grid: tuple[int, int, int] = DEFAULT_GRID, n_starts: int = 3, max_nfev: int = 100,
-                zoom: int = 7, regularize: bool = False) -> DefaultFit:
+def fit_varpro(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5, initial: np.ndarray | None = None,
+               grid: tuple[int, int, int] = DEFAULT_GRID, n_starts: int = 3, max_nfev: int = 100,
+               zoom: int = 7, regularize: bool = False) -> SolverResult:
     """Variable-projection grid search, analytic refinement, then a zoomed grid (module docstring).
 
     The zoom step re-grids ``(phi, delta)`` with ``zoom x zoom`` points over
@@ -356,20 +340,42 @@ def fit_default(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5,
     whose projected cost undercuts the best solution so far. With
     ``regularize`` the exact least-squares solution then starts the MAP
     refinement under :func:`weak_prior` (module docstring, step 6).
+
+    Returns
+    -------
+    SolverResult
+        The best refinement's ``x``, ``cost`` (eq 19a), ``success``, ``status``, ``message``; ``nfev`` and
+        ``njev`` count all model work (every grid point). Also ``evaluations`` (:class:`Evaluations`),
+        ``grid_time``, ``refine_time`` [s], ``grid_best``, ``grid_cost`` (best grid point and its projected
+        cost), ``refinements`` (every refinement's :class:`SolverResult`), ``exact``, ``exact_cost`` (the
+        least-squares solution before the prior), ``prior`` (:class:`Prior` or None) and ``tau``.
+
+    Raises
+    ------
+    CalibrationError
+        If the projected cost is not finite anywhere on the grid.
     """
     counter = Evaluations()
     t0 = time.perf_counter()
     nl = (3, 4, 6)
     axes = [np.linspace(lo[i], hi[i], m) if hi[i] > lo[i] else np.array([lo[i]]) for i, m in zip(nl, grid, strict=True)]
-    cost, theta = projected_grid(data, lo, hi, axes[0], axes[1], axes[2], lam)
+    stride = -(-len(data) // GRID_MAX_SAMPLES)
+    grid_data = data.every(stride)
+    if stride > 1:
+        _log.info("varpro: grid search on every %d-th of %d in-soil samples (GRID_MAX_SAMPLES %d)", stride,
+                  len(data), GRID_MAX_SAMPLES)
+    cost, theta = projected_grid(grid_data, lo, hi, axes[0], axes[1], axes[2], lam)
     counter.nfev += cost.size
     starts = [x for _, x in _starts_from_grid(cost, theta, axes, n_starts)]
     if not starts:
-        raise RuntimeError("projected cost is not finite anywhere on the grid")
+        raise CalibrationError("projected cost is not finite anywhere on the grid: the forces or the geometry "
+                               "cannot be fit by any soil on the grid")
     grid_best, grid_cost = starts[0].copy(), float(np.min(cost))
     if initial is not None:
         starts.insert(0, np.clip(np.asarray(initial, float), lo, hi))
     t1 = time.perf_counter()
+    _log.info("varpro: %d grid points in %.2f s; refining %d start(s) on %d samples", cost.size, t1 - t0,
+              len(starts), len(data))
     results = [refine(data, x0, lo, hi, lam, counter, max_nfev=max_nfev) for x0 in starts]
     best = min(results, key=lambda r: r.cost)
     if zoom > 1:
@@ -379,7 +385,7 @@ def fit_default(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5,
             a, b = max(lo[i], best.x[i] - step), min(hi[i], best.x[i] + step)
             zaxes.append(np.linspace(a, b, zoom) if b > a else np.array([a]))
         zaxes.append(axes[2])
-        zcost, ztheta = projected_grid(data, lo, hi, zaxes[0], zaxes[1], zaxes[2], lam)
+        zcost, ztheta = projected_grid(grid_data, lo, hi, zaxes[0], zaxes[1], zaxes[2], lam)
         counter.nfev += zcost.size
         for c, x0 in _starts_from_grid(zcost, ztheta, zaxes, 2):
             if c < best.cost:
@@ -389,9 +395,9 @@ def fit_default(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5,
                     best = r
     polished = polish_linear(data, best.x, lo, hi, lam, counter)
     if polished is not None and polished[1] < best.cost:
-        best = RefineResult(polished[0], polished[1], best.success, best.status,
+        best = SolverResult(polished[0], polished[1], best.success, best.status,
                             best.message + " (linear parameters polished by the exact bounded solve)",
-                            best.nfev, best.njev, best.start)
+                            best.nfev, best.njev, start=best.start, objective=polished[1])
     exact, exact_cost, prior, tau = best.x, best.cost, None, float("nan")
     if regularize:
         f_t, f_n, _ = data.forces(best.x)
@@ -402,9 +408,11 @@ def fit_default(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5,
             prior = weak_prior(lo, hi, nu, initial)
             r = refine(data, best.x, lo, hi, lam, counter, max_nfev=max_nfev, prior=prior)
             results.append(r)
-            best = RefineResult(r.x, r.cost, r.success, r.status,
+            best = SolverResult(r.x, r.cost, r.success, r.status,
                                 f"{r.message} (MAP under the weak prior, nu {nu:.4g} N^2, tau {tau:.3g})",
-                                r.nfev, r.njev, r.start, r.objective)
+                                r.nfev, r.njev, start=r.start, objective=r.objective)
     t2 = time.perf_counter()
-    return DefaultFit(best.x, best.cost, best.success, best.status, best.message, counter, t1 - t0, t2 - t1,
-                      grid_best, grid_cost, results, exact, exact_cost, prior, tau)
+    return SolverResult(best.x, best.cost, best.success, best.status, best.message, counter.nfev, counter.njev,
+                        time_s=t2 - t0, evaluations=counter, grid_time=t1 - t0, refine_time=t2 - t1,
+                        grid_best=grid_best, grid_cost=grid_cost, refinements=results, exact=exact,
+                        exact_cost=exact_cost, prior=prior, tau=tau)

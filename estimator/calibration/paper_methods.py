@@ -4,7 +4,7 @@ Both use ``scipy.optimize.minimize(method="L-BFGS-B")`` on the raw (unscaled)
 parameters with finite-difference gradients (scipy's default forward
 differences, absolute step 1e-8), ``options={"maxiter": 1000, "gtol": 1e-5}``
 and the paper's bounds (eq 19j). The force model is the same vectorised
-model as the default method's (:class:`~wheelloader.estimator.fitmodel.FitData`,
+model as the default method's (:class:`~wheelloader.estimator.calibration.fitmodel.FitData`,
 identical to :func:`~wheelloader.estimator.force_model.soil_forces`) and
 runs on the same in-soil samples, so speed comparisons are like for like.
 
@@ -28,14 +28,15 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 from scipy.optimize import minimize
 
+from ..soil import PARAMETER_NAMES, SoilParams
+from ..soil_vector import soil_vector
 from .fitmodel import FitData
-from .soil import PARAMETER_NAMES, SoilParams
+from .result import SolverResult
 
 #: L-BFGS-B options of the paper's methods.
 PAPER_OPTIONS = {"maxiter": 1000, "gtol": 1e-5}
@@ -48,39 +49,24 @@ def mid_range_guess(bounds: dict[str, tuple[float, float]]) -> np.ndarray:
     return np.array([0.5 * (bounds[k][0] + bounds[k][1]) for k in PARAMETER_NAMES])
 
 
-def _fit_vector(theta: np.ndarray, b: float) -> np.ndarray:
-    """Eight soil parameters -> the seven-entry fit vector (K = k_c / b + k_phi)."""
-    return np.array([theta[0], theta[1], theta[2], theta[3], theta[4], theta[5] / b + theta[6], theta[7]])
+#: Result of one L-BFGS-B run (a stage): :class:`SolverResult` with ``name`` (stage), ``names`` (its
+#: parameters), ``extra`` (per-stage data: predictions, filtered signal) besides the common keys.
+PaperStage = SolverResult
 
 
-@dataclass
-class PaperStage:
-    """One L-BFGS-B run of a paper method."""
-
-    name: str
-    names: tuple[str, ...]
-    x: np.ndarray
-    cost: float
-    success: bool
-    status: int
-    message: str
-    nfev: int
-    nit: int
-    time_s: float
-    extra: dict = field(default_factory=dict)
-
-
-@dataclass
-class PaperFit:
-    """Result of a paper method: final eight parameters and its stages."""
-
-    theta: np.ndarray
-    stages: list[PaperStage]
-    initial: np.ndarray
+def paper_fit(theta: np.ndarray, stages: list[SolverResult], initial: np.ndarray) -> SolverResult:
+    """Result of a paper method: :class:`SolverResult` with ``theta`` (the eight parameters, eq 18), ``stages``
+    and ``initial``; ``cost``, ``success``, ``nfev``, ``nit``, ``time_s`` summarise the stages (status and
+    message of the first stage that failed, else of the last)."""
+    failed = [s for s in stages if not s.success]
+    last = failed[0] if failed else stages[-1]
+    return SolverResult(theta, stages[-1].cost, not failed, last.status, last.message,
+                        sum(s.nfev for s in stages), 0, sum(s.nit for s in stages), sum(s.time_s for s in stages),
+                        theta=np.asarray(theta, dtype=float), stages=stages, initial=np.asarray(initial, dtype=float))
 
 
 def _run_lbfgsb(name: str, names: tuple[str, ...], fun, x0: np.ndarray, bounds, maxiter: int = 1000,
-                **extra) -> PaperStage:
+                **extra) -> SolverResult:
     calls = [0]
 
     def counted(x):
@@ -91,8 +77,8 @@ def _run_lbfgsb(name: str, names: tuple[str, ...], fun, x0: np.ndarray, bounds, 
     res = minimize(counted, x0, method="L-BFGS-B", bounds=bounds, options={**PAPER_OPTIONS, "maxiter": int(maxiter)})
     dt = time.perf_counter() - t0
     msg = res.message if isinstance(res.message, str) else res.message.decode()
-    return PaperStage(name, names, np.asarray(res.x, float), float(res.fun), bool(res.success), int(res.status),
-                      msg, calls[0], int(res.nit), dt, dict(extra))
+    return SolverResult(res.x, float(res.fun), bool(res.success), int(res.status), msg, calls[0], 0, int(res.nit), dt,
+                        name=name, names=names, extra=dict(extra))
 
 
 def _clip_guess(x0: np.ndarray, bounds: dict[str, tuple[float, float]]) -> np.ndarray:
@@ -102,23 +88,23 @@ def _clip_guess(x0: np.ndarray, bounds: dict[str, tuple[float, float]]) -> np.nd
 
 
 def fit_single_stage(data: FitData, bounds: dict[str, tuple[float, float]],
-                     initial: SoilParams | None = None, maxiter: int = 1000) -> PaperFit:
+                     initial: SoilParams | None = None, maxiter: int = 1000) -> SolverResult:
     """Section III-A: eq 19 with lambda = 0.5 over all eight parameters."""
     b = data.edge_thickness
     x0 = _clip_guess(initial.to_array() if initial is not None else mid_range_guess(bounds), bounds)
 
     def cost(theta):
-        f_t, f_n, _ = data.forces(_fit_vector(theta, b))
+        f_t, f_n, _ = data.forces(soil_vector(theta, b))
         return 0.5 * float(np.sum((data.y_t - f_t) ** 2)) + 0.5 * float(np.sum((data.y_n - f_n) ** 2))  # eq 19a
 
     stage = _run_lbfgsb("single-stage", PARAMETER_NAMES, cost, x0, [bounds[k] for k in PARAMETER_NAMES],
                         maxiter)
-    return PaperFit(stage.x, [stage], x0)
+    return paper_fit(stage.x, [stage], x0)
 
 
 def fit_multi_stage(data: FitData, bounds: dict[str, tuple[float, float]], initial: SoilParams | None = None,
                     sigma: float = DEFAULT_SIGMA, observed_normal_full: np.ndarray | None = None,
-                    maxiter: int = 1000) -> PaperFit:
+                    maxiter: int = 1000) -> SolverResult:
     """Section III-B: stages 1-3 (eqs 20-28).
 
     Parameters
@@ -175,7 +161,7 @@ def fit_multi_stage(data: FitData, bounds: dict[str, tuple[float, float]], initi
     def fee2(t2):
         th = theta.copy()
         th[[i[k] for k in names2]] = t2
-        f_t, f_n, _ = data.forces(_fit_vector(th, b))
+        f_t, f_n, _ = data.forces(soil_vector(th, b))
         return f_n / math.cos(delta_s)  # F of eq 27b (F_N = F cos delta)
 
     def cost2(t2):
@@ -193,7 +179,7 @@ def fit_multi_stage(data: FitData, bounds: dict[str, tuple[float, float]], initi
     def ft3(t3):
         th = theta.copy()
         th[[i[k] for k in names3]] = t3
-        return data.forces(_fit_vector(th, b))[0]
+        return data.forces(soil_vector(th, b))[0]
 
     def cost3(t3):
         return float(np.sum((data.y_t - ft3(t3)) ** 2))  # eq 19a, lambda = 1
@@ -202,4 +188,4 @@ def fit_multi_stage(data: FitData, bounds: dict[str, tuple[float, float]], initi
     for k, v in zip(names3, s3.x, strict=True):
         theta[i[k]] = v
     s3.extra["prediction"] = ft3(s3.x)
-    return PaperFit(theta, [s1, s2, s3], x0)
+    return paper_fit(theta, [s1, s2, s3], x0)

@@ -8,15 +8,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .calibration import Calibration, FitQuality, load_params
-from .cyclelog import CycleLog
-from .errors import ParameterError
-from .force_model import DEFAULT_OPTIONS, ModelOptions, SoilForces, soil_forces
-from .kinematics import DEFAULT_SLOPE_WINDOW, ContactState, contact_state
-from .machine import Bucket
-from .paths import BucketPath
-from .pile import Pile
-from .soil import SoilParams
+from ..cyclelog import CycleLog
+from ..errors import ParameterError
+from ..force_model import DEFAULT_OPTIONS, ModelOptions, SoilForces, soil_forces
+from ..kinematics import DEFAULT_SLOPE_WINDOW, ContactState, contact_state
+from ..machine import Bucket
+from ..paths import BucketPath
+from ..pile import Pile
+from ..soil import SoilParams
+from .result import Calibration, FitQuality, load_params
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,0 +1,29 @@
+"""Calibration of the soil from one cycle, and prediction with the calibrated soil.
+
+The shared model (soil, pile, paths, kinematics, force model, cycle log) lives
+in :mod:`wheelloader.estimator`; this subpackage fits it:
+
+* :mod:`.api`: :func:`calibrate` and the method names;
+* :mod:`.result`: :class:`Calibration`, :class:`FitQuality`, :class:`StageResult`, and
+  :class:`SolverResult`, the one result type of the internal solvers;
+* :mod:`.verdict`: whether the data could determine the soil (:attr:`Calibration.trustworthy`);
+* :mod:`.fitmodel`: the force model arranged for fitting (linear basis, analytic Jacobian);
+* :mod:`.varpro`: the ``"varpro"`` method (variable projection, global grid, analytic refinement);
+* :mod:`.boxqp`: the exact batched box-constrained least-squares solver it uses;
+* :mod:`.paper_methods`: the paper's ``"single-stage"`` and ``"multi-stage"`` baselines;
+* :mod:`.uncertainty`: covariance and identifiability;
+* :mod:`.prediction`: :func:`predict` forces along a new path.
+
+Everything public is re-exported from :mod:`wheelloader.estimator`.
+"""
+
+from ..errors import CalibrationError
+from .api import DEFAULT_METHOD, METHOD_ALIASES, METHODS, calibrate, canonical_method
+from .prediction import Prediction, predict
+from .result import Calibration, FitQuality, SolverResult, StageResult, jsonable, load_params
+from .uncertainty import Uncertainty
+from .verdict import FitWarning
+
+__all__ = ["DEFAULT_METHOD", "METHODS", "METHOD_ALIASES", "Calibration", "CalibrationError", "FitQuality", "FitWarning",
+           "Prediction", "SolverResult", "StageResult", "Uncertainty", "calibrate", "canonical_method", "jsonable",
+           "load_params", "predict"]

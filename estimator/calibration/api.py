@@ -1,0 +1,310 @@
+"""Calibrate the soil from one cycle: :func:`calibrate`, returning a :class:`~.result.Calibration`.
+
+Methods
+-------
+``"varpro"`` (alias ``"default"``, the default)
+    Our method (:mod:`wheelloader.estimator.calibration.varpro`): variable projection on
+    the model's linear structure, a global grid over ``(phi, delta, n)``,
+    analytic-Jacobian bounded least squares, optional warm start; with
+    ``regularize=True`` the MAP estimate under a weak prior (mid-range or
+    warm start, bound range / sqrt(12); noise per effective sample from the
+    residual autocorrelation) resolves directions the cycle leaves undetermined.
+``"single-stage"``, ``"multi-stage"`` (aliases ``"single"``, ``"multi"``)
+    The paper's baselines (:mod:`wheelloader.estimator.calibration.paper_methods`),
+    L-BFGS-B with finite differences, as in Section III.
+
+Fit quality: :mod:`wheelloader.estimator.calibration.result`; fit verdict:
+:mod:`wheelloader.estimator.calibration.verdict`.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from ..cyclelog import CycleLog
+from ..errors import CalibrationError, ParameterError
+from ..force_model import DEFAULT_OPTIONS, FLAG_TENSION, ModelOptions, soil_forces
+from ..kinematics import DEFAULT_SLOPE_WINDOW, ContactState
+from ..soil import PARAMETER_NAMES, SoilParams, as_soil, validate_bounds
+from ..soil_vector import SOIL_VECTOR_NAMES as FIT_NAMES
+from ..soil_vector import soil_from_vector, soil_vector, vector_bounds
+from .fitmodel import MIN_SAMPLES, FitData
+from .paper_methods import fit_multi_stage, fit_single_stage
+from .result import Calibration, FitQuality, StageResult
+from .uncertainty import analyse
+from .varpro import fit_varpro
+from .verdict import assess
+
+#: Calibration methods, by what they are.
+METHODS: tuple[str, ...] = ("varpro", "single-stage", "multi-stage")
+#: Other accepted names of the methods (case-insensitive): ``"default"`` is the varpro method.
+METHOD_ALIASES: dict[str, str] = {"default": "varpro", "single": "single-stage", "multi": "multi-stage"}
+#: The method :func:`calibrate` uses unless told otherwise.
+DEFAULT_METHOD = "varpro"
+#: Largest number of in-soil samples a calibration fits. A longer log (about 3 hours of digging at 60 Hz,
+#: or a log sampled far faster than the forces change) is fitted on a uniform subsample, every k-th
+#: in-soil sample, and ``settings["decimation"]`` says so; memory then stays bounded (about 1.5 kB per
+#: fitted sample at the peak, plus the log itself). The predicted forces cover every sample.
+MAX_FIT_SAMPLES = 200_000
+#: Samples per block when the fitted model's forces are evaluated along the whole log.
+FORCE_CHUNK = 200_000
+
+_log = logging.getLogger(__name__)
+
+
+def canonical_method(method: str) -> str:
+    """The name in :data:`METHODS` of a method or alias; :class:`CalibrationError` if unknown."""
+    key = method.strip().lower() if isinstance(method, str) else None
+    if key in METHODS:
+        return key
+    if key in METHOD_ALIASES:
+        return METHOD_ALIASES[key]
+    raise CalibrationError(f"unknown calibration method {method!r}; choose one of {list(METHODS)} "
+                           f"(aliases {sorted(METHOD_ALIASES)})")
+
+
+# ------------------------------------------------------------ calibrate
+def _coerce_initial(initial: Any) -> SoilParams | None:
+    if initial is None:
+        return None
+    if isinstance(initial, Calibration):
+        return initial.params
+    try:
+        return as_soil(initial)
+    except ParameterError as exc:
+        raise CalibrationError(f"initial: {exc}") from None
+
+
+def calibrate(
+    cycle: CycleLog,
+    method: str = DEFAULT_METHOD,
+    initial: Calibration | SoilParams | dict | str | None = None,
+    bounds: dict[str, tuple[float, float]] | None = None,
+    *,
+    lam: float = 0.5,
+    sigma: float = 3.0,
+    grid: tuple[int, int, int] = (9, 9, 8),
+    n_starts: int = 3,
+    max_iter: int | None = None,
+    options: ModelOptions = DEFAULT_OPTIONS,
+    slope_window: float = DEFAULT_SLOPE_WINDOW,
+    min_samples: int = MIN_SAMPLES,
+    regularize: bool = False,
+) -> Calibration:
+    """Calibrate the eight soil parameters from one cycle.
+
+    Parameters
+    ----------
+    cycle : CycleLog
+        The measured cycle (path, F_T, F_N, pile at the start, bucket).
+    method : str
+        ``"varpro"`` (our variable-projection method; alias ``"default"``),
+        ``"single-stage"`` or ``"multi-stage"`` (the paper's, Section III).
+    initial : Calibration, SoilParams, dict or str, optional
+        Warm start: the previous cycle's result. The varpro method refines
+        it as one more start (besides its grid search); the paper's methods
+        start from it instead of the mid-range guess. Its share of k_c/b in
+        K is kept when K is split into k_c, k_phi.
+    bounds : dict, optional
+        ``name -> (lower, upper)`` for some of the eight parameters; the
+        others keep the paper's bounds (eq 19j). Equal bounds fix a parameter.
+    lam : float
+        Weight lambda of F_T in eq 19a (default 0.5; the multi-stage method
+        uses its own stage weights).
+    sigma : float
+        Stage-2 Gaussian filter standard deviation [samples] (multi-stage).
+    grid : tuple of int
+        Grid sizes over (phi, delta, n) (varpro method).
+    n_starts : int
+        Grid local minima refined (varpro method).
+    max_iter : int, optional
+        Iteration limit: L-BFGS-B ``maxiter`` per stage for the paper's
+        methods (default 1000, as the paper); residual evaluations per
+        refinement for the varpro method (default 100).
+    options : ModelOptions
+        Force-model options.
+    slope_window : float
+        Half-width of the local slope chord [m].
+    min_samples : int
+        Smallest number of in-soil samples accepted.
+    regularize : bool
+        Varpro method only: after the exact least-squares fit, take the MAP
+        estimate under a weak prior (mean ``initial`` or the mid-range of the
+        bounds, standard deviation range / sqrt(12)) with the noise per
+        independent sample estimated from the residuals' autocorrelation
+        (:mod:`wheelloader.estimator.calibration.varpro`, step 6).
+
+    Returns
+    -------
+    Calibration
+
+    Raises
+    ------
+    CalibrationError
+        Unknown method, bad bounds or initial guess, NaN forces, too few
+        samples, or no sample in soil.
+    """
+    method = canonical_method(method)
+    if not isinstance(cycle, CycleLog):
+        raise CalibrationError(f"cycle must be a CycleLog, got {type(cycle).__name__}")
+    try:
+        bnds = validate_bounds({} if bounds is None else bounds)
+    except ParameterError as exc:
+        raise CalibrationError(str(exc)) from None
+    if not (isinstance(lam, (int, float)) and 0.0 <= lam <= 1.0):
+        raise CalibrationError(f"lam must be in [0, 1], got {lam!r}")
+    if not (isinstance(sigma, (int, float)) and math.isfinite(sigma) and sigma >= 0.0):
+        raise CalibrationError(f"sigma must be a finite number of samples >= 0, got {sigma!r}")
+    if max_iter is not None and not (isinstance(max_iter, int) and max_iter >= 1):
+        raise CalibrationError(f"max_iter must be a positive integer, got {max_iter!r}")
+    if not (isinstance(grid, (tuple, list)) and len(grid) == 3
+            and all(isinstance(g, (int, np.integer)) and not isinstance(g, bool) and g >= 1 for g in grid)):
+        raise CalibrationError(f"grid must be three positive integers (points over phi, delta, n), got {grid!r}")
+    if not (isinstance(n_starts, int) and not isinstance(n_starts, bool) and n_starts >= 1):
+        raise CalibrationError(f"n_starts must be a positive integer, got {n_starts!r}")
+    if not (isinstance(min_samples, int) and not isinstance(min_samples, bool) and min_samples >= 1):
+        raise CalibrationError(f"min_samples must be a positive integer, got {min_samples!r}")
+    if not isinstance(regularize, bool):
+        raise CalibrationError(f"regularize must be True or False, got {regularize!r}")
+    if method == "multi-stage" and sigma > len(cycle):
+        # gaussian_filter1d's kernel spans 8 sigma: a sigma of 1e9 samples asked for 60 GiB
+        raise CalibrationError(f"sigma = {sigma:g} samples is wider than the cycle ({len(cycle)} samples); "
+                               "the stage-2 filter needs sigma <= the number of samples")
+    prior = _coerce_initial(initial)
+    bucket = cycle.bucket
+    b = bucket.edge_thickness
+    state = cycle.contact_state(slope_window)
+    data = FitData.from_state(state, cycle.tangential, cycle.normal, bucket, options, min_samples)
+    lo, hi = vector_bounds(bnds, b)
+    settings: dict[str, Any] = {"lambda": lam}
+    stride = -(-len(data) // MAX_FIT_SAMPLES)
+    if stride > 1:
+        _log.warning("calibrate: %d in-soil samples exceed MAX_FIT_SAMPLES = %d; fitting every %d-th sample",
+                     len(data), MAX_FIT_SAMPLES, stride)
+        settings["decimation"] = {"stride": stride, "in_soil_samples": len(data), "max_fit_samples": MAX_FIT_SAMPLES}
+        data = data.every(stride)
+    _log.info("calibrate: method %s on %d in-soil samples of %d", method, len(data), len(cycle))
+
+    t0 = time.perf_counter()
+    stages: list[StageResult] = []
+    njev = 0
+    if method == "varpro":
+        settings.update(grid=list(grid), n_starts=n_starts, max_nfev=max_iter or 100, regularize=regularize)
+        x0 = None if prior is None else soil_vector(prior, b)
+        fit = fit_varpro(data, lo, hi, lam, x0, tuple(int(g) for g in grid), n_starts, max_iter or 100,
+                          regularize=regularize)
+        if fit.prior is not None:
+            settings["prior"] = {"mean": fit.prior.mean, "scale": fit.prior.scale, "nu": fit.prior.nu,
+                                 "autocorrelation_time": fit.tau, "exact_fit": fit.exact,
+                                 "exact_fit_cost": fit.exact_cost}
+        x = fit.x
+        nfev, njev = fit.evaluations.nfev, fit.evaluations.njev
+        success = fit.success and fit.status > 0
+        status, message = fit.status, fit.message
+        if fit.status == 0:
+            message = f"did not converge: {fit.message}"
+        stages.append(_stage("grid", data, fit.grid_best, lam, fit.grid_time, int(np.prod(grid)), True,
+                             f"best of {int(np.prod(grid))} grid points (projected cost {fit.grid_cost:.4g})"))
+        stages.append(_stage("refine", data, x, lam, fit.refine_time, sum(r.nfev for r in fit.refinements),
+                             success, f"{len(fit.refinements)} start(s); best: {message}"))
+    else:
+        maxiter = max_iter or 1000
+        if method == "single-stage":
+            pf = fit_single_stage(data, bnds, prior, maxiter)
+        else:
+            settings["sigma"] = sigma
+            pf = fit_multi_stage(data, bnds, prior, sigma, cycle.normal, maxiter)
+        theta = pf.theta
+        x = soil_vector(theta, b)
+        nfev = sum(s.nfev for s in pf.stages)
+        success = all(s.success for s in pf.stages)
+        failed = [s for s in pf.stages if not s.success]
+        status = failed[0].status if failed else 0
+        message = "; ".join(f"{s.name}: {s.message}" for s in pf.stages)
+        if failed:
+            message = "did not converge: " + message
+        settings.update(maxiter=maxiter, initial_guess="given" if prior is not None else "mid-range of bounds")
+        for s in pf.stages:
+            stages.append(_paper_stage(s, data, b))
+    time_s = time.perf_counter() - t0
+    _log.info("calibrate: %s fit in %.2f s (%d model evaluations)", method, time_s, nfev)
+
+    # Soil parameters: the paper's methods estimate k_c, k_phi directly; varpro splits K.
+    if method == "varpro":
+        soil = soil_from_vector(x, b, bnds, prior)
+    else:
+        soil = SoilParams.from_array(np.clip(pf.theta, [bnds[k][0] for k in PARAMETER_NAMES],
+                                             [bnds[k][1] for k in PARAMETER_NAMES]))
+    pred_t, pred_n, flags = _forces_along(soil, state, bucket, options)
+    in_soil = np.zeros(len(cycle), dtype=bool)
+    in_soil[data.index] = True
+    quality = FitQuality.from_forces(data.y_t, data.y_n, pred_t[data.index], pred_n[data.index])
+    f_t, f_n, jt, jn = data.forces_and_jacobian(x)
+    wt, wn = math.sqrt(lam), math.sqrt(1.0 - lam)
+    resid = np.concatenate([wt * (f_t - data.y_t), wn * (f_n - data.y_n)])
+    jac = np.vstack([wt * jt, wn * jn])
+    unc = analyse(jac, resid, x, lo, hi, float(np.mean(np.hypot(data.y_t, data.y_n))))
+    cost = float(0.5 * np.sum((f_t - data.y_t) ** 2) + 0.5 * np.sum((f_n - data.y_n) ** 2))
+    tension = int(np.count_nonzero(flags[data.index] & FLAG_TENSION))
+    warnings = assess(success=bool(success), obs_t=data.y_t, obs_n=data.y_n, pred_t=pred_t[data.index],
+                      pred_n=pred_n[data.index], percent_r=quality.percent_r, names=FIT_NAMES, values=x,
+                      lower=lo, upper=hi)
+    return Calibration(soil, method, float(x[5]), cost, bool(success), int(status), message, int(nfev), int(njev),
+                       time_s, quality, stages, unc, prior, bnds, pred_t, pred_n, in_soil, tension, settings, warnings)
+
+
+def _forces_along(soil: SoilParams, state: ContactState, bucket, options: ModelOptions):
+    """``(F_T, F_N, flags)`` of the model along the whole log, in blocks of :data:`FORCE_CHUNK` samples."""
+    n = len(state)
+    if n <= FORCE_CHUNK:
+        f = soil_forces(soil, state, bucket, options)
+        return f.tangential, f.normal, f.flags
+    f_t, f_n, flags = np.empty(n), np.empty(n), np.empty(n, dtype=np.int64)
+    for s in range(0, n, FORCE_CHUNK):
+        sl = slice(s, min(s + FORCE_CHUNK, n))
+        load = None if state.measured_load is None else np.asarray(state.measured_load)[sl]
+        part = ContactState(state.depth[sl], state.rho[sl], state.alpha[sl], state.blade_length[sl],
+                            state.fill_volume[sl], load)
+        f = soil_forces(soil, part, bucket, options)
+        f_t[sl], f_n[sl], flags[sl] = f.tangential, f.normal, f.flags
+    return f_t, f_n, flags
+
+
+def _stage(name: str, data: FitData, x: np.ndarray, lam: float, time_s: float, nfev: int, success: bool,
+           message: str) -> StageResult:
+    f_t, f_n, _ = data.forces(x)
+    q = FitQuality.from_forces(data.y_t, data.y_n, f_t, f_n)
+    cost = float(lam * np.sum((f_t - data.y_t) ** 2) + (1 - lam) * np.sum((f_n - data.y_n) ** 2))
+    params = {n: float(v) for n, v in zip(FIT_NAMES, x, strict=True)}
+    return StageResult(name, params, cost, {"F_T": [q.rmse_t, q.percent_t], "F_N": [q.rmse_n, q.percent_n],
+                                           "F_R": [q.rmse_r, q.percent_r]}, time_s, nfev, success, message)
+
+
+def _paper_stage(stage, data: FitData, b: float) -> StageResult:
+    """Per-stage RMSE as the paper's Table 3: stage 1 and 3 on F_T, stage 2 on the FEE force F."""
+    params = {n: float(v) for n, v in zip(stage.names, stage.x, strict=True)}
+    rmse: dict[str, list[float]] = {}
+    if stage.name == "stage 2":
+        obs, pred = stage.extra["observed"], stage.extra["prediction"]
+        filt = stage.extra["filtered"]
+        r = float(np.sqrt(np.mean((obs - pred) ** 2)))
+        rf = float(np.sqrt(np.mean((filt - pred) ** 2)))
+        scale = float(np.mean(np.abs(obs)))
+        rmse["F"] = [r, 100.0 * r / scale if scale > 0 else float("inf")]
+        rmse["F_filtered"] = [rf, 100.0 * rf / scale if scale > 0 else float("inf")]
+    elif stage.name in ("stage 1", "stage 3"):
+        pred = stage.extra["prediction"]
+        r = float(np.sqrt(np.mean((data.y_t - pred) ** 2)))
+        scale = float(np.mean(np.abs(data.y_t)))
+        rmse["F_T"] = [r, 100.0 * r / scale if scale > 0 else float("inf")]
+    else:
+        x = stage.x
+        f_t, f_n, _ = data.forces(soil_vector(x, b))
+        q = FitQuality.from_forces(data.y_t, data.y_n, f_t, f_n)
+        rmse = {"F_T": [q.rmse_t, q.percent_t], "F_N": [q.rmse_n, q.percent_n], "F_R": [q.rmse_r, q.percent_r]}
+    return StageResult(stage.name, params, stage.cost, rmse, stage.time_s, stage.nfev, stage.success, stage.message)

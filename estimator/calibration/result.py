@@ -1,0 +1,306 @@
+"""Result types of the calibration: :class:`Calibration` (public), its :class:`FitQuality` and
+:class:`StageResult`, and :class:`SolverResult`, the one result type of the internal solvers in SciPy's
+:class:`~scipy.optimize.OptimizeResult` style; plus :func:`load_params` and :func:`jsonable`.
+
+Fit quality (same definition for every method)
+----------------------------------------------
+RMSE of F_T, F_N and F_R = sqrt(F_T^2 + F_N^2) over the **in-soil samples**
+(depth > 0 to the surface at the start of the cycle; out of soil every
+method predicts exactly zero, so those samples would only dilute the
+figure), in N, and as a percentage of the **mean observed magnitude** of the
+same component over the same samples: ``100 * RMSE_X / mean(|X_obs|)``.
+The cost is eq 19a with lambda = 0.5 over the same samples.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.optimize import OptimizeResult
+
+from ..errors import ParameterError
+from ..soil import SoilParams, as_soil
+from ..soil_vector import SOIL_VECTOR_NAMES as FIT_NAMES
+from .uncertainty import Uncertainty
+from .verdict import FitWarning
+
+
+class SolverResult(OptimizeResult):
+    """Outcome of one internal solver run: a ``dict`` with attribute access, like SciPy's results.
+
+    Every solver sets the common keys below; solver-specific keys are documented with the solver
+    (:func:`~wheelloader.estimator.calibration.varpro.refine`,
+    :func:`~wheelloader.estimator.calibration.varpro.fit_varpro`, the paper methods of
+    :mod:`~wheelloader.estimator.calibration.paper_methods`).
+
+    Attributes
+    ----------
+    x : numpy.ndarray
+        Solution.
+    cost : float
+        Objective at ``x`` (each solver says which).
+    success : bool
+        Whether the solver reports convergence.
+    status : int
+        Solver status code (SciPy's).
+    message : str
+        Solver message.
+    nfev, njev, nit : int
+        Model evaluations, Jacobian evaluations, iterations.
+    time_s : float
+        Wall time [s].
+    """
+
+    def __init__(self, x: Any, cost: float, success: bool, status: int, message: str, nfev: int, njev: int = 0,
+                 nit: int = 0, time_s: float = 0.0, **extra: Any) -> None:
+        super().__init__(x=np.asarray(x, dtype=float), cost=float(cost), success=bool(success), status=int(status),
+                         message=str(message), nfev=int(nfev), njev=int(njev), nit=int(nit), time_s=float(time_s),
+                         **extra)
+
+
+# ----------------------------------------------------------------- quality
+@dataclass(frozen=True)
+class FitQuality:
+    """RMSE of F_T, F_N, F_R over the in-soil samples [N] and in % of the mean observed magnitude."""
+
+    rmse_t: float
+    rmse_n: float
+    rmse_r: float
+    percent_t: float
+    percent_n: float
+    percent_r: float
+    samples: int
+
+    @classmethod
+    def from_forces(cls, obs_t, obs_n, pred_t, pred_n) -> FitQuality:
+        """Quality of a prediction on the given (in-soil) samples."""
+        obs_t, obs_n, pred_t, pred_n = (np.asarray(v, float) for v in (obs_t, obs_n, pred_t, pred_n))
+        obs_r, pred_r = np.hypot(obs_t, obs_n), np.hypot(pred_t, pred_n)
+        out = []
+        for o, p in ((obs_t, pred_t), (obs_n, pred_n), (obs_r, pred_r)):
+            out.append(float(np.sqrt(np.mean((o - p) ** 2))))
+        pct = []
+        for o, r in zip((obs_t, obs_n, obs_r), out, strict=True):
+            scale = float(np.mean(np.abs(o)))
+            pct.append(100.0 * r / scale if scale > 0 else float("inf"))
+        return cls(*out, *pct, int(obs_t.size))
+
+    def to_dict(self) -> dict[str, Any]:
+        """``{"F_T": [N, %], "F_N": [...], "F_R": [...], "samples": n}``."""
+        return {"F_T": [self.rmse_t, self.percent_t], "F_N": [self.rmse_n, self.percent_n],
+                "F_R": [self.rmse_r, self.percent_r], "samples": self.samples}
+
+    def describe(self) -> str:
+        """One line: RMSE in N and %."""
+        return (f"RMSE F_T {self.rmse_t:.1f} N ({self.percent_t:.2f} %), F_N {self.rmse_n:.1f} N "
+                f"({self.percent_n:.2f} %), F_R {self.rmse_r:.1f} N ({self.percent_r:.2f} %) over {self.samples} "
+                "in-soil samples")
+
+
+@dataclass(frozen=True)
+class StageResult:
+    """One stage of a calibration (per-stage parameters, fit, time)."""
+
+    name: str
+    parameters: dict[str, float]
+    cost: float
+    rmse: dict[str, list[float]]
+    time_s: float
+    nfev: int
+    success: bool
+    message: str
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serialisable mapping."""
+        return {"name": self.name, "parameters": dict(self.parameters), "cost": self.cost, "rmse": self.rmse,
+                "time_s": self.time_s, "nfev": self.nfev, "success": self.success, "message": self.message}
+
+
+# -------------------------------------------------------------- result
+@dataclass(eq=False)
+class Calibration:
+    """Result of :func:`calibrate` (pickle-able; JSON via :meth:`to_dict` / :meth:`save_json`).
+
+    Attributes
+    ----------
+    params : SoilParams
+        Calibrated soil. ``k_c``/``k_phi`` are a documented split of the
+        identified ``K`` (see :attr:`sinkage_modulus` and :attr:`uncertainty`).
+    method : str
+        ``"varpro"``, ``"single-stage"`` or ``"multi-stage"``.
+    sinkage_modulus : float
+        Identified ``K = k_c / b + k_phi`` [N/m^(n+2)] (eq 15).
+    cost : float
+        Eq 19a with lambda = 0.5 at ``params`` over the in-soil samples [N^2].
+    success, status, message
+        Convergence of the optimiser(s); ``success=False`` whenever a stage
+        stopped on an iteration/evaluation limit or failed.
+    nfev, njev : int
+        Model evaluations (parameter sets at which forces were computed,
+        counting every grid point and every finite-difference probe) and
+        analytic Jacobian evaluations.
+    time_s : float
+        Wall time of the optimisation [s] (excludes kinematics and the
+        uncertainty analysis).
+    quality : FitQuality
+        RMSE on the training cycle (module docstring).
+    stages : list of StageResult
+        Per-stage parameters, RMSE and timings.
+    uncertainty : Uncertainty
+        Covariance, standard errors and identifiability.
+    initial : SoilParams or None
+        Initial guess / warm start used.
+    bounds : dict
+        Bounds of the eight parameters.
+    predicted_tangential, predicted_normal : numpy.ndarray
+        Model forces along the whole cycle [N].
+    in_soil : numpy.ndarray
+        Boolean mask of the samples used.
+    tension_samples : int
+        In-soil samples where the FEE force is clamped at 0 at ``params``.
+    settings : dict
+        Method settings (lambda, sigma, grid, ...).
+    warnings : list of FitWarning
+        Why the data may not have determined the soil (forces near zero,
+        constant or implausible forces, large error, little variation
+        explained, parameters on bounds, too few samples in soil, no
+        convergence); see :mod:`wheelloader.estimator.calibration.verdict`.
+        Empty for a trustworthy fit.
+    """
+
+    params: SoilParams
+    method: str
+    sinkage_modulus: float
+    cost: float
+    success: bool
+    status: int
+    message: str
+    nfev: int
+    njev: int
+    time_s: float
+    quality: FitQuality
+    stages: list[StageResult]
+    uncertainty: Uncertainty
+    initial: SoilParams | None
+    bounds: dict[str, tuple[float, float]]
+    predicted_tangential: np.ndarray = field(repr=False)
+    predicted_normal: np.ndarray = field(repr=False)
+    in_soil: np.ndarray = field(repr=False)
+    tension_samples: int = 0
+    settings: dict[str, Any] = field(default_factory=dict)
+    warnings: list[FitWarning] = field(default_factory=list)
+
+    @property
+    def trustworthy(self) -> bool:
+        """True when no :attr:`warnings` fired: the data could determine the soil (``success`` is separate)."""
+        return not self.warnings
+
+    @property
+    def identifiability(self) -> dict[str, Any]:
+        """The identifiability report (see :mod:`wheelloader.estimator.calibration.uncertainty`)."""
+        return self.uncertainty.to_dict()
+
+    @property
+    def std_errors(self) -> dict[str, float]:
+        """Standard errors of :data:`FIT_NAMES` (NaN for parameters on a bound)."""
+        return {n: float(v) for n, v in zip(FIT_NAMES, self.uncertainty.std_errors, strict=True)}
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serialisable ``{"soil": {8 params}, "calibration": {...}}`` (the params.json format)."""
+        return {
+            "soil": self.params.to_dict(),
+            "calibration": {
+                "method": self.method,
+                "sinkage_modulus_K": self.sinkage_modulus,
+                "cost": self.cost,
+                "success": self.success,
+                "trustworthy": self.trustworthy,
+                "warnings": [w.to_dict() for w in self.warnings],
+                "status": self.status,
+                "message": self.message,
+                "nfev": self.nfev,
+                "njev": self.njev,
+                "time_s": self.time_s,
+                "rmse": self.quality.to_dict(),
+                "rmse_definition": "over in-soil samples; % = 100 * RMSE / mean(|observed|) of the same component",
+                "stages": [s.to_dict() for s in self.stages],
+                "identifiability": self.uncertainty.to_dict(),
+                "initial": None if self.initial is None else self.initial.to_dict(),
+                "bounds": {k: list(v) for k, v in self.bounds.items()},
+                "tension_samples": self.tension_samples,
+                "settings": self.settings,
+            },
+        }
+
+    def save_json(self, path: str | Path) -> Path:
+        """Write :meth:`to_dict` as strict JSON to ``path`` (NaN and infinities become ``null``)."""
+        path = Path(path)
+        path.write_text(json.dumps(jsonable(self.to_dict()), indent=1, allow_nan=False))
+        return path
+
+    def summary(self) -> str:
+        """Multi-line human-readable summary."""
+        flag = "converged" if self.success else "NOT CONVERGED"
+        verdict = "trustworthy" if self.trustworthy else "NOT TRUSTWORTHY"
+        lines = [f"method {self.method}: {flag} ({self.message}); {self.time_s * 1e3:.1f} ms, "
+                 f"{self.nfev} model evaluations, cost {self.cost:.4g} N^2",
+                 f"  fit verdict: {verdict}" + "".join(f"\n    warning {w}" for w in self.warnings),
+                 "  " + self.quality.describe(), self.params.describe(),
+                 f"  K = k_c/b + k_phi = {self.sinkage_modulus:.6g} N/m^(n+2)"]
+        for s in self.stages:
+            lines.append(f"  stage {s.name}: {s.time_s * 1e3:.1f} ms, {s.nfev} evals, "
+                         + ", ".join(f"{k} {v[0]:.1f} N ({v[1]:.2f} %)" for k, v in s.rmse.items()))
+        lines.append("identifiability:")
+        lines.append(self.uncertainty.describe())
+        if self.tension_samples:
+            lines.append(f"  note: the FEE force is clamped at 0 on {self.tension_samples} samples")
+        return "\n".join(lines)
+
+
+def jsonable(obj: Any) -> Any:
+    """``obj`` with NumPy arrays and scalars as lists and numbers, and NaN/infinities as ``None`` (strict JSON)."""
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        return jsonable(obj.item())
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if obj is None or isinstance(obj, (str, int, float, bool)):
+        return obj
+    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
+
+
+def load_params(source: str | Path | dict | Calibration | SoilParams) -> SoilParams:
+    """Soil parameters from a params.json path, a ``{"soil": {...}}`` or bare 8-parameter dict, a preset name,
+    a :class:`Calibration` or :class:`SoilParams`."""
+    if isinstance(source, Calibration):
+        return source.params
+    if isinstance(source, SoilParams):
+        return source
+    if isinstance(source, dict):
+        data = source.get("soil", source) if "soil" in source else source
+        return SoilParams.from_dict(data)
+    path = Path(source)
+    if path.suffix.lower() == ".json" or path.exists():
+        if not path.exists():
+            raise FileNotFoundError(2, "No such file", str(path))
+        try:
+            data = json.loads(path.read_text(encoding="utf-8-sig"))
+        except (json.JSONDecodeError, UnicodeDecodeError, IsADirectoryError) as exc:
+            raise ParameterError(f"{path}: not a valid JSON file ({exc})") from None
+        if not isinstance(data, dict):
+            raise ParameterError(f"{path}: expected a JSON object with the soil parameters")
+        try:
+            return load_params(data)
+        except ParameterError as exc:
+            raise ParameterError(f"{path}: {exc}") from None
+    return as_soil(str(source))
