@@ -34,8 +34,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="Soil-force estimation, simulation and planning for wheel-loader bucket loading.",
     )
     parser.add_argument("--version", action="version", version=f"wheelloader {__version__}")
-    parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv: debug)")
-    parser.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors in the log output")
+    parser.add_argument("-v", "--verbose", action="count", default=0,
+                        help="log the library's progress (calibration stages, DEM runs); -vv: debug detail")
+    parser.add_argument("-q", "--quiet", action="store_true", help="log errors only (no warnings)")
     subparsers = parser.add_subparsers(title="commands", metavar="COMMAND")
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(subparsers)
@@ -43,7 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _configure_logging(verbose: int, quiet: bool) -> None:
-    level = logging.WARNING if quiet else logging.DEBUG if verbose >= 2 else logging.INFO
+    level = logging.ERROR if quiet else {0: logging.WARNING, 1: logging.INFO}.get(verbose, logging.DEBUG)
     logging.basicConfig(level=level, format="%(message)s" if level > logging.DEBUG else "%(name)s: %(message)s",
                         stream=sys.stderr, force=True)
     logging.getLogger("wheelloader").setLevel(level)

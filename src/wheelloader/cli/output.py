@@ -86,10 +86,15 @@ def atomic_output(target: str | Path) -> Iterator[Path]:
     target = Path(target)
     tmp = target.with_name(f".{target.stem}.partial-{os.getpid()}{target.suffix}")
     try:
-        yield tmp
-        if not tmp.exists():
-            raise OSError(f"nothing was written to {target}")
-        os.replace(tmp, target)
+        try:
+            yield tmp
+            if not tmp.exists():
+                raise OSError(f"nothing was written to {target}")
+            os.replace(tmp, target)
+        except OSError as exc:  # name the file the user asked for, not the temporary one
+            if exc.errno is None:
+                raise
+            raise OSError(exc.errno, exc.strerror, str(target)) from exc
     finally:
         tmp.unlink(missing_ok=True)
 
