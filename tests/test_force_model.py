@@ -214,12 +214,15 @@ def _random_path(rng_seed: int, rate: float):
 def test_no_discontinuity_along_smooth_paths(soil, seed):
     """Largest jump between samples shrinks with the sampling rate (60 Hz -> 600 Hz); a jump would not.
 
-    Eq 1 and the non-Bekker part of F_T are Lipschitz along smooth paths: jumps shrink ~10x. The Bekker
-    pressure P ~ d^n (eq 15) is only Hoelder-continuous at entry for n < 1, so its jumps shrink by
-    ~10^-n; F_R is checked against that bound. Down-slopes: ``tests/test_failure_angle.py``.
+    Eq 1, F_N and the non-Bekker part of F_T are Lipschitz along smooth paths: jumps shrink ~10x, and so
+    does F_R without the Bekker term. The Bekker pressure P = K d^n (eq 15) of the continuous depth is
+    continuous by construction but only Hoelder-continuous at entry for n < 1: its jumps shrink by about
+    10^-n, times a factor set by where the samples fall around the entry instant, so for n near its lower
+    bound (0.11: 10^-n = 0.78) no ratio test can tell it from a jump; it is not ratio-tested.
+    Down-slopes: ``tests/test_failure_angle.py``.
     """
     bucket, pile = Bucket(), Pile.trapezoid()
-    jumps = {"fee": [], "t_no_bekker": [], "resultant": []}
+    jumps = {"fee": [], "t_no_bekker": [], "normal": [], "resultant_no_bekker": []}
     for rate in (60.0, 600.0):
         path = _random_path(seed, rate)
         state = contact_state(path.x, path.z, path.blade_angle, pile, bucket)
@@ -227,14 +230,11 @@ def test_no_discontinuity_along_smooth_paths(soil, seed):
         no_bekker = out.tangential - bucket.width * bucket.edge_thickness * out.pressure
         jumps["fee"].append(np.max(np.abs(np.diff(out.fee_force))))
         jumps["t_no_bekker"].append(np.max(np.abs(np.diff(no_bekker))))
-        jumps["resultant"].append(np.max(np.abs(np.diff(out.resultant))))
-    for key in ("fee", "t_no_bekker"):
-        coarse, fine = jumps[key]
+        jumps["normal"].append(np.max(np.abs(np.diff(out.normal))))
+        jumps["resultant_no_bekker"].append(np.max(np.abs(np.diff(np.hypot(no_bekker, out.normal)))))
+    for key, (coarse, fine) in jumps.items():
         if coarse > 1e-6:
             assert fine <= 0.25 * coarse, key
-    coarse, fine = jumps["resultant"]
-    if coarse > 1e-6:
-        assert fine <= min(0.9, 2.0 * 0.1 ** min(soil.n, 1.0)) * coarse
 
 
 @settings(max_examples=100, deadline=None)
