@@ -31,8 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from wheelloader.estimator import SoilParams, as_soil
-from wheelloader.estimator.errors import ParameterError
+from wheelloader.estimator import ParameterError, SoilParams, as_soil
 from wheelloader.estimator.force_model import FLAG_OUT_OF_SOIL
 
 from .config import EnvConfig, RewardWeights, check_relax

@@ -22,11 +22,11 @@ from wheelloader.estimator import (
     PRESET_NAMES,
     Bucket,
     Loader,
+    ParameterError,
     Pile,
     SoilParams,
     as_soil,
 )
-from wheelloader.estimator.errors import ParameterError
 
 from .truth import TruthOptions, as_truth
 

@@ -28,7 +28,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
-from wheelloader.estimator.errors import ParameterError
+from wheelloader.estimator import ParameterError
 
 
 @dataclass(frozen=True)

@@ -34,6 +34,7 @@ from wheelloader.estimator import (
     DEFAULT_OPTIONS,
     GRAVITY,
     ContactState,
+    ParameterError,
     Pile,
     SoilParams,
     as_soil,
@@ -41,7 +42,6 @@ from wheelloader.estimator import (
     soil_forces,
     soil_forces_single,
 )
-from wheelloader.estimator.errors import ParameterError
 from wheelloader.estimator.force_model import FLAG_OUT_OF_SOIL
 from wheelloader.estimator.kinematics import blade_length_in_soil
 
