@@ -50,9 +50,14 @@ from .config import (
     next_pile,
 )
 from .cycle_logs import RECORD_KEYS, CycleHistory, to_cycle_log
-from .truth import TruthOptions, as_truth, stone_decay, stone_size
+from .truth import TruthOptions, as_truth, model_excess, stone_decay, stone_step
 
 __all__ = ["RESET_OPTIONS", "BucketLoadingEnv"]
+
+def _pick(condition: Any, a: Any, b: Any) -> Any:
+    """``where`` for Python scalars."""
+    return a if condition else b
+
 
 #: What the ``soil`` argument accepts (see :func:`~wheelloader.envs.config.parse_soil`).
 SoilArgument = str | SoilParams | SoilRandomization | Mapping[str, Any] | Sequence[str | SoilParams]
@@ -497,15 +502,11 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
                       j: int) -> tuple[float, float]:
         """Add the beyond-model effects of :mod:`wheelloader.envs.truth` (j < 0: no new stone)."""
         tr = self._truth
-        if depth > 0.0:
-            factor = 1.0 + tr.compaction * depth
-            f_t *= factor
-            f_n *= factor
-            f_t += tr.rate_resistance * self.cfg.bucket.width * depth * speed
+        f_t, f_n = model_excess(tr, f_t, f_n, depth, speed, self._bucket.width, where=_pick)
         if j >= 0:
-            self._stone *= self._decay
-            if depth > 0.0 and tr.stone_rate > 0.0 and self._noise_u[j, 0] < tr.stone_rate * dist:
-                self._stone += stone_size(tr, float(self._noise_u[j, 1]))
+            u = self._noise_u[j]
+            self._stone = stone_step(tr, self._stone, depth, dist, u[0], float(u[1]), self._decay, where=_pick,
+                                     log1p=math.log1p)
         return f_t + self._stone, f_n + 0.5 * self._stone
 
     # ------------------------------------------------------------------ observation

@@ -62,7 +62,7 @@ from .config import (
     make_config,
     next_pile,
 )
-from .truth import stone_decay, stone_size
+from .truth import model_excess, stone_decay, stone_step
 
 __all__ = ["STEP_INFO_KEYS", "BucketLoadingVectorEnv"]
 
@@ -285,18 +285,13 @@ class BucketLoadingVectorEnv(VectorEnv):
         return f_t, f_n, flags
 
     def _truth(self, g, rows, f_t, f_n, depth, speed, dist, j, new_stones: bool):
+        """The truth beyond the model (:mod:`.truth`) on the rows' forces (``new_stones``: the step moved)."""
         tr = self.cfg.truth
-        ins = depth > 0.0
-        factor = np.where(ins, 1.0 + tr.compaction * depth, 1.0)
-        f_t = np.where(ins, f_t * factor + tr.rate_resistance * self.cfg.bucket.width * depth * speed, f_t)
-        f_n = np.where(ins, f_n * factor, f_n)
+        f_t, f_n = model_excess(tr, f_t, f_n, depth, speed, self.cfg.bucket.width)
         stone = self._stone[g]
         if new_stones:
-            stone = stone * stone_decay(tr, self.cfg.dt)
-            if tr.stone_rate > 0.0:
-                u = self._noise_u[rows, j]
-                hit = ins & (u[:, 0] < tr.stone_rate * dist)
-                stone = np.where(hit, stone + stone_size(tr, u[:, 1], log1p=np.log1p), stone)
+            u = self._noise_u[rows, j]
+            stone = stone_step(tr, stone, depth, dist, u[:, 0], u[:, 1], stone_decay(tr, self.cfg.dt))
             self._stone[g] = stone
         return f_t + stone, f_n + 0.5 * stone
 
