@@ -164,7 +164,9 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Arguments
 
-    ``gym.make("wheelloader/BucketLoading-v0", **kwargs)`` with
+    ``gym.make("wheelloader/BucketLoading-v0", ...)`` (or ``BucketLoadingEnv(...)``) with
+    the keyword-only arguments (same names and defaults as
+    :func:`~wheelloader.envs.config.make_config`, which validates them):
 
     * ``soil``: hidden soil: preset name (default ``"gravel"``),
       :class:`SoilParams`, parameter dict, ``"random"`` (uniform over the
@@ -191,16 +193,25 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
       slump of steep carved walls), ``cycles_per_episode`` (default 1).
     * ``render_mode``: ``None``, ``"rgb_array"`` or ``"human"``.
 
-    ``reset(options=...)`` accepts ``keep_pile``, ``relax``, ``soil``
-    (``"keep"``, ``"resample"`` or a soil, e.g. calibrated parameters),
-    ``truth`` and ``sensor_noise``. Finished cycles are available as
-    :class:`~wheelloader.estimator.cyclelog.CycleLog` through
-    :meth:`last_cycle_log` and :meth:`cycle_logs`.
+    ``reset(options=...)`` accepts ``keep_pile`` (bool), ``relax`` (bool or
+    repose angle in (0, pi/2) rad), ``soil`` (``"keep"``, ``"resample"`` or a
+    soil, e.g. calibrated parameters), ``truth`` and ``sensor_noise`` (finite,
+    >= 0 N); anything else raises :class:`ParameterError` naming the option
+    (:func:`~wheelloader.envs.bookkeeping.parse_reset_options`, shared with
+    the batched env). Finished cycles are available as
+    :class:`~wheelloader.estimator.CycleLog` through :meth:`last_cycle_log`
+    and :meth:`cycle_logs`; :attr:`cycle_ends` says why each ended.
+
+    The step's work, reward terms and cycle-end rule are those of
+    :mod:`wheelloader.envs.bookkeeping`, the same functions the batched env,
+    :func:`~wheelloader.planner.verify_plan` and the planner's NLP use.
 
     ## Version History
 
     * v0: initial version. Before the first release the end-of-cycle rule
-      gained the opt-in ``exit_min_fill`` (default 0: the first-exit rule).
+      gained the opt-in ``exit_min_fill`` (default 0: the first-exit rule);
+      reset options are validated strictly (``keep_pile`` must be a bool);
+      the dynamics did not change.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 60}

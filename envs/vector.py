@@ -86,9 +86,19 @@ class BucketLoadingVectorEnv(VectorEnv):
     max_episode_steps : int
         Truncation limit per sub-env (``gym.make_vec`` passes the registered one).
     render_mode : str or None
-        ``"rgb_array"`` draws sub-env 0.
+        ``"rgb_array"``: :meth:`render` returns one frame per sub-env.
     **kwargs
-        As for the single env (``cycles_per_episode`` must be 1).
+        The single env's keyword arguments (``cycles_per_episode`` must be 1).
+
+    Notes
+    -----
+    ``reset(options=...)`` takes the single env's options (one parser,
+    :func:`~wheelloader.envs.bookkeeping.parse_reset_options`) plus
+    ``reset_mask``. Reset and step ``info`` carry the single env's keys, each
+    with a ``_key`` mask (:data:`STEP_INFO_KEYS`, :data:`RESET_INFO_KEYS`).
+    ``get_attr``, ``set_attr`` and ``call`` give one value per sub-env
+    (:data:`PER_ENV_ATTRIBUTES` differ between sub-envs; other attributes are
+    the batch's). SB3 users: :mod:`wheelloader.envs.sb3`.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 60, "autoreset_mode": AutoresetMode.NEXT_STEP}
