@@ -237,6 +237,12 @@ def pile_toe(pile: Pile) -> float:
     return pile.x0 + pile.spacing * max(first - 1, 0)
 
 
+def nominal_start_pose(pile: Pile) -> tuple[float, float, float]:
+    """The env's default start pose on ``pile``: 0.10 m before the toe, 0.03 m above the ground, blade
+    at -5 deg (x [m], z [m], blade angle [rad])."""
+    return pile_toe(pile) - 0.10, float(pile.heights.min()) + 0.03, math.radians(-5.0)
+
+
 def _as_obj(value: Any, cls: type, name: str):
     if value is None:
         return cls()
@@ -384,9 +390,7 @@ def make_config(
     if len(angles) != 2 or not (-0.5 * math.pi < angles[0] < angles[1] < 0.5 * math.pi):
         raise ParameterError(f"blade_angle_limits must be (low, high) inside (-pi/2, pi/2), got {blade_angle_limits!r}")
     if start_pose is None:
-        toe = pile_toe(pile_obj)
-        ground = float(pile_obj.heights.min())
-        start_pose = (toe - 0.10, ground + 0.03, math.radians(-5.0))
+        start_pose = nominal_start_pose(pile_obj)
     pose = tuple(float(v) for v in start_pose)
     noise = tuple(_non_negative("start_noise", float(v)) for v in start_noise)
     if len(pose) != 3 or len(noise) != 3 or not all(math.isfinite(v) for v in pose):
