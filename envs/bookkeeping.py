@@ -9,12 +9,13 @@ Four places need what happens then, and they must agree:
 * :func:`~wheelloader.planner.verify_plan` (NumPy arrays along a path),
 * the planner's NLP (:mod:`wheelloader.planner.trajectory`, CasADi expressions).
 
-So the formulas live here, and each function takes the few operations that
-differ between backends as keyword arguments, the way
+So the formulas live here, written with arithmetic and comparison operators
+that Python floats, NumPy arrays and (where needed) CasADi expressions share;
+the few operations that differ are keyword arguments, the way
 :func:`~wheelloader.estimator.force_model.log_ngamma_slope` takes ``tan``:
-``cos``, ``sin`` and ``pos`` (``max(v, 0)``, or a smooth version in the NLP).
-:data:`SCALAR` and :data:`NUMPY` hold the two exact sets; the NLP passes
-``casadi.cos``, ``casadi.sin`` and its smooth positive part.
+``cos`` and ``sin`` (NumPy's by default; the single env passes ``math``'s,
+the NLP CasADi's) and ``pos`` (``max(v, 0)``: :func:`exact_pos` by default,
+a smooth version in the NLP).
 
 Also here: the cycle-end rule (:func:`cycle_progress`, :func:`cycle_done`) and
 the parser of ``reset(options=...)`` shared by both envs
@@ -31,8 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from wheelloader.estimator import SoilParams, as_soil
-from wheelloader.estimator.errors import ParameterError
+from wheelloader.estimator import ParameterError, SoilParams, as_soil
 from wheelloader.estimator.force_model import FLAG_OUT_OF_SOIL
 
 from .config import EnvConfig, RewardWeights, check_relax
@@ -42,34 +42,11 @@ from .truth import as_truth
 RESET_OPTIONS: tuple[str, ...] = ("keep_pile", "relax", "soil", "truth", "sensor_noise")
 
 
-# ------------------------------------------------------------------ backends
+# ------------------------------------------------------------------ positive part
 def exact_pos(v: Any) -> Any:
     """``max(v, 0)`` as ``(v + |v|) / 2``: the same expression for Python floats and NumPy arrays, exact
     for finite values (``v + v`` and halving are exact in binary floating point), without a branch."""
     return 0.5 * (v + abs(v))
-
-
-@dataclasses.dataclass(frozen=True)
-class Backend:
-    """The operations the bookkeeping needs from a backend.
-
-    Attributes
-    ----------
-    cos, sin : callable
-        Trigonometric functions of the backend.
-    pos : callable
-        ``max(v, 0)`` (:func:`exact_pos`; the NLP passes a smooth version).
-    """
-
-    cos: Callable[[Any], Any]
-    sin: Callable[[Any], Any]
-    pos: Callable[[Any], Any] = exact_pos
-
-
-#: Python floats (the single env's fast path: ``math`` functions, as NumPy's are slow on scalars).
-SCALAR = Backend(math.cos, math.sin)
-#: NumPy arrays (the batched env, :func:`~wheelloader.planner.verify_plan`).
-NUMPY = Backend(np.cos, np.sin)
 
 
 # ------------------------------------------------------------------ energy
@@ -97,7 +74,7 @@ def step_work(f_t: Any, f_n: Any, dx: Any, dz: Any, blade_angle: Any, load_weigh
     load_weight : same type
         Weight of the soil in the bucket at the step's end, W_load [N].
     cos, sin : callable, keyword-only
-        The backend's trigonometric functions (default NumPy's; :data:`SCALAR` has ``math``'s).
+        The backend's trigonometric functions (default NumPy's; ``math``'s are much faster on floats).
     pos : callable, optional, keyword-only
         The backend's ``max(v, 0)``; default :func:`exact_pos` (floats and NumPy arrays). The NLP passes a
         smooth one.

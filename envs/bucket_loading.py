@@ -16,14 +16,15 @@ from wheelloader.estimator import (
     DEFAULT_OPTIONS,
     GRAVITY,
     Bucket,
+    CycleLog,
     Loader,
+    ParameterError,
     Pile,
     SoilParams,
     SurfaceCarver,
     contact_single,
     soil_forces_single,
 )
-from wheelloader.estimator.errors import ParameterError
 
 from .bookkeeping import (
     RESET_OPTIONS,
@@ -48,9 +49,15 @@ from .config import (
     make_config,
     next_pile,
 )
-from .truth import TruthOptions, as_truth, stone_decay, stone_size
+from .cycle_logs import RECORD_KEYS, CycleHistory, to_cycle_log
+from .truth import TruthOptions, as_truth, model_excess, stone_decay, stone_step
 
 __all__ = ["RESET_OPTIONS", "BucketLoadingEnv"]
+
+def _pick(condition: Any, a: Any, b: Any) -> Any:
+    """``where`` for Python scalars."""
+    return a if condition else b
+
 
 #: What the ``soil`` argument accepts (see :func:`~wheelloader.envs.config.parse_soil`).
 SoilArgument = str | SoilParams | SoilRandomization | Mapping[str, Any] | Sequence[str | SoilParams]
@@ -157,7 +164,9 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ## Arguments
 
-    ``gym.make("wheelloader/BucketLoading-v0", **kwargs)`` with
+    ``gym.make("wheelloader/BucketLoading-v0", ...)`` (or ``BucketLoadingEnv(...)``) with
+    the keyword-only arguments (same names and defaults as
+    :func:`~wheelloader.envs.config.make_config`, which validates them):
 
     * ``soil``: hidden soil: preset name (default ``"gravel"``),
       :class:`SoilParams`, parameter dict, ``"random"`` (uniform over the
@@ -184,16 +193,25 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
       slump of steep carved walls), ``cycles_per_episode`` (default 1).
     * ``render_mode``: ``None``, ``"rgb_array"`` or ``"human"``.
 
-    ``reset(options=...)`` accepts ``keep_pile``, ``relax``, ``soil``
-    (``"keep"``, ``"resample"`` or a soil, e.g. calibrated parameters),
-    ``truth`` and ``sensor_noise``. Finished cycles are available as
-    :class:`~wheelloader.estimator.cyclelog.CycleLog` through
-    :meth:`last_cycle_log` and :meth:`cycle_logs`.
+    ``reset(options=...)`` accepts ``keep_pile`` (bool), ``relax`` (bool or
+    repose angle in (0, pi/2) rad), ``soil`` (``"keep"``, ``"resample"`` or a
+    soil, e.g. calibrated parameters), ``truth`` and ``sensor_noise`` (finite,
+    >= 0 N); anything else raises :class:`ParameterError` naming the option
+    (:func:`~wheelloader.envs.bookkeeping.parse_reset_options`, shared with
+    the batched env). Finished cycles are available as
+    :class:`~wheelloader.estimator.CycleLog` through :meth:`last_cycle_log`
+    and :meth:`cycle_logs`; :attr:`cycle_ends` says why each ended.
+
+    The step's work, reward terms and cycle-end rule are those of
+    :mod:`wheelloader.envs.bookkeeping`, the same functions the batched env,
+    :func:`~wheelloader.planner.verify_plan` and the planner's NLP use.
 
     ## Version History
 
     * v0: initial version. Before the first release the end-of-cycle rule
-      gained the opt-in ``exit_min_fill`` (default 0: the first-exit rule).
+      gained the opt-in ``exit_min_fill`` (default 0: the first-exit rule);
+      reset options are validated strictly (``keep_pile`` must be a bool);
+      the dynamics did not change.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 60}
@@ -248,7 +266,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         self._soil: SoilParams | None = None
         self._start_pile: Pile = self.cfg.pile
         self._carver: SurfaceCarver | None = None
-        self._cycles: list[dict[str, Any]] = []
+        self._cycles = CycleHistory()
         self.max_logged_cycles = 20
         self._seed: int | None = None
         self._record: dict[str, list] | None = None
@@ -321,8 +339,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         self._beta: float | None = None
         self._energy_soil = self._energy_payload = 0.0
         self._cycle_t = 0
-        self._record = {k: [] for k in ("t", "x", "z", "blade_angle", "F_T", "F_N", "fill", "true_F_T",
-                                        "true_F_N", "flags")}
+        self._record = {k: [] for k in RECORD_KEYS}
         depth, rho, alpha, lt = contact_single(pile, self._x, self._z, self._th, cfg.bucket.floor_length,
                                                cfg.slope_window)
         self._depth, self._rho, self._alpha, self._lt = depth, rho, alpha, lt
@@ -496,15 +513,11 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
                       j: int) -> tuple[float, float]:
         """Add the beyond-model effects of :mod:`wheelloader.envs.truth` (j < 0: no new stone)."""
         tr = self._truth
-        if depth > 0.0:
-            factor = 1.0 + tr.compaction * depth
-            f_t *= factor
-            f_n *= factor
-            f_t += tr.rate_resistance * self.cfg.bucket.width * depth * speed
+        f_t, f_n = model_excess(tr, f_t, f_n, depth, speed, self._bucket.width, where=_pick)
         if j >= 0:
-            self._stone *= self._decay
-            if depth > 0.0 and tr.stone_rate > 0.0 and self._noise_u[j, 0] < tr.stone_rate * dist:
-                self._stone += stone_size(tr, float(self._noise_u[j, 1]))
+            u = self._noise_u[j]
+            self._stone = stone_step(tr, self._stone, depth, dist, u[0], float(u[1]), self._decay, where=_pick,
+                                     log1p=math.log1p)
         return f_t + self._stone, f_n + 0.5 * self._stone
 
     # ------------------------------------------------------------------ observation
@@ -534,47 +547,29 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         self._record = None
         if rec is None or len(rec["t"]) < 2:
             return
-        entry = {
-            "record": {k: np.asarray(v, dtype=np.int64 if k == "flags" else float) for k, v in rec.items()},
-            "pile": self._start_pile, "pile_after": self._carver.pile(), "soil": self._soil,
-            "reason": reason, "seed": self._seed, "cycle": self._cycle_count,
-            "energy_soil": self._energy_soil, "energy_payload": self._energy_payload,
-        }
-        self._cycles.append(entry)
-        del self._cycles[:-self.max_logged_cycles]
+        self._cycles.add(rec, self.max_logged_cycles, pile=self._start_pile, pile_after=self._carver.pile(),
+                         soil=self._soil, reason=reason, seed=self._seed, cycle=self._cycle_count,
+                         energy_soil=self._energy_soil, energy_payload=self._energy_payload)
+
+    @property
+    def cycle_ends(self) -> tuple[str, ...]:
+        """Why each kept finished cycle ended (``"exit"``, ``"stall"`` or ``"reset"``), oldest first."""
+        return self._cycles.ends
 
     def episode_record(self, index: int = -1, current: bool = False) -> dict[str, Any]:
         """Raw arrays of a finished cycle (``index`` into the kept cycles) or of the current one.
 
-        Keys: ``t, x, z, blade_angle`` (path), ``F_T, F_N`` (measured), ``true_F_T, true_F_N``
-        (noise-free plant forces), ``fill`` [m^3], ``flags``.
+        Keys (:data:`~wheelloader.envs.cycle_logs.RECORD_KEYS`): ``t, x, z, blade_angle`` (path),
+        ``F_T, F_N`` (measured), ``fill`` [m^3], ``true_F_T, true_F_N`` (noise-free plant forces), ``flags``.
         """
         if current:
             if self._record is None:
                 raise ParameterError("no cycle in progress")
             return {k: np.asarray(v) for k, v in self._record.items()}
-        if not self._cycles:
-            raise ParameterError("no finished cycle yet")
-        return dict(self._cycles[index]["record"])
+        return self._cycles.record(index)
 
-    def _to_cycle_log(self, entry: dict[str, Any]):
-        from wheelloader.estimator.cyclelog import CycleLog  # lazy: written by the estimator package
-        from wheelloader.estimator.paths import BucketPath
-
-        rec = entry["record"]
-        path = BucketPath(rec["t"], rec["x"], rec["z"], rec["blade_angle"], name=f"env cycle {entry['cycle']}")
-        metadata = {
-            "source": "wheelloader.envs.BucketLoadingEnv", "true_soil": entry["soil"].to_dict(),
-            "seed": entry["seed"], "cycle": entry["cycle"], "end": entry["reason"],
-            "energy_soil": entry["energy_soil"], "energy_payload": entry["energy_payload"],
-            "env": self.cfg.to_dict(),
-        }
-        return CycleLog(path=path, tangential=rec["F_T"], normal=rec["F_N"], pile=entry["pile"],
-                        bucket=self.cfg.bucket, fill_volume=rec["fill"], pile_after=entry["pile_after"],
-                        metadata=metadata)
-
-    def last_cycle_log(self):
-        """The most recent finished cycle as a :class:`~wheelloader.estimator.cyclelog.CycleLog`.
+    def last_cycle_log(self) -> CycleLog:
+        """The most recent finished cycle as a :class:`~wheelloader.estimator.CycleLog`.
 
         Forces are the measured (noisy) ones; ``pile`` is the surface at the
         start of the cycle, ``pile_after`` the carved one, ``fill_volume`` the
@@ -583,11 +578,11 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         """
         if not self._cycles:
             raise ParameterError("no finished cycle yet: step until termination (or reset) first")
-        return self._to_cycle_log(self._cycles[-1])
+        return to_cycle_log(self._cycles[-1], self.cfg)
 
-    def cycle_logs(self) -> list:
+    def cycle_logs(self) -> list[CycleLog]:
         """All kept finished cycles (at most ``max_logged_cycles``), oldest first, as CycleLogs."""
-        return [self._to_cycle_log(e) for e in self._cycles]
+        return [to_cycle_log(e, self.cfg) for e in self._cycles]
 
     # ------------------------------------------------------------------ twin
     def make_twin(self, soil: SoilParams | str | dict | None = None) -> BucketLoadingEnv:

@@ -11,24 +11,27 @@ from __future__ import annotations
 import math
 import numbers
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 import numpy as np
 
 from wheelloader.estimator import (
-    PAPER_BOUNDS,
-    PARAMETER_NAMES,
-    PRESET_NAMES,
     Bucket,
     Loader,
+    ParameterError,
     Pile,
     SoilParams,
     as_soil,
 )
-from wheelloader.estimator.errors import ParameterError
 
+from .soils import SoilRandomization, SoilSpec, drift_soil, parse_soil
 from .truth import TruthOptions, as_truth
+
+__all__ = ["BASE_OBS_NAMES", "BASE_OBS_UNITS", "DEFAULT_BLADE_ANGLE_LIMITS", "DEFAULT_LOOKAHEAD", "DEFAULT_START_NOISE",
+           "NOISE_CHUNK", "REWARD_TERMS", "EnvConfig", "RewardWeights", "SoilRandomization", "SoilSpec",
+           "as_reward_weights", "check_relax", "choose_soil", "draw_noise_chunk", "draw_start_pose", "drift_soil",
+           "make_config", "next_pile", "nominal_start_pose", "parse_pile", "parse_soil", "pile_toe"]
 
 #: Noise values are drawn in chunks of this many steps (one RNG call per chunk).
 NOISE_CHUNK = 256
@@ -106,108 +109,6 @@ def as_reward_weights(value: RewardWeights | Mapping[str, float] | None) -> Rewa
     raise ParameterError(f"reward_weights must be a RewardWeights or a dict, got {type(value).__name__}")
 
 
-# ------------------------------------------------------------------ soil
-@dataclass(frozen=True)
-class SoilRandomization:
-    """A distribution of hidden soils for domain randomisation.
-
-    Parameters
-    ----------
-    base : SoilParams or str
-        Soil whose parameters are used where ``ranges`` says nothing.
-    ranges : dict
-        ``name -> (low, high)`` in SI units: the parameter is drawn uniformly.
-    choices : tuple of str or SoilParams
-        If given, each reset first picks one of these soils uniformly as the
-        base (then ``ranges`` apply).
-    """
-
-    base: SoilParams | str = "gravel"
-    ranges: Mapping[str, tuple[float, float]] = field(default_factory=dict)
-    choices: tuple[SoilParams | str, ...] = ()
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "base", as_soil(self.base))
-        object.__setattr__(self, "choices", tuple(as_soil(c) for c in self.choices))
-        clean: dict[str, tuple[float, float]] = {}
-        for name, pair in dict(self.ranges).items():
-            if name not in PARAMETER_NAMES:
-                raise ParameterError(f"soil range: unknown parameter {name!r}; expected one of {list(PARAMETER_NAMES)}")
-            try:
-                lo, hi = (float(v) for v in pair)
-            except (TypeError, ValueError):
-                raise ParameterError(f"soil range {name!r} must be a pair (low, high), got {pair!r}") from None
-            if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
-                raise ParameterError(f"soil range {name!r} must be finite with low <= high, got {(lo, hi)!r}")
-            clean[name] = (lo, hi)
-        object.__setattr__(self, "ranges", clean)
-        # Validate the corners now rather than at the first reset.
-        self.base.replace(**{k: v[0] for k, v in clean.items()})
-        self.base.replace(**{k: v[1] for k, v in clean.items()})
-
-    def sample(self, rng: np.random.Generator) -> SoilParams:
-        """Draw one soil (uses ``rng`` in a fixed order: choice, then ranges in parameter order)."""
-        base = self.base
-        if self.choices:
-            base = self.choices[int(rng.integers(len(self.choices)))]
-        if not self.ranges:
-            return base
-        names = [n for n in PARAMETER_NAMES if n in self.ranges]
-        u = rng.random(len(names))
-        values = {}
-        for n, ui in zip(names, u, strict=True):
-            lo, hi = self.ranges[n]
-            values[n] = lo + float(ui) * (hi - lo)
-        return base.replace(**values)
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-able description."""
-        return {"base": self.base.to_dict(), "ranges": {k: list(v) for k, v in self.ranges.items()},
-                "choices": [c.to_dict() for c in self.choices]}
-
-
-SoilSpec = SoilParams | SoilRandomization
-
-
-def parse_soil(soil: Any) -> SoilSpec:
-    """Parse the ``soil`` argument of the envs.
-
-    Accepted: a preset name; ``"random"`` (uniform over the presets); a
-    :class:`SoilParams`; a dict of the eight parameters; a dict
-    ``{name: (low, high), ...}`` of ranges (optionally with a ``"base"`` key);
-    a list of presets / soils (uniform choice); a :class:`SoilRandomization`.
-    """
-    if isinstance(soil, (SoilParams, SoilRandomization)):
-        return soil
-    if isinstance(soil, str):
-        if soil.strip().lower() == "random":
-            return SoilRandomization(base=PRESET_NAMES[0], choices=PRESET_NAMES)
-        return as_soil(soil)
-    if isinstance(soil, Mapping):
-        data = dict(soil)
-        if any(isinstance(v, (tuple, list)) for v in data.values()):
-            base = data.pop("base", "gravel")
-            choices = data.pop("choices", ())
-            return SoilRandomization(base=base, ranges=data, choices=tuple(choices))
-        return as_soil(data)
-    if isinstance(soil, Sequence) and soil and all(isinstance(s, (str, SoilParams)) for s in soil):
-        return SoilRandomization(base=as_soil(soil[0]), choices=tuple(soil))
-    raise ParameterError(
-        f"soil must be a preset name, 'random', SoilParams, a parameter dict, a range dict or a list of soils; "
-        f"got {soil!r}"
-    )
-
-
-def drift_soil(soil: SoilParams, drift: float, rng: np.random.Generator) -> SoilParams:
-    """Random-walk drift of every parameter by a factor ``exp(drift * N(0, 1))``, clipped to the paper bounds."""
-    z = rng.standard_normal(len(PARAMETER_NAMES))
-    values = {}
-    for name, zi in zip(PARAMETER_NAMES, z, strict=True):
-        lo, hi = PAPER_BOUNDS[name]
-        values[name] = min(max(getattr(soil, name) * math.exp(drift * float(zi)), lo), hi)
-    return SoilParams(**values)
-
-
 # ------------------------------------------------------------------ pile
 def parse_pile(pile: Any) -> Pile:
     """Parse the ``pile`` argument: ``None`` (default trapezoid), a :class:`Pile`, or a dict
@@ -235,6 +136,12 @@ def pile_toe(pile: Pile) -> float:
     rising = np.nonzero(z > z.min() + 1e-9)[0]
     first = int(rising[0]) if rising.size else 0
     return pile.x0 + pile.spacing * max(first - 1, 0)
+
+
+def nominal_start_pose(pile: Pile) -> tuple[float, float, float]:
+    """The env's default start pose on ``pile``: 0.10 m before the toe, 0.03 m above the ground, blade
+    at -5 deg (x [m], z [m], blade angle [rad])."""
+    return pile_toe(pile) - 0.10, float(pile.heights.min()) + 0.03, math.radians(-5.0)
 
 
 def _as_obj(value: Any, cls: type, name: str):
@@ -384,9 +291,7 @@ def make_config(
     if len(angles) != 2 or not (-0.5 * math.pi < angles[0] < angles[1] < 0.5 * math.pi):
         raise ParameterError(f"blade_angle_limits must be (low, high) inside (-pi/2, pi/2), got {blade_angle_limits!r}")
     if start_pose is None:
-        toe = pile_toe(pile_obj)
-        ground = float(pile_obj.heights.min())
-        start_pose = (toe - 0.10, ground + 0.03, math.radians(-5.0))
+        start_pose = nominal_start_pose(pile_obj)
     pose = tuple(float(v) for v in start_pose)
     noise = tuple(_non_negative("start_noise", float(v)) for v in start_noise)
     if len(pose) != 3 or len(noise) != 3 or not all(math.isfinite(v) for v in pose):

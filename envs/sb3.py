@@ -28,7 +28,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 
-from wheelloader.estimator.errors import ParameterError
+from wheelloader.estimator import ParameterError
 
 try:
     from stable_baselines3.common.vec_env import VecEnv, VecMonitor

@@ -13,8 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from wheelloader.estimator import BucketPath, Loader, default_path
-from wheelloader.estimator.errors import ParameterError
+from wheelloader.estimator import BucketPath, Loader, ParameterError, default_path
 
 
 class PathTracker:

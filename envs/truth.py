@@ -28,7 +28,9 @@ from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
-from wheelloader.estimator.errors import ParameterError
+import numpy as np
+
+from wheelloader.estimator import ParameterError
 
 
 @dataclass(frozen=True)
@@ -96,6 +98,32 @@ def as_truth(value: TruthOptions | Mapping[str, float] | None) -> TruthOptions:
 def stone_decay(options: TruthOptions, dt: float) -> float:
     """Per-step decay factor of a stone spike."""
     return math.exp(-dt / options.stone_duration)
+
+
+def model_excess(options: TruthOptions, f_t: Any, f_n: Any, depth: Any, speed: Any, width: float, *,
+                 where: Callable[[Any, Any, Any], Any] = np.where) -> tuple[Any, Any]:
+    """Effects 1 and 2 on the model forces ``F_T, F_N`` [N] where the tip is in soil (``depth > 0`` [m]):
+    compaction and rate-dependent resistance at tip ``speed`` [m/s] with bucket ``width`` [m].
+
+    ``where(condition, a, b)`` is the backend's select (``numpy.where``, or a conditional for floats).
+    """
+    ins = depth > 0.0
+    factor = 1.0 + options.compaction * depth
+    return (where(ins, f_t * factor + options.rate_resistance * width * depth * speed, f_t),
+            where(ins, f_n * factor, f_n))
+
+
+def stone_step(options: TruthOptions, stone: Any, depth: Any, dist: Any, u_hit: Any, u_size: Any, decay: float, *,
+               where: Callable[[Any, Any, Any], Any] = np.where,
+               log1p: Callable[[Any], Any] = np.log1p) -> Any:
+    """Effect 3 over one step: the stone spike [N] decays by ``decay`` (:func:`stone_decay`), and with the
+    tip in soil a new stone is hit when ``u_hit < stone_rate * dist`` (``dist``: tip travel of the step [m];
+    ``u_hit``, ``u_size``: uniforms in [0, 1)). The spike adds to ``F_T`` and half of it to ``F_N``."""
+    stone = stone * decay
+    if options.stone_rate > 0.0:
+        hit = (depth > 0.0) & (u_hit < options.stone_rate * dist)
+        stone = where(hit, stone + stone_size(options, u_size, log1p=log1p), stone)
+    return stone
 
 
 def stone_size(options: TruthOptions, u: Any, *, log1p: Callable[[Any], Any] = math.log1p) -> Any:

@@ -34,17 +34,16 @@ from wheelloader.estimator import (
     DEFAULT_OPTIONS,
     GRAVITY,
     ContactState,
-    Pile,
+    ParameterError,
     SoilParams,
     as_soil,
     contact_single,
     soil_forces,
     soil_forces_single,
 )
-from wheelloader.estimator.errors import ParameterError
 from wheelloader.estimator.force_model import FLAG_OUT_OF_SOIL
-from wheelloader.estimator.kinematics import blade_length_in_soil
 
+from .batched_surface import BatchedSurfaces
 from .bookkeeping import (
     ResetRequest,
     cycle_done,
@@ -63,7 +62,7 @@ from .config import (
     make_config,
     next_pile,
 )
-from .truth import stone_decay, stone_size
+from .truth import model_excess, stone_decay, stone_step
 
 __all__ = ["STEP_INFO_KEYS", "BucketLoadingVectorEnv"]
 
@@ -87,9 +86,19 @@ class BucketLoadingVectorEnv(VectorEnv):
     max_episode_steps : int
         Truncation limit per sub-env (``gym.make_vec`` passes the registered one).
     render_mode : str or None
-        ``"rgb_array"`` draws sub-env 0.
+        ``"rgb_array"``: :meth:`render` returns one frame per sub-env.
     **kwargs
-        As for the single env (``cycles_per_episode`` must be 1).
+        The single env's keyword arguments (``cycles_per_episode`` must be 1).
+
+    Notes
+    -----
+    ``reset(options=...)`` takes the single env's options (one parser,
+    :func:`~wheelloader.envs.bookkeeping.parse_reset_options`) plus
+    ``reset_mask``. Reset and step ``info`` carry the single env's keys, each
+    with a ``_key`` mask (:data:`STEP_INFO_KEYS`, :data:`RESET_INFO_KEYS`).
+    ``get_attr``, ``set_attr`` and ``call`` give one value per sub-env
+    (:data:`PER_ENV_ATTRIBUTES` differ between sub-envs; other attributes are
+    the batch's). SB3 users: :mod:`wheelloader.envs.sb3`.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 60, "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -116,12 +125,8 @@ class BucketLoadingVectorEnv(VectorEnv):
         self.single_observation_space = spaces.Box(low, high, dtype=np.float32)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self._low64, self._high64 = low.astype(np.float64), high.astype(np.float64)
-        n, m = num_envs, self.cfg.pile.heights.size
-        self._x0, self._sp, self._m = self.cfg.pile.x0, self.cfg.pile.spacing, m
-        self._w = np.full(m, self._sp)
-        self._w[0] = self._w[-1] = 0.5 * self._sp
-        self._h0 = np.empty((n, m))  # start-of-cycle surface (depth)
-        self._h = np.empty((n, m))  # carved surface
+        n = num_envs
+        self._surf = BatchedSurfaces(self.cfg.pile, n)
         self._rngs: list[np.random.Generator | None] = [None] * n
         self._soils: list[SoilParams | None] = [None] * n
         self._groups: list[tuple[SoilParams, np.ndarray | slice]] | None = None
@@ -228,15 +233,14 @@ class BucketLoadingVectorEnv(VectorEnv):
         cfg = self.cfg
         rng = self._rngs[i]
         keep = request.keep_pile
-        carved = Pile(self._x0, self._sp, self._h[i]) if keep and self._soils[i] is not None else None
+        carved = self._surf.pile(i) if keep and self._soils[i] is not None else None
         soil = choose_soil(cfg, self._soils[i], request.soil, rng)
         if soil is not self._soils[i]:
             self._groups = None
         self._soils[i] = soil
         self._gamma[i] = soil.gamma
         pile = next_pile(cfg, carved, keep, request.relax, soil)
-        self._h0[i] = pile.heights
-        self._h[i] = pile.heights
+        self._surf.set(i, pile.heights)
         x, z, th = draw_start_pose(cfg, rng)
         self._x[i], self._z[i], self._th[i] = x, z, th
         self._vx[i] = self._vz[i] = self._om[i] = 0.0
@@ -256,28 +260,7 @@ class BucketLoadingVectorEnv(VectorEnv):
         self._mt[i] = min(max(f_t + cfg.sensor_noise * float(self._noise_n[i, 0, 0]), -r), r)
         self._mn[i] = min(max(f_n + cfg.sensor_noise * float(self._noise_n[i, 0, 1]), -r), r)
 
-    # ------------------------------------------------------------------ geometry helpers
-    def _interp(self, heights: np.ndarray, rows: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """Surface height of ``heights[rows]`` at ``x`` (as Pile.height_at, row-wise; x may be 2-D)."""
-        last = self._m - 1
-        u = np.clip((x - self._x0) / self._sp, 0.0, last)
-        i = u.astype(np.int64)
-        f = u - i
-        base = rows * self._m if x.ndim == 1 else (rows * self._m)[:, None]
-        flat = heights.reshape(-1)
-        za = flat[base + i]
-        return za + f * (flat[base + np.minimum(i + 1, last)] - za)
-
-    def _contact(self, rows: np.ndarray, x: np.ndarray, z: np.ndarray, th: np.ndarray):
-        """(depth, rho, alpha, blade_length, surface height) against the start surfaces (as contact_single)."""
-        w = self.cfg.slope_window
-        h = self._interp(self._h0, rows, np.stack([x + w, x - w, x], axis=1))
-        alpha = np.arctan((h[:, 0] - h[:, 1]) / (2.0 * w))
-        vertical = h[:, 2] - z
-        depth = np.maximum(vertical, 0.0) * np.cos(alpha)
-        rho = alpha - th
-        return depth, rho, alpha, blade_length_in_soil(depth, rho, self.cfg.bucket.floor_length), h[:, 2]
-
+    # ------------------------------------------------------------------ forces
     def _soil_groups(self) -> list[tuple[SoilParams, np.ndarray | slice]]:
         if self._groups is None:
             index: dict[SoilParams, list[int]] = {}
@@ -312,18 +295,13 @@ class BucketLoadingVectorEnv(VectorEnv):
         return f_t, f_n, flags
 
     def _truth(self, g, rows, f_t, f_n, depth, speed, dist, j, new_stones: bool):
+        """The truth beyond the model (:mod:`.truth`) on the rows' forces (``new_stones``: the step moved)."""
         tr = self.cfg.truth
-        ins = depth > 0.0
-        factor = np.where(ins, 1.0 + tr.compaction * depth, 1.0)
-        f_t = np.where(ins, f_t * factor + tr.rate_resistance * self.cfg.bucket.width * depth * speed, f_t)
-        f_n = np.where(ins, f_n * factor, f_n)
+        f_t, f_n = model_excess(tr, f_t, f_n, depth, speed, self.cfg.bucket.width)
         stone = self._stone[g]
         if new_stones:
-            stone = stone * stone_decay(tr, self.cfg.dt)
-            if tr.stone_rate > 0.0:
-                u = self._noise_u[rows, j]
-                hit = ins & (u[:, 0] < tr.stone_rate * dist)
-                stone = np.where(hit, stone + stone_size(tr, u[:, 1], log1p=np.log1p), stone)
+            u = self._noise_u[rows, j]
+            stone = stone_step(tr, stone, depth, dist, u[:, 0], u[:, 1], stone_decay(tr, self.cfg.dt))
             self._stone[g] = stone
         return f_t + stone, f_n + 0.5 * stone
 
@@ -395,9 +373,9 @@ class BucketLoadingVectorEnv(VectorEnv):
         vx, vz, om = (xn - x) / dt, (zn - z) / dt, (thn - th) / dt
         fill0 = self._fill[g].copy()
         spilled0 = self._spilled[g].copy()
-        undo = self._carve(r, x, z, xn, zn)
+        undo = self._carve(r, g, x, z, xn, zn)
         fill = self._fill[g].copy()
-        depth, rho, alpha, lt, h_surf = self._contact(r, xn, zn, thn)
+        depth, rho, alpha, lt, h_surf = self._surf.contact(r, xn, zn, thn, cfg.slope_window, cfg.bucket.floor_length)
         f_t, f_n, flags = self._forces(r, depth, rho, alpha, lt, fill)
         self._k[g] += 1
         k = self._k[g].copy()
@@ -412,15 +390,14 @@ class BucketLoadingVectorEnv(VectorEnv):
         stalled = (f_t > ld.max_push_force) | (f_n > ld.max_lift_force)
         if stalled.any():
             s = np.nonzero(stalled)[0]
-            idx_u, old_u = undo
-            back = np.isin(idx_u // self._m, r[s])
-            self._h.reshape(-1)[idx_u[back]] = old_u[back]
+            self._surf.undo(*undo, r[s])
             fill[s] = fill0[s]
             self._fill[r[s]] = fill0[s]
             self._spilled[r[s]] = spilled0[s]
             xn[s], zn[s], thn[s] = x[s], z[s], th[s]
             vx[s] = vz[s] = om[s] = 0.0
-            d2, rho2, al2, lt2, h2 = self._contact(r[s], x[s], z[s], th[s])
+            d2, rho2, al2, lt2, h2 = self._surf.contact(r[s], x[s], z[s], th[s], cfg.slope_window,
+                                                        cfg.bucket.floor_length)
             h_surf[s] = h2
             ft2, fn2, fl2 = self._forces(r[s], d2, rho2, al2, lt2, fill0[s])
             if truth_on:
@@ -459,40 +436,12 @@ class BucketLoadingVectorEnv(VectorEnv):
                    cycle=np.zeros(r.size, dtype=int))
         return out, terminated
 
-    def _carve(self, r: np.ndarray, xa, za, xb, zb):
-        """Batched SurfaceCarver.cut_segment on rows ``r``; returns (flat indices, old heights) of changed nodes."""
-        x0, sp, m = self._x0, self._sp, self._m
-        lo, hi = np.minimum(xa, xb), np.maximum(xa, xb)
-        i0 = np.maximum(0, np.ceil((lo - x0) / sp - 1e-12).astype(np.int64))
-        i1 = np.minimum(m - 1, np.floor((hi - x0) / sp + 1e-12).astype(np.int64))
-        count = i1 - i0 + 1
-        width_k = int(count.max()) if count.size else 0
-        empty = (np.zeros(0, np.int64), np.zeros(0))
-        if width_k <= 0:
-            return empty
-        cols = i0[:, None] + np.arange(width_k)
-        valid = cols <= i1[:, None]
-        cols_c = np.minimum(cols, m - 1)
-        xi = x0 + cols_c * sp
-        dx = xb - xa
-        flat = dx == 0.0
-        safe = np.where(flat, 1.0, dx)
-        zc = za[:, None] + (zb - za)[:, None] * (xi - xa[:, None]) / safe[:, None]
-        zc = np.where(flat[:, None], np.minimum(za, zb)[:, None], zc)
-        flat_h = self._h.reshape(-1)
-        flat_idx = (r * m)[:, None] + cols_c
-        old = flat_h[flat_idx]
-        cut = valid & (zc < old)
-        if not cut.any():
-            return empty
-        contrib = np.where(cut, self._w[cols_c] * (old - zc), 0.0)
-        area = contrib[:, 0].copy()
-        for k in range(1, width_k):  # node order, as SurfaceCarver sums
-            area += contrib[:, k]
-        idx_u, old_u = flat_idx[cut], old[cut]
-        flat_h[idx_u] = zc[cut]
+    def _carve(self, r: np.ndarray, g: Any, xa, za, xb, zb):
+        """Carve the rows' segments and fill their buckets (the rest spills); returns what undoes the cut."""
+        idx_u, old_u, area = self._surf.carve(r, xa, za, xb, zb)
+        if area is None:
+            return idx_u, old_u
         removed = area * self.cfg.bucket.width
-        g: Any = slice(None) if r.size == self.num_envs else r
         fill = self._fill[g]
         room = np.maximum(0.0, self.cfg.bucket.capacity - fill)
         taken = np.where(removed <= room, removed, room)
@@ -514,7 +463,7 @@ class BucketLoadingVectorEnv(VectorEnv):
         obs[:, 10], obs[:, 11] = self._mt * 1e-3, self._mn * 1e-3
         if look:
             ahead = self._x[:, None] + np.asarray(look)[None, :]
-            obs[:, 12:] = self._interp(self._h, np.arange(n), ahead) - self._z[:, None]
+            obs[:, 12:] = self._surf.height(self._surf.carved, np.arange(n), ahead) - self._z[:, None]
         np.clip(obs, self._low64, self._high64, out=obs)
         return obs.astype(np.float32)
 
@@ -535,8 +484,7 @@ class BucketLoadingVectorEnv(VectorEnv):
     def _render_state(self, i: int) -> dict[str, Any]:
         """What the renderer draws for sub-env ``i`` (as BucketLoadingEnv.render_state)."""
         return {
-            "pile": self.cfg.pile, "start_pile": Pile(self._x0, self._sp, self._h0[i]),
-            "carved": Pile(self._x0, self._sp, self._h[i]),
+            "pile": self.cfg.pile, "start_pile": self._surf.pile(i, carved=False), "carved": self._surf.pile(i),
             "x": float(self._x[i]), "z": float(self._z[i]), "blade_angle": float(self._th[i]),
             "fill": float(self._fill[i]), "capacity": self.cfg.bucket.capacity, "F_T": float(self._mt[i]),
             "F_N": float(self._mn[i]), "floor_length": self.cfg.bucket.floor_length,
@@ -555,7 +503,7 @@ class BucketLoadingVectorEnv(VectorEnv):
             return self._soils[i]
         if name == "np_random":
             return self._rngs[i]
-        return Pile(self._x0, self._sp, self._h0[i].copy())  # start_pile
+        return self._surf.pile(i, carved=False)  # start_pile
 
     def get_attr(self, name: str) -> tuple[Any, ...]:
         """The attribute ``name`` of every sub-env (as ``SyncVectorEnv.get_attr``).

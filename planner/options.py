@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wheelloader.estimator.errors import PlanningError
+from wheelloader.estimator import PlanningError
 
 from .surface import SurfaceGrid
 

@@ -8,8 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from wheelloader.estimator import BucketPath
-from wheelloader.estimator.errors import PlanningError
+from wheelloader.estimator import BucketPath, PlanningError
 
 __all__ = ["Plan"]
 

@@ -14,8 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from wheelloader.estimator import Bucket, BucketPath, Loader, Pile, SoilParams, as_soil
-from wheelloader.estimator.errors import PlanningError
+from wheelloader.estimator import Bucket, BucketPath, Loader, Pile, PlanningError, SoilParams, as_soil
 from wheelloader.estimator.kinematics import DEFAULT_SLOPE_WINDOW
 
 from .casadi_model import soil_vector

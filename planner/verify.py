@@ -16,8 +16,17 @@ from typing import Any
 import numpy as np
 
 from wheelloader.envs.bookkeeping import cycle_done, cycle_progress, outside_validity, step_work
-from wheelloader.estimator import Bucket, BucketPath, Loader, Pile, SoilParams, as_soil, contact_state, soil_forces
-from wheelloader.estimator.errors import PlanningError
+from wheelloader.estimator import (
+    Bucket,
+    BucketPath,
+    Loader,
+    Pile,
+    PlanningError,
+    SoilParams,
+    as_soil,
+    contact_state,
+    soil_forces,
+)
 
 from .options import PlannerOptions
 from .plan import Plan

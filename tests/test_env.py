@@ -383,3 +383,23 @@ def test_grazing_a_thin_layer_ends_the_cycle_only_under_the_first_exit_rule():
     assert _graze_and_rise()["cycle_done"]
     with pytest.raises(ParameterError, match="exit_min_fill"):
         gym.make("wheelloader/BucketLoading-v0", exit_min_fill=1.5)
+
+
+def test_cycle_ends_says_why_kept_cycles_ended():
+    env = gym.make(MAIN_ID, sensor_noise=0.0)
+    env.reset(seed=0)
+    assert env.unwrapped.cycle_ends == ()
+    run_path(env, seed=1)
+    env.reset(seed=2)
+    for _ in range(5):
+        env.step(np.array([0.5, 0.0, 0.0], np.float32))
+    env.reset(seed=3)  # a cycle in progress is kept as ended by "reset"
+    assert env.unwrapped.cycle_ends == ("exit", "reset")
+    assert [log.metadata["end"] for log in env.unwrapped.cycle_logs()] == ["exit", "reset"]
+    stalling = gym.make(MAIN_ID, loader=Loader(max_push_force=2000.0))
+    stalling.reset(seed=0)
+    for _ in range(400):
+        *_, terminated, truncated, _ = stalling.step(np.array([1.0, -0.2, 0.0], np.float32))
+        if terminated or truncated:
+            break
+    assert stalling.unwrapped.cycle_ends == ("stall",)

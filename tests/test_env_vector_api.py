@@ -193,3 +193,17 @@ def test_sb3_adapter_without_stable_baselines3_says_what_to_install():
             "except ImportError as exc:\n    print(exc)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert "wheelloader.envs.sb3 needs stable-baselines3" in out and "wheelloader[rl]" in out
+
+
+def test_step_info_arrays_are_fresh_and_not_shared():
+    """info arrays are not views of the env's state (they keep their values) and no two keys share one."""
+    vec = BucketLoadingVectorEnv(num_envs=4)
+    vec.reset(seed=0)
+    act = np.full((4, 3), 0.5, np.float32)
+    *_, info = vec.step(act)
+    snapshot = {k: v.copy() for k, v in info.items()}
+    for _ in range(5):
+        vec.step(act)
+    for key, value in snapshot.items():
+        np.testing.assert_array_equal(info[key], value, err_msg=key)
+    assert len({id(v) for v in info.values()}) == len(info)
