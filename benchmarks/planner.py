@@ -176,8 +176,8 @@ def run_env(soil_name: str, policy, seed: int, max_steps: int = 2000) -> dict[st
         if terminated or truncated:
             break
     base = env.unwrapped
-    cycles = base._cycles
-    end = cycles[-1]["reason"] if cycles else ("time limit" if truncated else "running")
+    cycles = base.cycle_ends
+    end = cycles[-1] if cycles else ("time limit" if truncated else "running")
     rec = base.episode_record(-1) if cycles else base.episode_record(current=True)
     executed = BucketPath(rec["t"], rec["x"], rec["z"], rec["blade_angle"], name="executed")
     fill = float(info.get("fill_volume", 0.0))

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from typing import Any
 
+from wheelloader.envs.config import nominal_start_pose
 from wheelloader.estimator import Bucket, Loader, Pile
 
 from .trajectory import PlannerOptions, StartState, TrajectoryOptimizer, first_rise
@@ -35,16 +35,10 @@ def cautious_options(options: PlannerOptions, level: int = 1) -> PlannerOptions:
 
 
 def default_start(pile: Pile, cfg: Any = None) -> StartState:
-    """The env's nominal start pose: 0.10 m before the toe, 0.03 m above the ground, blade at -5 deg.
-
-    With an env config ``cfg`` its ``start_pose`` is used instead.
-    """
-    if cfg is not None:
-        x, z, th = cfg.start_pose
-        return StartState(x, z, th)
-    from wheelloader.envs.config import pile_toe
-
-    return StartState(pile_toe(pile) - 0.10, float(pile.heights.min()) + 0.03, math.radians(-5.0))
+    """The env's nominal start pose on ``pile`` (:func:`~wheelloader.envs.config.nominal_start_pose`), or
+    with an env config ``cfg`` its ``start_pose``."""
+    x, z, th = cfg.start_pose if cfg is not None else nominal_start_pose(pile)
+    return StartState(x, z, th)
 
 
 def cycle_duration(pile: Pile, start: StartState) -> float:

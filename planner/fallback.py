@@ -53,7 +53,8 @@ def _kept(pile: Pile, x: np.ndarray, z: np.ndarray, bucket: Bucket,
     (the first exit after loading ``exit_min_fill`` of the bucket, else the path's end)."""
     fill = pile.carve(x, z, bucket.width, bucket.capacity).fill_history
     clearance = z - np.asarray(pile.surface_height(x))
-    end = cycle_end_index(clearance < 0.0, clearance, fill / bucket.capacity, exit_min_fill=exit_min_fill)
+    end = cycle_end_index(clearance < 0.0, clearance, fill / bucket.capacity, exit_min_fill=exit_min_fill, z=z,
+                          crest=float(np.max(pile.heights)))
     end = len(x) - 1 if end is None else end
     return float(fill[end]), end
 
