@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 if os.environ.get("WHEELLOADER_REQUIRE_RL") == "1":  # CI sets this after installing the rl extra: no silent skip
+    import moviepy  # noqa: F401  (in the rl extra, for VecVideoRecorder)
     import stable_baselines3  # noqa: F401
     import torch  # noqa: F401
 else:
@@ -208,7 +209,7 @@ def test_evaluate_policy_runs_without_warnings():
 
 def test_video_recorder_runs_without_warnings(tmp_path):
     """SB3's VecVideoRecorder on the packaged adapter (render_mode="rgb_array"): no warning, a video written."""
-    pytest.importorskip("moviepy", reason="VecVideoRecorder writes with moviepy (pip install moviepy)")
+    pytest.importorskip("moviepy", reason='VecVideoRecorder needs moviepy (rl extra: pip install -e ".[rl]")')
     from stable_baselines3.common.vec_env import VecVideoRecorder
 
     from wheelloader.envs.sb3 import make_sb3_vec_env
