@@ -17,7 +17,11 @@ def _variant(cycle: CycleLog, tangential, normal) -> CycleLog:
 
 
 def test_200_random_cycles_calibrate_and_summarise():
-    """Random in-bounds soils and paths, some scaled x10 or with swapped F_T/F_N columns (7 of 150 crashed)."""
+    """Random in-bounds soils and paths, some scaled x10 or with swapped F_T/F_N columns (7 of 150 crashed).
+
+    Every fourth cycle runs with the default settings, the others with a coarser grid and one start (the
+    crash was in the report after the fit, which every setting reaches), to keep the suite's time down.
+    """
     rng = np.random.default_rng(2013)
     fitted = 0
     for i in range(200):
@@ -27,8 +31,9 @@ def test_200_random_cycles_calibrate_and_summarise():
             cycle = _variant(cycle, 10.0 * cycle.tangential, 10.0 * cycle.normal)
         elif i % 4 == 2:
             cycle = _variant(cycle, cycle.normal, cycle.tangential)
+        cheap = {} if i % 4 == 3 else {"grid": (5, 5, 4), "n_starts": 1}
         try:
-            cal = calibrate(cycle)
+            cal = calibrate(cycle, **cheap)
         except CalibrationError:
             continue  # a clear refusal (e.g. a path that barely enters the soil) is not a crash
         fitted += 1
