@@ -15,6 +15,11 @@ BLAS threads are limited to one (``OPENBLAS_NUM_THREADS=1`` etc., set before
 numpy loads): every solve here is tiny and thread hand-offs only add noise on
 a shared 2-core machine; all methods run under the same setting.
 
+Long logs (issue #13, item 4): ``--long-log 166000 1660000`` instead measures the command line on one
+gravel cycle resampled to that many rows, each run in its own process under ``/usr/bin/time -v``
+(wall time and peak resident memory; ``getrusage`` where GNU time is missing), and writes
+``long_logs.json``.
+
 Run: ``python benchmarks/calibration.py [--out results/calibration]``.
 """
 
@@ -162,6 +167,51 @@ def print_table(results: dict) -> None:
                   f"(median RMSE/floor {v['median_ratio']:.3f}, median time {v['median_time_s'] * 1e3:.1f} ms)")
 
 
+def run_long_logs(rows: list[int], out: Path, seed: int) -> list[dict]:
+    """Time and peak memory of ``wheelloader calibrate`` on resampled long logs (module docstring)."""
+    import re
+    import resource
+    import shutil
+    import subprocess
+
+    import numpy as np
+
+    from wheelloader.estimator import BucketPath, synthetic_cycle
+
+    base = synthetic_cycle("gravel", noise=0.05, seed=seed).path
+    gnu_time = Path("/usr/bin/time").exists() and shutil.which("/usr/bin/time") is not None
+    found = []
+    for n in rows:
+        t = np.linspace(base.t[0], base.t[-1], int(n))
+        path = BucketPath(t, np.interp(t, base.t, base.x), np.interp(t, base.t, base.z),
+                          np.interp(t, base.t, base.blade_angle), name=f"long{n}")
+        log = out / f"long_{n}.csv"
+        synthetic_cycle("gravel", path, noise=0.05, seed=seed + 1).save(log)
+        cmd = [sys.executable, "-m", "wheelloader.cli", "calibrate", str(log), "-o", str(out / f"long_{n}.json"),
+               "--overwrite"]
+        if gnu_time:
+            cmd = ["/usr/bin/time", "-v", *cmd]
+        before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+        t0 = time.perf_counter()
+        proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        wall = time.perf_counter() - t0
+        peak_kb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+        match = re.search(r"Maximum resident set size \(kbytes\): (\d+)", proc.stderr)
+        if match:
+            peak_kb = int(match.group(1))
+        elif peak_kb <= before:
+            peak_kb = None  # getrusage only reports the largest child so far
+        record = {"rows": int(n), "csv_mb": log.stat().st_size / 1e6, "exit_code": proc.returncode,
+                  "wall_s": wall, "peak_rss_mb": None if peak_kb is None else peak_kb / 1024.0,
+                  "decimated": "MAX_FIT_SAMPLES" in proc.stderr}
+        found.append(record)
+        note = ", fit decimated" if record["decimated"] else ""
+        print(f"long log {n:>9} rows ({record['csv_mb']:.0f} MB): exit {proc.returncode}, {wall:.1f} s, "
+              f"peak {record['peak_rss_mb'] or float('nan'):.0f} MB{note}")
+        log.unlink()
+    return found
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark and write ``results.json`` and plots into ``--out``."""
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
@@ -174,7 +224,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--noise", type=float, default=0.05, help="white noise, fraction of peak F_R")
     parser.add_argument("--vibration", type=float, default=0.02, help="5-15 Hz vibration, fraction of peak F_R")
     parser.add_argument("--robustness", type=int, default=50, help="random cycles for the robustness part (0: skip)")
+    parser.add_argument("--long-log", type=int, nargs="+", metavar="ROWS",
+                        help="only measure 'wheelloader calibrate' on long logs of these row counts")
     args = parser.parse_args(argv)
+    if args.long_log:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        found = run_long_logs(args.long_log, out, args.seed)
+        (out / "long_logs.json").write_text(json.dumps({"benchmark": "calibration-long-logs", "machine": machine_info(),
+                                                        "runs": found}, indent=1))
+        return 0
 
     import numpy as np
 

@@ -200,10 +200,13 @@ def soil_forces_single(soil: SoilParams, depth: float, rho: float, alpha: float,
         rho, flags = options.rho_min, flags | FLAG_RHO_LOW
     elif rho > rho_hi:
         rho, flags = rho_hi, flags | FLAG_RHO_HIGH
+    alpha_lo = options.slope_margin - phi  # validity.alpha_lower_limit
+    if alpha_lo < -options.alpha_max:
+        alpha_lo = -options.alpha_max
     if alpha > options.alpha_max:
         alpha, flags = options.alpha_max, flags | FLAG_ALPHA_CLAMPED
-    elif alpha < -min(phi - options.slope_margin, options.alpha_max):  # validity.alpha_lower_limit
-        alpha, flags = -min(phi - options.slope_margin, options.alpha_max), flags | FLAG_ALPHA_CLAMPED
+    elif alpha < alpha_lo:
+        alpha, flags = alpha_lo, flags | FLAG_ALPHA_CLAMPED
     beta = optimal_beta_scalar(alpha, rho, phi, delta, options, beta_guess)
     s_beta = math.sin(rho + delta + beta + phi)
     sin_beta = math.sin(beta)

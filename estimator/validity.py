@@ -149,6 +149,16 @@ def clamp_details(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTION
 
 
 def clamp_angles(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS):
-    """Clamp (alpha, rho) into the validity domain; return ``(alpha_eff, rho_eff, flags)``."""
-    c = clamp_details(alpha, rho, phi, delta, options)
-    return c.alpha, c.rho, c.flags
+    """Clamp (alpha, rho) into the validity domain; return ``(alpha_eff, rho_eff, flags)``.
+
+    The same limits as :func:`clamp_details` (:func:`rho_upper_limit`, :func:`alpha_lower_limit`), in the
+    fewest array operations (the force model's hot path).
+    """
+    alpha = np.asarray(alpha, dtype=float)
+    rho = np.asarray(rho, dtype=float)
+    rho_hi = rho_upper_limit(phi, delta, options)
+    alpha_lo = alpha_lower_limit(phi, options)
+    flags = np.where(rho < options.rho_min, FLAG_RHO_LOW, 0)
+    flags |= np.where(rho > rho_hi, FLAG_RHO_HIGH, 0)
+    flags |= np.where((alpha > options.alpha_max) | (alpha < alpha_lo), FLAG_ALPHA_CLAMPED, 0)
+    return np.clip(alpha, alpha_lo, options.alpha_max), np.clip(rho, options.rho_min, rho_hi), flags.astype(np.int64)
