@@ -10,8 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wheelloader.estimator import Pile
-from wheelloader.estimator.kinematics import blade_length_in_soil
+from wheelloader.estimator import Pile, blade_length_in_soil
 
 __all__ = ["BatchedSurfaces"]
 

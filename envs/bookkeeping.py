@@ -32,8 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from wheelloader.estimator import ParameterError, SoilParams, as_soil
-from wheelloader.estimator.force_model import FLAG_OUT_OF_SOIL
+from wheelloader.estimator import FLAG_OUT_OF_SOIL, ParameterError, SoilParams, as_soil
 
 from .config import EnvConfig, RewardWeights, check_relax
 from .truth import as_truth

@@ -32,6 +32,7 @@ from gymnasium.vector.utils import batch_space
 
 from wheelloader.estimator import (
     DEFAULT_OPTIONS,
+    FLAG_OUT_OF_SOIL,
     GRAVITY,
     ContactState,
     ParameterError,
@@ -41,7 +42,6 @@ from wheelloader.estimator import (
     soil_forces,
     soil_forces_single,
 )
-from wheelloader.estimator.force_model import FLAG_OUT_OF_SOIL
 
 from .batched_surface import BatchedSurfaces
 from .bookkeeping import (

@@ -8,6 +8,8 @@ logs. Calibration and prediction are the subpackage
 """
 
 from .calibration import (
+    DEFAULT_METHOD,
+    METHOD_ALIASES,
     METHODS,
     Calibration,
     FitQuality,
@@ -16,6 +18,7 @@ from .calibration import (
     StageResult,
     Uncertainty,
     calibrate,
+    canonical_method,
     load_params,
     predict,
 )
@@ -32,23 +35,23 @@ from .force_model import (
     soil_forces,
     soil_forces_single,
 )
-from .kinematics import ContactState, contact_single, contact_state
+from .kinematics import DEFAULT_SLOPE_WINDOW, ContactState, blade_length_in_soil, contact_single, contact_state
 from .machine import Bucket, Loader
 from .paths import BucketPath, bezier_path, default_path, paper_paths, polyline_path
 from .pile import CarveResult, Pile, SurfaceCarver
 from .soil import PAPER_BOUNDS, PARAMETER_NAMES, PRESET_NAMES, SoilParams, as_soil, preset
 from .soil_vector import SOIL_VECTOR_NAMES, soil_from_vector, soil_vector
 from .synthetic import random_bezier_path, random_soil, synthetic_cycle
+from .validity import FLAG_OUT_OF_SOIL
 
 __all__ = [
-    "CycleLog", "load_path_csv", "save_path_csv",
-    "METHODS", "Calibration", "FitQuality", "FitWarning", "Prediction", "StageResult", "Uncertainty", "calibrate",
-    "load_params", "predict", "random_bezier_path", "random_soil", "synthetic_cycle",
-    "Bucket", "BucketPath", "CalibrationError", "CarveResult", "ContactState", "CycleLogError",
-    "DEFAULT_OPTIONS", "FLAG_NAMES", "GRAVITY", "Loader", "ModelOptions", "PAPER_BOUNDS", "PARAMETER_NAMES",
-    "PRESET_NAMES", "ParameterError", "Pile", "PlanningError", "SOIL_VECTOR_NAMES", "SoilForces", "SoilParams",
-    "SurfaceCarver", "soil_from_vector", "soil_vector",
-    "WheelloaderError", "as_soil", "bearing_factors", "bezier_path", "contact_single", "contact_state",
-    "default_path", "optimal_beta", "paper_paths", "polyline_path", "preset", "soil_forces",
-    "soil_forces_single",
+    "Bucket", "BucketPath", "Calibration", "CalibrationError", "CarveResult", "ContactState", "CycleLog",
+    "CycleLogError", "DEFAULT_METHOD", "DEFAULT_OPTIONS", "DEFAULT_SLOPE_WINDOW", "FLAG_NAMES", "FLAG_OUT_OF_SOIL",
+    "FitQuality", "FitWarning", "GRAVITY", "Loader", "METHODS", "METHOD_ALIASES", "ModelOptions", "PAPER_BOUNDS",
+    "PARAMETER_NAMES", "PRESET_NAMES", "ParameterError", "Pile", "PlanningError", "Prediction", "SOIL_VECTOR_NAMES",
+    "SoilForces", "SoilParams", "StageResult", "SurfaceCarver", "Uncertainty", "WheelloaderError", "as_soil",
+    "bearing_factors", "bezier_path", "blade_length_in_soil", "calibrate", "canonical_method", "contact_single",
+    "contact_state", "default_path", "load_params", "load_path_csv", "optimal_beta", "paper_paths", "polyline_path",
+    "predict", "preset", "random_bezier_path", "random_soil", "save_path_csv", "soil_forces", "soil_forces_single",
+    "soil_from_vector", "soil_vector", "synthetic_cycle",
 ]

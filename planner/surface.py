@@ -20,9 +20,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from wheelloader.estimator import Pile
+from wheelloader.estimator import DEFAULT_SLOPE_WINDOW, Pile
 from wheelloader.estimator.errors import PlanningError
-from wheelloader.estimator.kinematics import DEFAULT_SLOPE_WINDOW
 
 
 @dataclass(frozen=True)

@@ -14,8 +14,16 @@ from typing import Any
 
 import numpy as np
 
-from wheelloader.estimator import Bucket, BucketPath, Loader, Pile, PlanningError, SoilParams, as_soil
-from wheelloader.estimator.kinematics import DEFAULT_SLOPE_WINDOW
+from wheelloader.estimator import (
+    DEFAULT_SLOPE_WINDOW,
+    Bucket,
+    BucketPath,
+    Loader,
+    Pile,
+    PlanningError,
+    SoilParams,
+    as_soil,
+)
 
 from .casadi_model import soil_vector
 from .guess import face_position, first_rise, straight_dig

@@ -76,8 +76,10 @@ def test_paper_method_and_errors(tmp_path, log_csv, capsys):
     assert "exists" in capsys.readouterr().err
     assert main(["calibrate", str(tmp_path / "missing.csv")]) == 2
     assert main(["predict", str(params), str(log_csv), "-o", str(tmp_path / "x.csv"), "--pile", "nope"]) == 2
-    with pytest.raises(SystemExit):
-        main(["calibrate", str(log_csv), "--method", "newton"])
+    capsys.readouterr()
+    assert main(["calibrate", str(log_csv), "--method", "newton", "-o", str(tmp_path / "n.json")]) == 2
+    assert "unknown calibration method 'newton'" in capsys.readouterr().err
+    assert not (tmp_path / "n.json").exists()
 
 
 def test_broken_files_give_clear_errors_not_tracebacks(tmp_path, log_csv, capsys):

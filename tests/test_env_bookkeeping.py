@@ -18,7 +18,7 @@ from wheelloader.envs.bookkeeping import (
     step_work,
 )
 from wheelloader.envs.config import RewardWeights
-from wheelloader.estimator.force_model import FLAG_OUT_OF_SOIL
+from wheelloader.estimator import FLAG_OUT_OF_SOIL
 from wheelloader.planner.verify import cycle_end_index
 
 RNG = np.random.default_rng(0)

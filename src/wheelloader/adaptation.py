@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from wheelloader.estimator import (
+    FLAG_OUT_OF_SOIL,
     BucketPath,
     CycleLog,
     Pile,
@@ -225,7 +226,7 @@ def run_loop(env: Any, strategy: Strategy, cycles: int = 5, seed: int = 0,
         violations = 0
         while not (terminated or truncated):
             obs, _, terminated, truncated, info = env.step(controller(obs))
-            if info["flags"] not in (0, 1) and info["depth"] > 0.0:
+            if int(info["flags"]) & ~FLAG_OUT_OF_SOIL and info["depth"] > 0.0:
                 violations += 1
         log = base.last_cycle_log() if terminated else _finish(env)
         logs.append(log)

@@ -17,11 +17,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from .inputs import PILE_PRESETS, is_cycle_log, load_pile, load_soil, sidecar_of
+from .inputs import PILE_PRESETS, add_strict_flag, check_physical, is_cycle_log, load_pile, load_soil, sidecar_of
 from .output import add_force_flag, atomic_output, check_outputs, write_json
-
-#: Calibration methods offered on the command line ("varpro" is ours; "default" names it too).
-METHOD_CHOICES = ("default", "single-stage", "multi-stage")
 
 
 def register(subparsers: Any) -> None:
@@ -30,8 +27,9 @@ def register(subparsers: Any) -> None:
                               description="Calibrate the soil parameters from one logged cycle (CSV + JSON "
                                           "sidecar); print timing, fit quality and what the cycle determined.")
     p.add_argument("log", help="cycle log CSV (with its JSON sidecar of the same stem)")
-    p.add_argument("--method", default="default", choices=METHOD_CHOICES,
-                   help="calibration method (default: %(default)s, ours; the others are the paper's baselines)")
+    p.add_argument("--method", default="varpro",
+                   help="calibration method: varpro (ours, the default; alias 'default'), single-stage or "
+                        "multi-stage (the paper's baselines; aliases 'single', 'multi')")
     p.add_argument("--initial", help="warm start: params.json of a previous cycle (or a soil preset name)")
     p.add_argument("--sigma", type=float, default=3.0,
                    help="multi-stage stage-2 Gaussian filter sigma [samples] (default: %(default)s)")
@@ -39,6 +37,8 @@ def register(subparsers: Any) -> None:
                    help="also run the other methods and show all side by side (output params: --method's)")
     p.add_argument("-o", "--output", default="params.json", help="output parameter file (default: %(default)s)")
     p.add_argument("--plot", help="write an observed-vs-predicted figure (PNG) like the paper's Figs. 6-7")
+    add_strict_flag(p, "exit with status 1 when the fit is not trustworthy (the data could not determine the "
+                       "soil), 2 when --initial holds parameters outside the physical domain")
     add_force_flag(p)
     p.set_defaults(func=run_calibrate)
 
@@ -52,6 +52,7 @@ def register(subparsers: Any) -> None:
     q.add_argument("--pile", help="pile: JSON file with {\"x\": [...], \"z\": [...]} (or a cycle-log sidecar), "
                                   f"or a preset: {', '.join(PILE_PRESETS)} (default: the log's pile, else trapezoid)")
     q.add_argument("--plot", help="write a figure of the predicted (and observed) forces (PNG)")
+    add_strict_flag(q, "refuse parameters outside the physical domain (exit status 2) instead of warning")
     add_force_flag(q)
     q.set_defaults(func=run_predict)
 
@@ -66,18 +67,18 @@ def _check_sigma(sigma: float, samples: int) -> None:
 
 def run_calibrate(args: argparse.Namespace) -> int:
     """Handler of ``wheelloader calibrate``."""
-    from wheelloader.estimator import CycleLog, calibrate, load_params
+    from wheelloader.estimator import METHODS, CycleLog, calibrate, canonical_method
 
+    method = canonical_method(args.method)
     inputs = [args.log, sidecar_of(args.log), args.initial]
     check_outputs([("-o/--output", args.output), ("--plot", args.plot)], inputs, args.force)
     cycle = CycleLog.load(args.log)
     _check_sigma(args.sigma, len(cycle))
-    initial = load_params(args.initial) if args.initial else None
-    cal = calibrate(cycle, args.method, initial=initial, sigma=args.sigma)
+    initial = check_physical(load_soil(args.initial), "--initial", args.strict) if args.initial else None
+    cal = calibrate(cycle, method, initial=initial, sigma=args.sigma)
     others = []
     if args.compare:
-        others = [calibrate(cycle, m, initial=initial, sigma=args.sigma)
-                  for m in METHOD_CHOICES if m != cal.method]
+        others = [calibrate(cycle, m, initial=initial, sigma=args.sigma) for m in METHODS if m != cal.method]
     print(f"{args.log}: {len(cycle)} samples, {int(cal.in_soil.sum())} in soil")
     print(cal.summary())
     for other in others:
@@ -92,7 +93,10 @@ def run_calibrate(args: argparse.Namespace) -> int:
         with atomic_output(args.plot) as tmp:
             plot_calibration(cycle, [cal, *others], tmp, title=f"calibration of {Path(args.log).name}")
         print(f"figure written to {args.plot}")
-    return 0 if cal.success else 1
+    if not cal.trustworthy:
+        print("the fit is NOT trustworthy: " + "; ".join(w.message for w in cal.warnings)
+              + ("" if args.strict else " (--strict makes this exit status 1)"))
+    return 0 if cal.success and (cal.trustworthy or not args.strict) else 1
 
 
 def run_predict(args: argparse.Namespace) -> int:
@@ -102,7 +106,7 @@ def run_predict(args: argparse.Namespace) -> int:
     path_file = Path(args.path)
     inputs = [args.params, path_file, sidecar_of(path_file), args.pile]
     check_outputs([("-o/--output", args.output), ("--plot", args.plot)], inputs, args.force)
-    soil = load_soil(args.params)
+    soil = check_physical(load_soil(args.params), args.params, args.strict)
     pile = None if args.pile is None else load_pile(args.pile)
     start = time.perf_counter()
     if is_cycle_log(path_file):

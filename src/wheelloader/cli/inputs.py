@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # the estimator (and scipy) is imported only when a command runs
     from wheelloader.estimator import Pile, SoilParams
@@ -74,3 +75,22 @@ def is_cycle_log(path: Path) -> bool:
 def sidecar_of(csv_path: str | Path) -> Path:
     """The JSON sidecar of a cycle-log CSV (same stem)."""
     return Path(csv_path).with_suffix(".json")
+
+
+def add_strict_flag(parser: Any, help_text: str) -> None:
+    """Add ``--strict`` to a subcommand's parser."""
+    parser.add_argument("--strict", action="store_true", help=help_text)
+
+
+def check_physical(soil: SoilParams, source: str, strict: bool) -> SoilParams:
+    """``soil`` unchanged; its parameters outside the physical domain logged as a warning naming
+    ``source``, or with ``strict`` a :class:`ParameterError`."""
+    from wheelloader.estimator import ParameterError
+
+    problems = soil.physical_warnings()
+    if problems:
+        text = f"{source}: parameters outside the physical domain: " + "; ".join(problems)
+        if strict:
+            raise ParameterError(text)
+        logging.getLogger("wheelloader.cli").warning("warning: %s (--strict makes this an error)", text)
+    return soil

@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from .inputs import PILE_PRESETS, load_pile, load_soil
+from .inputs import PILE_PRESETS, add_strict_flag, check_physical, load_pile, load_soil
 from .output import add_force_flag, atomic_output, check_outputs, write_json
 
 #: Summary file written beside the CSV: ``plan.csv`` -> ``plan.summary.json`` (not ``plan.json``, which
@@ -55,6 +55,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("-o", "--output", default="plan.csv", help="output path CSV (default: %(default)s); "
                                                               f"the summary goes beside it as *{SUMMARY_SUFFIX}")
     p.add_argument("--plot", help="write a figure (PNG): path, predicted forces and limits (+ Pareto front)")
+    add_strict_flag(p, "refuse parameters outside the physical domain (exit status 2) instead of warning")
     add_force_flag(p)
     p.set_defaults(func=run_plan)
 
@@ -125,7 +126,7 @@ def run_plan(args: argparse.Namespace) -> int:
     check_outputs([("-o/--output", output), ("summary", summary_path), ("--plot", args.plot)],
                   [args.params, args.pile], args.force)
 
-    soil = load_soil(args.params)
+    soil = check_physical(load_soil(args.params), args.params, args.strict)
     pile = load_pile(args.pile)
     options = PlannerOptions(max_wall_time=args.max_time)
     timing: dict[str, float] = {}
