@@ -187,8 +187,8 @@ def run_long_logs(rows: list[int], out: Path, seed: int) -> list[dict]:
                           np.interp(t, base.t, base.blade_angle), name=f"long{n}")
         log = out / f"long_{n}.csv"
         synthetic_cycle("gravel", path, noise=0.05, seed=seed + 1).save(log)
-        cmd = [sys.executable, "-m", "wheelloader.cli", "calibrate", str(log), "-o", str(out / f"long_{n}.json"),
-               "--overwrite"]
+        cmd = [sys.executable, "-m", "wheelloader.cli", "calibrate", str(log), "-o", str(out / f"long_{n}_params.json"),
+               "--force"]
         if gnu_time:
             cmd = ["/usr/bin/time", "-v", *cmd]
         before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
