@@ -1,4 +1,8 @@
-"""The paper's experiments (Section IV) on the Yade DEM reference data, all methods side by side.
+"""The paper's experiments (Section IV) on a reference data set (Yade DEM or MPM continuum), methods side by side.
+
+``--data`` names the set: ``data/reference`` (the Yade DEM, the default) or the MPM continuum set
+(``data/mpm``, ``python -m wheelloader.references.mpm.generate``). Which plant made it is read from the
+logs' metadata (``source``), and the reference material values come from there too.
 
 Data: ``data/reference`` (``python dem/run.py reference``; see dem/README.md). Every method
 (``default``, ``single-stage``, ``multi-stage``) calibrates on the same filtered training cycle;
@@ -70,7 +74,10 @@ def run(args) -> dict:
         raw = dem.load_reference(name, data)
         return raw, dem.filtered(raw, args.sigma)
 
-    results: dict = {"benchmark": "paper_experiments", "machine": machine_info(), "settings": vars(args),
+    results_plant = plant_name(dem.load_reference("gravel_path1", data))
+
+    results: dict = {"benchmark": "paper_experiments", "plant": results_plant, "machine": machine_info(),
+                     "settings": vars(args),
                      "filter": {"kind": "gaussian", "sigma_s": args.sigma, "mode": "nearest"},
                      "rmse_definition": "F_R RMSE over in-soil samples; % of mean observed |F_R| (same samples)"}
     cals: dict = {}
@@ -138,7 +145,7 @@ def run(args) -> dict:
         if f"{soil}_path1" not in names:
             continue
         raw, filt = load(f"{soil}_path1")
-        table4[soil] = {"dem": DEM_VALUES[soil], "bulk_density_measured": raw.metadata.get("bulk_density")}
+        table4[soil] = {"dem": reference_material(raw, soil), "bulk_density_measured": raw.metadata.get("bulk_density")}
         for method in args.methods:
             cal = cals.get((soil, method)) or calibrate(filt, method)
             cals[(soil, method)] = cal
@@ -168,6 +175,21 @@ def run(args) -> dict:
     results["acceptance"] = acceptance(results)
     results["_cals"] = cals
     return results
+
+
+def plant_name(log) -> str:
+    """``"mpm"`` or ``"yade"`` (the DEM): the plant that made a reference log (its metadata's ``source``)."""
+    return str(log.metadata.get("source", "yade"))
+
+
+def reference_material(log, soil: str) -> dict:
+    """The reference's own material values comparable with FEE parameters: the MPM continuum's from the
+    log's metadata, the DEM's from :data:`DEM_VALUES` (particle friction, target bulk density)."""
+    continuum = log.metadata.get("continuum")
+    if continuum:
+        return {"gamma": continuum["density"], "cohesion": continuum["cohesion"], "phi": continuum["friction_angle"],
+                "delta": continuum["wall_friction_angle"], "adhesion": continuum["adhesion"]}
+    return DEM_VALUES[soil]
 
 
 def acceptance(results: dict) -> list[dict]:
@@ -288,10 +310,14 @@ def plots(results: dict, args, out: Path) -> None:
 
 def report(results: dict, args) -> str:
     f = results["filter"]
-    lines = ["# Paper experiments on the Yade DEM reference data", "",
+    plant = {"mpm": "plane-strain MPM continuum", "yade": "Yade DEM"}.get(results.get("plant"), results.get("plant"))
+    git = results["machine"].get("git") or {}
+    lines = [f"# Paper experiments on the {plant} reference data", "",
+             f"`python benchmarks/paper_experiments.py --data {args.data}` at commit "
+             f"{(git.get('commit') or 'unknown')[:10]}{' (uncommitted changes)' if git.get('dirty') else ''}.", "",
              f"Filter of the reference forces: Gaussian, sigma = {f['sigma_s']} s, mode {f['mode']}. "
              "RMSE of F_R over in-soil samples, N and % of the mean observed |F_R|; "
-             "'filtered' = against the filtered DEM record, 'unfiltered' = against the raw 60 Hz record. "
+             "'filtered' = against the filtered reference record, 'unfiltered' = against the raw 60 Hz record. "
              "All methods calibrate on the filtered record.", "",
              "## Table 3: training on gravel path 1", "",
              "Paper (Table 3, Algoryx data): single-stage F_R 8.6 % in 87.21 s, multi-stage 8.9 % in 47.0 s.", "",
@@ -334,14 +360,20 @@ def report(results: dict, args) -> str:
             lines.append(f"| {m} | " + " | ".join(f"{fmt(r[k]['filtered'])} / {fmt(r[k]['unfiltered'])}"
                                                  for k in ("cycle1", "cycle2_carved_surface",
                                                            "cycle2_initial_surface")) + " |")
-    lines += ["", "## Table 4 / Fig. 10: soils (path 1), parameters next to the DEM material", "",
+    lines += ["", "## Table 4 / Fig. 10: soils (path 1), parameters next to the reference material", "",
               "Paper (Table 4): F_R 9.0 % gravel, 8.6 % modified sand, 15.3 % dirt.", "",
               "| soil | method | gamma [kg/m^3] | C [Pa] | C_a [Pa] | phi [rad] | delta [rad] | K | n | "
               "F_R RMSE filtered | unfiltered |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for soil, r in results["table4"].items():
         d = r["dem"]
-        lines.append(f"| {soil} | DEM material | {d['gamma']:.0f} (measured {r['bulk_density_measured']:.0f}) | "
-                     f"{d['cohesion']:.0f} | - | {d['phi']:.3f} (particle) | - | - | - | - | - |")
+        if "delta" in d:  # a continuum: its own parameters
+            lines.append(f"| {soil} | MPM continuum | {d['gamma']:.0f} | {d['cohesion']:.0f} | {d['adhesion']:.0f} | "
+                         f"{d['phi']:.3f} | {d['delta']:.3f} | - | - | - | - |")
+        else:
+            measured = r["bulk_density_measured"]
+            lines.append(f"| {soil} | DEM material | {d['gamma']:.0f}"
+                         + (f" (measured {measured:.0f})" if measured is not None else "")
+                         + f" | {d['cohesion']:.0f} | - | {d['phi']:.3f} (particle) | - | - | - | - | - |")
         for m in args.methods:
             p = r[m]["params"]
             lines.append(f"| {soil} | {m} | {p['gamma']:.0f} | {p['cohesion']:.0f} | {p['adhesion']:.0f} | "
