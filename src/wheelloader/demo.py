@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from wheelloader.cli.output import write_json
+from wheelloader.provenance import machine_info
 
 DEFAULT_CYCLES = 5
 
@@ -62,6 +63,7 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
         "cycles": {name: [r.to_dict() for r in recs] for name, (recs, _) in results.items()},
         "final_parameters_ours": ours[-1].params,
         "wall_time_s": time.perf_counter() - start,
+        "machine": machine_info(),
         "figures": files,
         "table_markdown": "table.md",
         "table": table,
