@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from .errors import CycleLogError, ParameterError
+from .jsonable import to_jsonable
 from .kinematics import DEFAULT_SLOPE_WINDOW, ContactState, contact_state
 from .machine import Bucket
 from .paths import BucketPath
@@ -151,7 +152,7 @@ class CycleLog:
             "bucket": self.bucket.to_dict(),
             "metadata": self.metadata,
         }
-        sidecar.write_text(json.dumps(meta, indent=1, default=_json_default))
+        sidecar.write_text(json.dumps(to_jsonable(meta), indent=1, allow_nan=False))
         return csv_path
 
     @classmethod
@@ -205,14 +206,6 @@ def save_path_csv(path: BucketPath, csv_path: str | Path, overwrite: bool = Fals
 
 
 # ------------------------------------------------------------------ helpers
-def _json_default(obj: Any) -> Any:
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
-
-
 def write_columns(csv_path: Path, columns: dict[str, np.ndarray]) -> None:
     """Write named columns as CSV with a header row, full float precision (``repr``)."""
     names = list(columns)

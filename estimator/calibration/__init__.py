@@ -20,10 +20,10 @@ Everything public is re-exported from :mod:`wheelloader.estimator`.
 from ..errors import CalibrationError
 from .api import DEFAULT_METHOD, METHOD_ALIASES, METHODS, calibrate, canonical_method
 from .prediction import Prediction, predict
-from .result import Calibration, FitQuality, SolverResult, StageResult, jsonable, load_params
+from .result import Calibration, FitQuality, SolverResult, StageResult, load_params
 from .uncertainty import Uncertainty
 from .verdict import FitWarning
 
 __all__ = ["DEFAULT_METHOD", "METHODS", "METHOD_ALIASES", "Calibration", "CalibrationError", "FitQuality", "FitWarning",
-           "Prediction", "SolverResult", "StageResult", "Uncertainty", "calibrate", "canonical_method", "jsonable",
+           "Prediction", "SolverResult", "StageResult", "Uncertainty", "calibrate", "canonical_method",
            "load_params", "predict"]

@@ -1,6 +1,6 @@
 """Result types of the calibration: :class:`Calibration` (public), its :class:`FitQuality` and
 :class:`StageResult`, and :class:`SolverResult`, the one result type of the internal solvers in SciPy's
-:class:`~scipy.optimize.OptimizeResult` style; plus :func:`load_params` and :func:`jsonable`.
+:class:`~scipy.optimize.OptimizeResult` style; plus :func:`load_params`.
 
 Fit quality (same definition for every method)
 ----------------------------------------------
@@ -15,7 +15,6 @@ The cost is eq 19a with lambda = 0.5 over the same samples.
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,6 +23,7 @@ import numpy as np
 from scipy.optimize import OptimizeResult
 
 from ..errors import ParameterError
+from ..jsonable import to_jsonable
 from ..soil import SoilParams, as_soil
 from ..soil_vector import SOIL_VECTOR_NAMES as FIT_NAMES
 from .uncertainty import Uncertainty
@@ -240,7 +240,7 @@ class Calibration:
     def save_json(self, path: str | Path) -> Path:
         """Write :meth:`to_dict` as strict JSON to ``path`` (NaN and infinities become ``null``)."""
         path = Path(path)
-        path.write_text(json.dumps(jsonable(self.to_dict()), indent=1, allow_nan=False))
+        path.write_text(json.dumps(to_jsonable(self.to_dict()), indent=1, allow_nan=False))
         return path
 
     def summary(self) -> str:
@@ -260,23 +260,6 @@ class Calibration:
         if self.tension_samples:
             lines.append(f"  note: the FEE force is clamped at 0 on {self.tension_samples} samples")
         return "\n".join(lines)
-
-
-def jsonable(obj: Any) -> Any:
-    """``obj`` with NumPy arrays and scalars as lists and numbers, and NaN/infinities as ``None`` (strict JSON)."""
-    if isinstance(obj, dict):
-        return {str(k): jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return jsonable(obj.tolist())
-    if isinstance(obj, np.generic):
-        return jsonable(obj.item())
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if obj is None or isinstance(obj, (str, int, float, bool)):
-        return obj
-    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
 
 
 def load_params(source: str | Path | dict | Calibration | SoilParams) -> SoilParams:
