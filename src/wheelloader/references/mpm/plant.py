@@ -219,7 +219,7 @@ def _carved_pile(pile: Pile, scene: Any, start: np.ndarray, end: np.ndarray, in_
     x_lo, x_hi = scene.soil_x
     z_bed = scene.domain.z_min
     centres, before, _ = surface_columns(start, x_lo, x_hi, scene.spacing, z_bed)
-    _, after, resting = surface_columns(end, x_lo, x_hi, scene.spacing, z_bed)
+    _, after, resting = surface_columns(end, x_lo, x_hi, scene.spacing, z_bed, exclude=in_bucket)
     change = after - before
     xs = pile.x
     inside = (xs >= x_lo) & (xs <= x_hi)

@@ -137,7 +137,7 @@ def bucket_scene(pile: Pile, trajectory: Trajectory, shape: ToolShape, dx: float
 
 
 def surface_columns(positions: np.ndarray, x_lo: float, x_hi: float, spacing: float, z_bed: float,
-                    width: float | None = None, gap: float | None = None
+                    width: float | None = None, gap: float | None = None, exclude: np.ndarray | None = None
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Height of the soil resting on the bed, per column, from the volume of its particles.
 
@@ -161,6 +161,8 @@ def surface_columns(positions: np.ndarray, x_lo: float, x_hi: float, spacing: fl
         Column width [m]; default two spacings.
     gap : float
         Largest vertical gap inside a resting stack [m]; default three spacings.
+    exclude : numpy.ndarray
+        Boolean mask of particles that are never resting (those inside the bucket).
 
     Returns
     -------
@@ -178,6 +180,8 @@ def surface_columns(positions: np.ndarray, x_lo: float, x_hi: float, spacing: fl
     col = np.floor((positions[:, 0] - x_lo) / width).astype(int)
     col = np.clip(col, 0, count - 1)
     order = np.lexsort((positions[:, 1], col))
+    if exclude is not None:
+        order = order[~np.asarray(exclude, dtype=bool)[order]]
     cols = col[order]
     starts = np.flatnonzero(np.r_[True, cols[1:] != cols[:-1]])
     ends = np.r_[starts[1:], len(order)]

@@ -14,7 +14,9 @@ deviatoric log strain scaled onto the cone; a state beyond the apex (tension abo
 returns to the apex.
 
 Tool: plates in a body frame, pose prescribed each step. A grid node within ``contact_band`` cells of a
-plate is in contact with its nearest plate; the normal points from the plate to the node. When the node
+plate (measured normal to it, and within the plate's length: the band has square ends, so a blade
+reaches exactly its own depth) is in contact with its nearest plate; the normal is the plate's normal
+on the node's side. When the node
 moves into the plate (relative normal velocity < 0) its normal velocity is set to the tool's and its
 tangential slip is limited by Coulomb friction plus adhesion: the tangential impulse the plate can apply
 is ``tan(delta) m |v_n| + c_a dx^2 / h dt`` (``c_a`` spread over the nodes of a band ``h`` thick).
@@ -169,10 +171,10 @@ class _Fields:
                             a = plate_a[k]
                             ab = plate_b[k] - a
                             l2 = ab.dot(ab)
-                            t = ti.min(ti.max((q - a).dot(ab) / l2, 0.0), 1.0)
+                            t = (q - a).dot(ab) / l2
                             d = q - (a + t * ab)
                             dist = d.norm()
-                            if dist < best:
+                            if dist < best and 0.0 <= t <= 1.0:
                                 best = dist
                                 if dist > 1e-6 * dx:
                                     nb = d / dist
