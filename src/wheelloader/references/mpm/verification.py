@@ -5,7 +5,7 @@
 * :func:`run_wall`: a frictionless wall against a soil block, at rest (against the elastic / Jaky
   at-rest ratio) and pushed into it (against Rankine's passive pressure, :func:`rankine_passive`);
 * :func:`run_column_collapse`: a granular column collapsing on a rough floor, against the run-out
-  scaling of Lube et al. (2005) and Lajeunesse et al. (2005), :func:`column_runout_scaling`.
+  scaling of Lube et al. (2005), :func:`column_runout_scaling`.
 
 The benchmark ``benchmarks/mpm_verification.py`` runs them and writes the report.
 """
@@ -71,18 +71,21 @@ def at_rest_force(height: float, soil: ContinuumSoil, ratio: float | None = None
     return 0.5 * k0 * soil.density * GRAVITY * height**2
 
 
-def column_runout_scaling(aspect_ratio: float) -> dict[str, float]:
-    """Normalised run-out ``(L_inf - L_0) / L_0`` of a 2-D granular column of ``aspect_ratio`` H0/L0.
+def column_runout_scaling(aspect_ratio: float) -> dict[str, float | str]:
+    """Normalised run-out ``(L_inf - L_0) / L_0`` of a 2-D granular column of ``aspect_ratio`` a = H0/L0.
 
-    Lube et al. (2005, J. Fluid Mech. 2D channel): 1.2 a for a < 1.8, 1.9 a^(2/3) for a > 2.8 (the
-    larger of the two between). Lajeunesse et al. (2005, rectangular channel): about 1.2 a for a < 3
-    (their fits run 1.1-1.6 a depending on the material); the band returned spans both.
+    The fits of Lube et al. (2005, Phys. Rev. E 72, 041301; quasi-2D channel): ``1.2 a`` for a < 1.8 and
+    ``1.9 a^(2/3)`` for a > 2.8; between them the two fits are interpolated linearly in a.
     """
     a = float(aspect_ratio)
     if not a > 0.0:
         raise ValueError(f"aspect_ratio must be > 0, got {aspect_ratio!r}")
-    lube = 1.2 * a if a < 1.8 else (1.9 * a ** (2.0 / 3.0) if a > 2.8 else max(1.2 * a, 1.9 * a ** (2.0 / 3.0)))
-    return {"lube": lube, "low": min(lube, 1.1 * a if a < 3 else lube) * 0.9, "high": max(lube, 1.6 * a) * 1.1}
+    if a < 1.8:
+        return {"lube": 1.2 * a, "regime": "1.2 a"}
+    if a > 2.8:
+        return {"lube": 1.9 * a ** (2.0 / 3.0), "regime": "1.9 a^(2/3)"}
+    w = (a - 1.8) / 1.0
+    return {"lube": (1.0 - w) * 1.2 * a + w * 1.9 * a ** (2.0 / 3.0), "regime": "transition (interpolated)"}
 
 
 # ------------------------------------------------------------------ simulations
@@ -213,7 +216,7 @@ def run_column_collapse(aspect_ratio: float, soil: ContinuumSoil, dx: float, *, 
     spacing = dx / PARTICLES_PER_CELL
     rng = np.random.default_rng(seed)
     pts, over = fill_particles(lambda x: np.full_like(np.asarray(x, dtype=float), h0), 0.0, width, 0.0, spacing, rng)
-    reach = width * (1.0 + 2.0 * column_runout_scaling(aspect_ratio)["high"]) + 0.1
+    reach = width * (1.0 + 3.0 * float(column_runout_scaling(aspect_ratio)["lube"])) + 0.1
     domain = Domain(0.0, 0.0, reach, h0 + 0.1)
     wall0 = time.perf_counter()
     with MPMSolver(soil, domain, dx, pts, threads=threads) as solver:
