@@ -30,7 +30,7 @@ from wheelloader.provenance import machine_info
 PARTS = ("blade", "wall", "column", "cycle")
 SIGMA_S = 0.1
 BLADE_DEPTHS = (0.10, 0.15, 0.20)
-BLADE_CELLS = 10.0
+BLADE_CELLS = 15.0
 WALL_HEIGHT = 0.3
 WALL_DX = 0.015
 COLUMN_RATIOS = (0.5, 1.0, 3.0)
@@ -84,6 +84,7 @@ def part_blade(args) -> dict:
                          "mckyes_horizontal": ref["horizontal"], "ratio": horizontal / ref["horizontal"],
                          "vertical_over_horizontal": vertical / horizontal,
                          "tan_delta": math.tan(soil.wall_friction_angle), "particles": res.particles,
+                         "guard_impulse_share": res.extra["guard_impulse_share"],
                          "steps": res.steps, "wall_s": res.wall_s,
                          "travel": travel.tolist(), "fx": res.force[:, 0].tolist(), "fz": res.force[:, 1].tolist()})
             progress(args, f"blade {name} d={depth}: {horizontal:.0f} N/m vs McKyes {ref['horizontal']:.0f} "

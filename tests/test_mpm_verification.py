@@ -68,7 +68,7 @@ def test_blade_matches_mckyes(soil):
     from wheelloader.references.mpm.verification import run_blade
 
     depth = 0.15
-    res = run_blade(depth, soil, depth / 10)
+    res = run_blade(depth, soil, depth / 15)
     travel = res.extra["travel"]
     window = (travel >= 0.5 * depth) & (travel <= depth)
     horizontal = -np.mean(res.force[window, 0])

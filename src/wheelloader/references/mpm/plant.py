@@ -175,6 +175,7 @@ class MPMPlant:
                                                self.shape.inside(tuple(poses[-1]), end_positions),
                                                solver.particle_volume)
             steps, guard = solver.steps, solver.guard_corrections
+            guard_share = float(np.linalg.norm(solver.guard_impulse) / max(1e-12, np.linalg.norm(solver.total_impulse)))
             dt = solver.dt_max
         finally:
             solver.close()
@@ -196,6 +197,7 @@ class MPMPlant:
             "steps": int(steps),
             "dt_max": dt,
             "guard_corrections": int(guard),
+            "guard_impulse_share": guard_share,
             "mass_balance": balance,
             "wall_s": wall,
             "settle_wall_s": settle_s,

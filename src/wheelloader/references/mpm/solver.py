@@ -22,9 +22,14 @@ tangential slip is limited by Coulomb friction plus adhesion: the tangential imp
 is ``tan(delta) m |v_n| + c_a dx^2 / h dt`` (``c_a`` spread over the nodes of a band ``h`` thick).
 Nodes moving away are left free (the soil may leave the tool). The force of the soil on the tool is
 the momentum these corrections remove, ``-sum m dv / dt``. A particle-level guard keeps particles on
-their side of each plate (a grid of cell size dx cannot separate soil on both sides of a thin plate):
+their side of each plate. Transfers do not cross plates (compatible particle-in-cell, CPIC, after Hu et
+al. 2018): a particle and a grid node on opposite sides of a plate do not exchange mass or momentum in
+particle -> grid, and in grid -> particle such a node is replaced by the particle's own velocity with any
+motion into the plate (relative to the tool) removed. A particle guard is the last safety net (a grid
+of cell size dx cannot separate soil on both sides of a thin plate by itself):
 a particle that would cross a plate, or come within ``0.25 dx`` of it, is put back on its side and its
-normal velocity relative to the tool is removed; the count of such corrections is reported.
+normal velocity relative to the tool is removed; that momentum is part of the tool force too (soil
+resting in the bucket is partly carried this way), and the count and impulse are reported.
 
 Domain: a box with frictionless side walls, a top lid and a sticky (or frictionless) floor. Forces and
 masses are per metre of out-of-plane width (plane strain).
@@ -94,10 +99,13 @@ class _Fields:
         fb.dense(ti.ij, (nx, nz)).place(self.grid_v, self.grid_m)
         self.plate_a = ti.Vector.field(2, ti.f32)
         self.plate_b = ti.Vector.field(2, ti.f32)
-        fb.dense(ti.i, MAX_PLATES).place(self.plate_a, self.plate_b)
+        self.world_a = ti.Vector.field(2, ti.f32)
+        self.world_b = ti.Vector.field(2, ti.f32)
+        fb.dense(ti.i, MAX_PLATES).place(self.plate_a, self.plate_b, self.world_a, self.world_b)
         self.impulse = ti.Vector.field(2, ti.f64)
+        self.guard_impulse = ti.Vector.field(2, ti.f64)
         self.guarded = ti.field(ti.i64)
-        fb.place(self.impulse, self.guarded)
+        fb.place(self.impulse, self.guard_impulse, self.guarded)
         self.tree = fb.finalize()
         self._build_kernels(ti, vec2, mat2)
 
@@ -109,7 +117,8 @@ class _Fields:
         x, v, C, F = self.x, self.v, self.C, self.F
         grid_v, grid_m = self.grid_v, self.grid_m
         plate_a, plate_b = self.plate_a, self.plate_b
-        impulse, guarded = self.impulse, self.guarded
+        world_a, world_b = self.world_a, self.world_b
+        impulse, guard_impulse, guarded = self.impulse, self.guard_impulse, self.guarded
         f32 = ti.f32
 
         @ti.func
@@ -119,9 +128,46 @@ class _Fields:
                 grid_m[i, j] = 0.0
 
         @ti.func
-        def p2g(n: ti.i32, x0: f32, z0: f32, inv_dx: f32, dt: f32, p_vol: f32, p_mass: f32, mu: f32, lam: f32):
+        def cross2(a, b):
+            return a[0] * b[1] - a[1] * b[0]
+
+        @ti.func
+        def near_tool(xw, n_plates: ti.i32, reach: f32):
+            """Whether the world point is within ``reach`` of any plate (then transfers are checked)."""
+            near = 0
+            for k in range(n_plates):
+                a = world_a[k]
+                ab = world_b[k] - a
+                t = ti.min(ti.max((xw - a).dot(ab) / ab.dot(ab), 0.0), 1.0)
+                if (xw - a - t * ab).norm() < reach:
+                    near = 1
+            return near
+
+        @ti.func
+        def blocked(xw, node, n_plates: ti.i32):
+            """Index of a plate that the segment particle -> node crosses (CPIC), or -1."""
+            hit = -1
+            for k in range(n_plates):
+                a = world_a[k]
+                ab = world_b[k] - a
+                d1 = cross2(ab, xw - a)
+                d2 = cross2(ab, node - a)
+                pq = node - xw
+                d3 = cross2(pq, a - xw)
+                d4 = cross2(pq, world_b[k] - xw)
+                if d1 * d2 < 0.0 and d3 * d4 <= 0.0:
+                    hit = k
+            return hit
+
+        @ti.func
+        def p2g(n: ti.i32, x0: f32, z0: f32, inv_dx: f32, dt: f32, p_vol: f32, p_mass: f32, mu: f32, lam: f32,
+                tool_on: ti.i32, n_plates: ti.i32):
             origin = vec2(x0, z0)
+            dx = 1.0 / inv_dx
             for p in range(n):
+                near = 0
+                if tool_on:
+                    near = near_tool(x[p], n_plates, 2.5 * dx)
                 xp = (x[p] - origin) * inv_dx
                 base = ti.cast(xp - 0.5, ti.i32)
                 fx = xp - ti.cast(base, f32)
@@ -136,8 +182,13 @@ class _Fields:
                     offset = ti.Vector([i, j])
                     dpos = (ti.cast(offset, f32) - fx) / inv_dx
                     weight = w[i][0] * w[j][1]
-                    grid_v[base + offset] += weight * (p_mass * v[p] + affine @ dpos)
-                    grid_m[base + offset] += weight * p_mass
+                    ok = 1
+                    if near:
+                        if blocked(x[p], origin + ti.cast(base + offset, f32) * dx, n_plates) >= 0:
+                            ok = 0
+                    if ok:
+                        grid_v[base + offset] += weight * (p_mass * v[p] + affine @ dpos)
+                        grid_m[base + offset] += weight * p_mass
 
         @ti.func
         def body_to_world(b, c, s):
@@ -211,7 +262,8 @@ class _Fields:
                     grid_v[i, j] = vel
 
         @ti.func
-        def g2p(n: ti.i32, x0: f32, z0: f32, inv_dx: f32, dt: f32, mu: f32, lam: f32, sin_phi: f32, cos_phi: f32,
+        def g2p(n: ti.i32, x0: f32, z0: f32, inv_dx: f32, dt: f32, p_mass: f32, mu: f32, lam: f32, sin_phi: f32,
+                cos_phi: f32,
                 cohesion: f32, tool_on: ti.i32, n_plates: ti.i32,
                 tx0: f32, tz0: f32, a0: f32, tx1: f32, tz1: f32, a1: f32, guard: f32,
                 x_lo: f32, x_hi: f32, z_lo: f32, z_hi: f32):
@@ -222,7 +274,11 @@ class _Fields:
             tip1 = vec2(tx1, tz1)
             vtip = (tip1 - tip0) / dt
             omega = (a1 - a0) / dt
+            dx = 1.0 / inv_dx
             for p in range(n):
+                near = 0
+                if tool_on:
+                    near = near_tool(x[p], n_plates, 2.5 * dx)
                 xp = (x[p] - origin) * inv_dx
                 base = ti.cast(xp - 0.5, ti.i32)
                 fx = xp - ti.cast(base, f32)
@@ -233,6 +289,21 @@ class _Fields:
                     offset = ti.Vector([i, j])
                     dpos = ti.cast(offset, f32) - fx
                     g = grid_v[base + offset]
+                    if near:
+                        k = blocked(x[p], origin + ti.cast(base + offset, f32) * dx, n_plates)
+                        if k >= 0:
+                            # a node across a plate: the particle's own velocity, not moving into the plate
+                            a = world_a[k]
+                            ab = world_b[k] - a
+                            nrm = vec2(-ab[1], ab[0]).normalized()
+                            if cross2(ab, x[p] - a) < 0.0:
+                                nrm = -nrm
+                            rel = x[p] - tip0
+                            r = v[p] - (vtip + omega * vec2(-rel[1], rel[0]))
+                            rn = r.dot(nrm)
+                            g = v[p]
+                            if rn < 0.0:
+                                g = v[p] - rn * nrm
                     weight = w[i][0] * w[j][1]
                     new_v += weight * g
                     new_c += 4.0 * inv_dx * weight * g.outer_product(dpos)
@@ -283,6 +354,7 @@ class _Fields:
                                 rn = r.dot(nrm)
                                 if rn < 0.0:
                                     new_v -= rn * nrm
+                                    guard_impulse[None] += ti.cast(p_mass * rn * nrm, ti.f64)
                                 guarded[None] += 1
                 x_new[0] = ti.min(ti.max(x_new[0], x_lo), x_hi)
                 x_new[1] = ti.min(ti.max(x_new[1], z_lo), z_hi)
@@ -292,6 +364,7 @@ class _Fields:
         @ti.kernel
         def reset_counters():
             impulse[None] = ti.Vector([0.0, 0.0], ti.f64)
+            guard_impulse[None] = ti.Vector([0.0, 0.0], ti.f64)
             guarded[None] = 0
 
         @ti.kernel
@@ -302,12 +375,16 @@ class _Fields:
                     band: f32, tan_delta: f32, adhesion_impulse: f32, guard: f32,
                     x_lo: f32, x_hi: f32, z_lo: f32, z_hi: f32):
             inv_dx = 1.0 / dx
+            c0, s0 = ti.cos(a0), ti.sin(a0)
+            for k in range(n_plates):
+                world_a[k] = vec2(tx0, tz0) + body_to_world(plate_a[k], c0, s0)
+                world_b[k] = vec2(tx0, tz0) + body_to_world(plate_b[k], c0, s0)
             clear_grid(nx, nz)
-            p2g(n, x0, z0, inv_dx, dt, p_vol, p_mass, mu, lam)
+            p2g(n, x0, z0, inv_dx, dt, p_vol, p_mass, mu, lam, tool_on, n_plates)
             grid_update(nx, nz, x0, z0, dx, dt, gravity, damp, sticky_floor, tool_on, n_plates, tx0, tz0, a0, tx1, tz1,
                         a1, band, tan_delta, adhesion_impulse)
-            g2p(n, x0, z0, inv_dx, dt, mu, lam, sin_phi, cos_phi, cohesion, tool_on, n_plates, tx0, tz0, a0, tx1, tz1,
-                a1, guard, x_lo, x_hi, z_lo, z_hi)
+            g2p(n, x0, z0, inv_dx, dt, p_mass, mu, lam, sin_phi, cos_phi, cohesion, tool_on, n_plates, tx0, tz0, a0,
+                tx1, tz1, a1, guard, x_lo, x_hi, z_lo, z_hi)
 
         self.substep = substep
         self.reset_counters = reset_counters
@@ -454,8 +531,8 @@ class MPMSolver:
     def advance(self, t_end: float, trajectory: Trajectory | None = None, *, damping: float = 0.0) -> np.ndarray:
         """Integrate from the current time to ``t_end`` [s]; return the tool impulse over it [N s per m].
 
-        The impulse is the soil's push on the tool, ``-sum m dv`` over the contact corrections;
-        divided by the interval it is the mean force. ``damping`` [1/s] damps grid velocities
+        The impulse is the soil's push on the tool, ``-sum m dv`` over the grid contact corrections and
+        the particle guard's; divided by the interval it is the mean force. ``damping`` [1/s] damps grid velocities
         (``v / (1 + damping dt)`` per step; used for settling only).
         """
         span = float(t_end) - self.time
@@ -484,13 +561,13 @@ class MPMSolver:
         head = (self.n, self.nx, self.nz, self.x0, self.z0, self.dx, dt, self.particle_volume, self.particle_mass, mu,
                 lam, sin_phi, cos_phi, soil.cohesion, GRAVITY, damp, int(self.sticky_floor), tool_on, n_plates)
         tail = (band, math.tan(soil.wall_friction_angle), adhesion_impulse, guard, x_lo, x_hi, z_lo, z_hi)
-        before = f.impulse.to_numpy().astype(float)
+        before = f.impulse.to_numpy().astype(float) + f.guard_impulse.to_numpy().astype(float)
         for k in range(steps):
             pose = (float(px[k]), float(pz[k]), float(pa[k]), float(px[k + 1]), float(pz[k + 1]), float(pa[k + 1]))
             f.substep(*head, *pose, *tail)
         self.time = float(t_end)
         self.steps += steps
-        return f.impulse.to_numpy().astype(float) - before
+        return f.impulse.to_numpy().astype(float) + f.guard_impulse.to_numpy().astype(float) - before
 
     # ------------------------------------------------------------- reading
     def positions(self) -> np.ndarray:
@@ -509,6 +586,16 @@ class MPMSolver:
         """Kinetic energy of the particles [J per m]."""
         v = self.velocities()
         return float(0.5 * self.particle_mass * np.sum(v * v))
+
+    @property
+    def total_impulse(self) -> np.ndarray:
+        """Tool impulse since the solver started [N s per m] (grid contact and particle guard)."""
+        return self._f.impulse.to_numpy().astype(float) + self.guard_impulse
+
+    @property
+    def guard_impulse(self) -> np.ndarray:
+        """Part of the tool impulse so far [N s per m] that came through the particle guard."""
+        return self._f.guard_impulse.to_numpy().astype(float)
 
     @property
     def guard_corrections(self) -> int:

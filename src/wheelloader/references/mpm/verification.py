@@ -154,9 +154,12 @@ def run_blade(depth: float, soil: ContinuumSoil, dx: float, *, speed: float = 0.
         solver.set_geostatic_stress(over)
         times, force = _run(solver, traj, 0.2, duration, int(round(duration * samples_per_s)))
         steps = solver.steps
+        guard_share = float(np.linalg.norm(solver.guard_impulse) / max(1e-12, np.linalg.norm(solver.total_impulse)))
+        guard_count = solver.guard_corrections
     wall = time.perf_counter() - wall0
     result = CaseResult(times, force, len(pts), steps, wall)
     result.extra["travel"] = _ramp(times, speed, ramp)
+    result.extra.update(guard_impulse_share=guard_share, guard_corrections=guard_count)
     return result
 
 
