@@ -30,7 +30,7 @@ from wheelloader.provenance import machine_info
 PARTS = ("blade", "wall", "column", "cycle")
 SIGMA_S = 0.1
 BLADE_DEPTHS = (0.10, 0.15, 0.20)
-BLADE_CELLS = 15.0
+BLADE_CELLS = 10.0
 WALL_HEIGHT = 0.3
 WALL_DX = 0.015
 COLUMN_RATIOS = (0.5, 1.0, 3.0)
@@ -79,8 +79,11 @@ def part_blade(args) -> dict:
             horizontal = float(-np.mean(res.force[window, 0]))
             vertical = float(np.mean(res.force[window, 1]))
             ref = mckyes_blade(depth, soil)
+            early = (travel >= 0.25 * depth) & (travel <= 0.5 * depth)
+            horizontal_early = float(-np.mean(res.force[early, 0]))
             rows.append({"soil": name, "criterion": criterion, "depth": depth, "dx": dx, "horizontal": horizontal,
-                         "vertical": vertical,
+                         "vertical": vertical, "horizontal_0.25_0.5d": horizontal_early,
+                         "ratio_0.25_0.5d": horizontal_early / ref["horizontal"],
                          "mckyes_horizontal": ref["horizontal"], "ratio": horizontal / ref["horizontal"],
                          "vertical_over_horizontal": vertical / horizontal,
                          "tan_delta": math.tan(soil.wall_friction_angle), "particles": res.particles,
@@ -89,7 +92,8 @@ def part_blade(args) -> dict:
                          "travel": travel.tolist(), "fx": res.force[:, 0].tolist(), "fz": res.force[:, 1].tolist()})
             progress(args, f"blade {name} d={depth}: {horizontal:.0f} N/m vs McKyes {ref['horizontal']:.0f} "
                            f"({horizontal / ref['horizontal']:.3f}), {res.wall_s:.0f} s")
-    return {"rows": rows, "window": "mean over 0.5-1.0 depth of travel", "cells_over_cut": BLADE_CELLS,
+    return {"rows": rows, "window": "mean over 0.5-1.0 depth of travel (ratio); 0.25-0.5 depth (ratio_0.25_0.5d)",
+            "cells_over_cut": BLADE_CELLS,
             "speed": 0.2}
 
 
@@ -223,8 +227,8 @@ def report(out_dir: Path) -> dict:
     res = summary["results"]
     if "blade" in parts:
         rows = parts["blade"]["result"]["rows"]
-        keys = ("soil", "criterion", "depth", "dx", "horizontal", "mckyes_horizontal", "ratio",
-                "vertical_over_horizontal", "tan_delta", "wall_s")
+        keys = ("soil", "criterion", "depth", "dx", "horizontal", "mckyes_horizontal", "ratio", "ratio_0.25_0.5d",
+                "vertical_over_horizontal", "tan_delta", "guard_impulse_share", "wall_s")
         res["blade_vs_mckyes"] = [{k: r.get(k) for k in keys} for r in rows]
         res["blade_within_10_percent"] = all(abs(r["ratio"] - 1.0) <= 0.10 for r in rows if r.get("criterion", True))
     if "wall" in parts:

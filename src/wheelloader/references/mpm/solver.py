@@ -21,15 +21,16 @@ moves into the plate (relative normal velocity < 0) its normal velocity is set t
 tangential slip is limited by Coulomb friction plus adhesion: the tangential impulse the plate can apply
 is ``tan(delta) m |v_n| + c_a dx^2 / h dt`` (``c_a`` spread over the nodes of a band ``h`` thick).
 Nodes moving away are left free (the soil may leave the tool). The force of the soil on the tool is
-the momentum these corrections remove, ``-sum m dv / dt``. A particle-level guard keeps particles on
-their side of each plate. Transfers do not cross plates (compatible particle-in-cell, CPIC, after Hu et
-al. 2018): a particle and a grid node on opposite sides of a plate do not exchange mass or momentum in
-particle -> grid, and in grid -> particle such a node is replaced by the particle's own velocity with any
-motion into the plate (relative to the tool) removed. A particle guard is the last safety net (a grid
-of cell size dx cannot separate soil on both sides of a thin plate by itself):
-a particle that would cross a plate, or come within ``0.25 dx`` of it, is put back on its side and its
-normal velocity relative to the tool is removed; that momentum is part of the tool force too (soil
-resting in the bucket is partly carried this way), and the count and impulse are reported.
+the momentum these corrections remove, ``-sum m dv / dt``.
+
+Transfers do not cross plates (compatible particle-in-cell, CPIC, after Hu et al. 2018): a particle and
+a grid node on opposite sides of a plate exchange nothing in particle -> grid (the stress and APIC
+impulse the node would have received goes to the plate instead: it sums to zero over a particle's
+nodes, so dropping it would create momentum), and in grid -> particle such a node is replaced by the
+particle's own velocity with any motion into the plate (relative to the tool) removed. A particle guard
+is the last safety net: a particle that would cross a plate, or come within ``0.25 dx`` of it, is put
+back on its side and its normal velocity relative to the tool is removed; that momentum is part of the
+tool force too, and the count and impulse are reported.
 
 Domain: a box with frictionless side walls, a top lid and a sticky (or frictionless) floor. Forces and
 masses are per metre of out-of-plane width (plane strain).
@@ -189,6 +190,10 @@ class _Fields:
                     if ok:
                         grid_v[base + offset] += weight * (p_mass * v[p] + affine @ dpos)
                         grid_m[base + offset] += weight * p_mass
+                    else:
+                        # the stress (and APIC) impulse this node would have received sums to zero over all
+                        # nine nodes; the plate between takes it instead (momentum is conserved)
+                        impulse[None] += ti.cast(weight * (affine @ dpos), ti.f64)
 
         @ti.func
         def body_to_world(b, c, s):
