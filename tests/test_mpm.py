@@ -183,3 +183,12 @@ def test_cyclelog_round_trips(digs, tmp_path):
     for key in ("resolution", "youngs_modulus", "contact_band", "seed", "particles", "wall_s"):
         assert key in back.metadata
     np.testing.assert_allclose(back.pile_after.heights, log.pile_after.heights)
+
+
+def test_observer_sees_every_sample():
+    _need_taichi()
+    seen = []
+    path = tiny_path()
+    log = tiny_plant().dig(path, TINY_PILE, "gravel", seed=3, observer=lambda t, pos: seen.append((t, pos.shape)))
+    assert [t for t, _ in seen] == pytest.approx(list(path.t))
+    assert all(shape == (log.metadata["particles"], 2) for _, shape in seen)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -118,7 +119,8 @@ class MPMPlant:
         return ContinuumSoil.from_soil(soil, youngs_modulus=self.settings.youngs_modulus,
                                        poisson_ratio=self.settings.poisson_ratio)
 
-    def dig(self, path: BucketPath, pile: Pile, soil: SoilParams | str | ContinuumSoil, *, seed: int = 0) -> CycleLog:
+    def dig(self, path: BucketPath, pile: Pile, soil: SoilParams | str | ContinuumSoil, *, seed: int = 0,
+            observer: Callable[[float, np.ndarray], None] | None = None) -> CycleLog:
         """Dig ``path`` into ``pile`` of ``soil``; see :class:`wheelloader.references.Plant`.
 
         The bucket rests at the path's first pose while the soil settles (``settle_time``), then follows
@@ -127,6 +129,9 @@ class MPMPlant:
         ``dem/yade_scenario.py``; ``fill_volume`` is the volume (mass / density) of the particles inside
         the bucket outline at each sample; ``pile_after`` is the start pile plus the change of the
         resting soil's surface within the simulated range.
+
+        ``observer``, if given, is called at every sample with the time [s] and the particle positions
+        (N, 2) [m] (for figures; it does not change the result).
         """
         if not isinstance(path, BucketPath):
             raise ValueError(f"path must be a BucketPath, got {type(path).__name__}")
@@ -157,12 +162,16 @@ class MPMPlant:
             fill = np.zeros(n)
             poses = traj.poses()
             fill[0] = np.count_nonzero(self.shape.inside(tuple(poses[0]), start_positions)) * solver.particle_volume
+            if observer is not None:
+                observer(float(t[0]), start_positions)
             for k in range(n):
                 if k > 0:
                     impulse[k] += solver.advance(t[k], traj)
                     window[k] += t[k] - mids[k - 1]
-                    fill[k] = (np.count_nonzero(self.shape.inside(tuple(poses[k]), solver.positions()))
-                               * solver.particle_volume)
+                    positions = solver.positions()
+                    fill[k] = np.count_nonzero(self.shape.inside(tuple(poses[k]), positions)) * solver.particle_volume
+                    if observer is not None:
+                        observer(float(t[k]), positions)
                 if k < n - 1:
                     impulse[k] += solver.advance(mids[k], traj)
                     window[k] += mids[k] - t[k]
