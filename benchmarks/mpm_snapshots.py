@@ -36,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
     path = paper_paths()[args.path - 1]
     pile = Pile.trapezoid()
     plant = MPMPlant(args.resolution, threads=args.threads)
-    wanted = sorted(args.times)
+    wanted = sorted({min(max(w, float(path.t[0])), float(path.t[-1])) for w in args.times})
     shots: dict[float, np.ndarray] = {}
 
     def observer(t: float, positions: np.ndarray) -> None:
