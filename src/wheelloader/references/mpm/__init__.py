@@ -1,1 +1,20 @@
-"""Plane-strain MPM continuum reference (being built)."""
+"""Plane-strain Material Point Method continuum reference plant (optional extra ``mpm``: Taichi).
+
+:class:`MPMPlant` implements :class:`wheelloader.references.Plant`: ``dig(path, pile, soil, seed=0)``
+returns a :class:`~wheelloader.estimator.CycleLog` with F_T, F_N, fill and the carved pile. The solver
+(:mod:`.solver`) is a 2-D MLS-MPM with Hencky elasticity and Mohr-Coulomb plasticity with cohesion;
+the bucket is a rigid kinematic tool of plates with Coulomb friction and adhesion. Importing this
+package does not import Taichi; the first solver does (``pip install "wheelloader[mpm]"``).
+"""
+
+from ._backend import INSTALL_HINT, MPMUnavailableError, taichi_available
+from .plant import DEFAULT_RESOLUTION, MPMPlant, MPMSettings
+from .scene import SceneSettings
+from .soil import DEFAULT_YOUNGS_MODULUS, ContinuumSoil, jaky_poisson_ratio
+from .tool import Plate, ToolShape, Trajectory, bucket_shape
+
+__all__ = [
+    "DEFAULT_RESOLUTION", "DEFAULT_YOUNGS_MODULUS", "INSTALL_HINT", "ContinuumSoil", "MPMPlant", "MPMSettings",
+    "MPMUnavailableError", "Plate", "SceneSettings", "ToolShape", "Trajectory", "bucket_shape", "jaky_poisson_ratio",
+    "taichi_available",
+]

@@ -1,0 +1,252 @@
+"""The MPM reference plant: dig a bucket path into a pile of soil and log what a machine would measure."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from wheelloader.estimator import Bucket, BucketPath, CycleLog, Pile, SoilParams, as_soil
+
+from ._backend import TAICHI_VERSION, initialised_threads
+from .scene import SceneSettings, bucket_scene, surface_columns
+from .soil import DEFAULT_YOUNGS_MODULUS, ContinuumSoil
+from .solver import MPMSolver
+from .tool import Trajectory, bucket_shape
+
+#: Default grid cell size [m]; see :class:`MPMPlant` for how it was chosen (a convergence study).
+DEFAULT_RESOLUTION = 0.02
+
+
+@dataclass(frozen=True)
+class MPMSettings:
+    """Numerical settings of the plant (SI units).
+
+    Parameters
+    ----------
+    resolution : float
+        Grid cell size dx [m]; 2 x 2 particles per cell.
+    youngs_modulus : float
+        Young's modulus of the soil [Pa] (a numerical stiffness; see :mod:`.soil`).
+    poisson_ratio : float or None
+        Poisson ratio; None: Jaky's at-rest ratio (:func:`.soil.jaky_poisson_ratio`).
+    contact_band : float
+        Tool contact band [cells].
+    cfl : float
+        Time step / (dx / P-wave speed).
+    settle_time : float
+        Settling under gravity before the cycle [s] (the bucket rests at the path's first pose).
+    settle_damping : float
+        Grid-velocity damping during settling [1/s] (none during the cycle).
+    threads : int
+        Taichi CPU threads (effective at the process's first solver).
+    scene : SceneSettings
+        Bed depth, truncation wall, margins and particle jitter.
+    """
+
+    resolution: float = DEFAULT_RESOLUTION
+    youngs_modulus: float = DEFAULT_YOUNGS_MODULUS
+    poisson_ratio: float | None = None
+    contact_band: float = 1.0
+    cfl: float = 0.3
+    settle_time: float = 0.3
+    settle_damping: float = 20.0
+    threads: int = 1
+    scene: SceneSettings = field(default_factory=SceneSettings)
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.resolution, (int, float)) and math.isfinite(self.resolution)
+                and 0.002 <= self.resolution <= 0.2):
+            raise ValueError(f"resolution must be a cell size in [0.002, 0.2] m, got {self.resolution!r}")
+        if not (math.isfinite(self.settle_time) and self.settle_time >= 0.0):
+            raise ValueError(f"settle_time must be >= 0 s, got {self.settle_time!r}")
+        if not (math.isfinite(self.settle_damping) and self.settle_damping >= 0.0):
+            raise ValueError(f"settle_damping must be >= 0 1/s, got {self.settle_damping!r}")
+        if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads < 1:
+            raise ValueError(f"threads must be a positive integer, got {self.threads!r}")
+        if not isinstance(self.scene, SceneSettings):
+            raise ValueError(f"scene must be a SceneSettings, got {type(self.scene).__name__}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serialisable mapping."""
+        out = {k: getattr(self, k) for k in ("resolution", "youngs_modulus", "poisson_ratio", "contact_band", "cfl",
+                                             "settle_time", "settle_damping", "threads")}
+        out["scene"] = {k: getattr(self.scene, k) for k in ("bed_depth", "wall_margin", "front_margin", "top_margin",
+                                                            "jitter")}
+        return out
+
+
+class MPMPlant:
+    """Plane-strain MPM continuum reference plant (:class:`wheelloader.references.Plant`).
+
+    Soil: :class:`ContinuumSoil` from the project's soil (gamma, phi, C, delta, C_a; the Bekker
+    parameters are the force model's and unused). Bucket: :func:`.tool.bucket_shape` of ``bucket``.
+    The forces are computed per metre of width and multiplied by ``bucket.width``; so is the fill.
+
+    Parameters
+    ----------
+    resolution : float
+        Grid cell size [m]. Default :data:`DEFAULT_RESOLUTION` = 0.02 m, chosen by measurement
+        (``benchmarks/mpm_verification.py``, gravel, path 1): the filtered F_R (sigma 0.1 s) of dx 2 cm
+        and 1.5 cm differ by 4.5 % RMS, of 3 and 2 cm by 11.8 %; a default cycle costs about 3 minutes
+        at 2 cm (17k particles) and 10 minutes at 1.5 cm on one thread.
+    bucket : Bucket
+        Bucket geometry (default :class:`Bucket`).
+    **settings
+        Other :class:`MPMSettings` fields (``youngs_modulus``, ``contact_band``, ``threads``, ...).
+    """
+
+    name = "mpm"
+
+    def __init__(self, resolution: float = DEFAULT_RESOLUTION, *, bucket: Bucket | None = None,
+                 **settings: Any) -> None:
+        unknown = set(settings) - set(MPMSettings.__dataclass_fields__) - {"resolution"}
+        if unknown:
+            raise ValueError(f"unknown MPMPlant setting(s) {sorted(unknown)}; "
+                             f"expected some of {sorted(MPMSettings.__dataclass_fields__)}")
+        self.settings = MPMSettings(resolution=resolution, **settings)
+        if bucket is not None and not isinstance(bucket, Bucket):
+            raise ValueError(f"bucket must be a Bucket, got {type(bucket).__name__}")
+        self.bucket = bucket or Bucket()
+        self.shape = bucket_shape(self.bucket)
+
+    def continuum(self, soil: SoilParams | str | ContinuumSoil) -> ContinuumSoil:
+        """The continuum material this plant uses for ``soil``."""
+        if isinstance(soil, ContinuumSoil):
+            return soil
+        return ContinuumSoil.from_soil(soil, youngs_modulus=self.settings.youngs_modulus,
+                                       poisson_ratio=self.settings.poisson_ratio)
+
+    def dig(self, path: BucketPath, pile: Pile, soil: SoilParams | str | ContinuumSoil, *, seed: int = 0,
+            observer: Callable[[float, np.ndarray], None] | None = None) -> CycleLog:
+        """Dig ``path`` into ``pile`` of ``soil``; see :class:`wheelloader.references.Plant`.
+
+        The bucket rests at the path's first pose while the soil settles (``settle_time``), then follows
+        the path, its pose interpolated linearly between samples at every MPM step. ``F_T``, ``F_N``
+        are the mean force over each sample's interval (centred on the sample), in the blade frame of
+        ``dem/yade_scenario.py``; ``fill_volume`` is the volume (mass / density) of the particles inside
+        the bucket outline at each sample; ``pile_after`` is the start pile plus the change of the
+        resting soil's surface within the simulated range.
+
+        ``observer``, if given, is called at every sample with the time [s] and the particle positions
+        (N, 2) [m] (for figures; it does not change the result).
+        """
+        if not isinstance(path, BucketPath):
+            raise ValueError(f"path must be a BucketPath, got {type(path).__name__}")
+        if not isinstance(pile, Pile):
+            raise ValueError(f"pile must be a Pile, got {type(pile).__name__}")
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+            raise ValueError(f"seed must be an integer, got {seed!r}")
+        material = self.continuum(soil)
+        soil_label = soil if isinstance(soil, str) else None
+        cfg = self.settings
+        wall0 = time.perf_counter()
+        traj = Trajectory.from_path(path)
+        scene = bucket_scene(pile, traj, self.shape, cfg.resolution, int(seed), cfg.scene)
+        solver = MPMSolver(material, scene.domain, cfg.resolution, scene.particles, tool=self.shape,
+                           contact_band=cfg.contact_band, cfl=cfg.cfl, sticky_floor=True, threads=cfg.threads)
+        try:
+            solver.set_geostatic_stress(scene.overburden)
+            t0 = float(path.t[0])
+            solver.time = t0 - cfg.settle_time
+            solver.advance(t0, traj, damping=cfg.settle_damping)
+            start_positions = solver.positions()
+            settle_s = time.perf_counter() - wall0
+            t = path.t
+            mids = 0.5 * (t[1:] + t[:-1])
+            n = len(t)
+            impulse = np.zeros((n, 2))
+            window = np.zeros(n)
+            fill = np.zeros(n)
+            poses = traj.poses()
+            fill[0] = np.count_nonzero(self.shape.inside(tuple(poses[0]), start_positions)) * solver.particle_volume
+            if observer is not None:
+                observer(float(t[0]), start_positions)
+            for k in range(n):
+                if k > 0:
+                    impulse[k] += solver.advance(t[k], traj)
+                    window[k] += t[k] - mids[k - 1]
+                    positions = solver.positions()
+                    fill[k] = np.count_nonzero(self.shape.inside(tuple(poses[k]), positions)) * solver.particle_volume
+                    if observer is not None:
+                        observer(float(t[k]), positions)
+                if k < n - 1:
+                    impulse[k] += solver.advance(mids[k], traj)
+                    window[k] += mids[k] - t[k]
+            end_positions = solver.positions()
+            force = impulse / window[:, None]
+            a = path.blade_angle
+            tangential = -(force[:, 0] * np.cos(a) + force[:, 1] * np.sin(a))
+            normal = force[:, 0] * np.sin(a) - force[:, 1] * np.cos(a)
+            pile_after, balance = _carved_pile(pile, scene, start_positions, end_positions,
+                                               self.shape.inside(tuple(poses[-1]), end_positions),
+                                               solver.particle_volume)
+            steps, guard = solver.steps, solver.guard_corrections
+            guard_share = float(np.linalg.norm(solver.guard_impulse) / max(1e-12, np.linalg.norm(solver.total_impulse)))
+            dt = solver.dt_max
+        finally:
+            solver.close()
+        wall = time.perf_counter() - wall0
+        width = self.bucket.width
+        metadata = {
+            "source": "mpm",
+            "plant": self.name,
+            "soil": soil_label,
+            "soil_params": None if isinstance(soil, ContinuumSoil) else as_soil(soil).to_dict(),
+            "continuum": material.to_dict(),
+            "settings": cfg.to_dict(),
+            "resolution": cfg.resolution,
+            "youngs_modulus": material.youngs_modulus,
+            "contact_band": cfg.contact_band,
+            "seed": int(seed),
+            "particles": int(len(scene.particles)),
+            "domain": [scene.domain.x_min, scene.domain.z_min, scene.domain.x_max, scene.domain.z_max],
+            "steps": int(steps),
+            "dt_max": dt,
+            "guard_corrections": int(guard),
+            "guard_impulse_share": guard_share,
+            "mass_balance": balance,
+            "wall_s": wall,
+            "settle_wall_s": settle_s,
+            "taichi": TAICHI_VERSION,
+            "taichi_threads": initialised_threads(),
+            "path_name": path.name,
+            "width_scaling": "forces and volumes per metre of width x bucket.width",
+        }
+        return CycleLog(path, tangential * width, normal * width, pile, self.bucket, fill * width, None, pile_after,
+                        metadata)
+
+
+def _carved_pile(pile: Pile, scene: Any, start: np.ndarray, end: np.ndarray, in_bucket: np.ndarray,
+                 particle_volume: float) -> tuple[Pile, dict[str, float]]:
+    """The start pile plus the change of the resting soil's column heights; the area balance per metre [m^2].
+
+    ``net_area_removed`` (carved minus deposited area of the resting soil) equals ``detached_area_end``
+    (the particles no longer resting on the pile: in or on the bucket, in flight) by construction;
+    ``fill_area_end`` is the part inside the bucket outline.
+    """
+    x_lo, x_hi = scene.soil_x
+    z_bed = scene.domain.z_min
+    centres, before, _ = surface_columns(start, x_lo, x_hi, scene.spacing, z_bed)
+    _, after, resting = surface_columns(end, x_lo, x_hi, scene.spacing, z_bed, exclude=in_bucket)
+    change = after - before
+    xs = pile.x
+    inside = (xs >= x_lo) & (xs <= x_hi)
+    heights = pile.heights.copy()
+    heights[inside] += np.interp(xs[inside], centres, change)
+    after_pile = pile.with_heights(heights)
+    width = (x_hi - x_lo) / len(centres)
+    carved = float(np.sum(np.clip(-change, 0.0, None)) * width)
+    deposited = float(np.sum(np.clip(change, 0.0, None)) * width)
+    balance = {
+        "carved_area": carved,
+        "deposited_area": deposited,
+        "net_area_removed": carved - deposited,
+        "fill_area_end": float(np.count_nonzero(in_bucket) * particle_volume),
+        "detached_area_end": float(np.count_nonzero(~resting) * particle_volume),
+    }
+    return after_pile, balance
