@@ -34,7 +34,7 @@ try:
     from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 except ImportError as exc:  # pragma: no cover - depends on the installation
     raise ImportError('wheelloader.envs.sb3 needs stable-baselines3: pip install torch==2.13.0 && '
-                      'pip install "wheelloader[rl]"') from exc
+                      'pip install "wheelloader[rl]"', name=exc.name) from exc
 
 import wheelloader.envs  # noqa: F401,E402  (registers the env ids)
 

@@ -41,5 +41,11 @@ def test_every_import_in_the_docs_works():
             lines += [ln.split("#")[0].rstrip() for ln in block.splitlines()
                       if re.match(r"(from wheelloader[\w.]* import |import wheelloader)", ln)]
     assert lines, "no import lines found"
+    optional = {"stable_baselines3", "torch", "taichi", "moviepy"}  # the rl and mpm extras
     for line in lines:
-        exec(line, {})  # noqa: S102 - our own README's import lines
+        try:
+            exec(line, {})  # noqa: S102 - our own README's import lines
+        except ImportError as exc:
+            # a line of the optional extras' docs works once the extra is installed (its own tests check that)
+            if exc.name not in optional:
+                raise
