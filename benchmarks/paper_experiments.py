@@ -403,6 +403,44 @@ def report(results: dict, args) -> str:
     return "\n".join(lines)
 
 
+#: The continuum reference issue's targets for our method's F_R RMSE (filtered) [%].
+TARGETS = {"training": 10.0, "unseen": 15.0, "dual": 20.0, "soil": 15.0}
+
+
+def summary_table(results: dict, args) -> str:
+    """One Markdown table: each case, the target, and every method's F_R RMSE (filtered / unfiltered)."""
+    methods = [m for m in ("default", "multi-stage", "single-stage") if m in results["table3"]]
+
+    def cell(entry) -> str:
+        return f"{entry['filtered'][1]:.1f} / {entry['unfiltered'][1]:.1f} %"
+
+    head = ("| case | target (ours, filtered) | " + " | ".join(("ours (varpro)" if m == "default" else m)
+                                                          for m in methods) + " |")
+    lines = [head, "|" + "---|" * (2 + len(methods))]
+
+    def row(case, target, entries):
+        lines.append(f"| {case} | {target} | " + " | ".join(cell(entries[m]) for m in methods) + " |")
+
+    row("Table 3: gravel path 1 (training)", f"≤ {TARGETS['training']:g} %",
+        {m: results["table3"][m]["train"] for m in methods})
+    for k in results["fig8"][methods[0]]:
+        row(f"Fig. 8: gravel {k} (unseen)", f"≤ {TARGETS['unseen']:g} %", {m: results["fig8"][m][k] for m in methods})
+    if "fig9" in results:
+        row("Fig. 9: dual cycle 2, depth to the carved surface", f"≤ {TARGETS['dual']:g} %",
+            {m: results["fig9"][m]["cycle2_carved_surface"] for m in methods})
+    for soil, r in results["table4"].items():
+        row(f"Table 4: {soil} path 1", f"≤ {TARGETS['soil']:g} %", {m: r[m]["rmse"] for m in methods})
+    times = {m: results["table3"][m]["time_s"] for m in methods}
+    lines.append("| calibration time, gravel path 1 | ≤ 0.1 s | "
+                 + " | ".join(f"{times[m]:.2f} s" for m in methods) + " |")
+    git = results["machine"].get("git") or {}
+    lines += ["", f"*`python benchmarks/paper_experiments.py --data {args.data}` at commit "
+              f"{(git.get('commit') or 'unknown')[:10]}; filtered = against the reference filtered with a Gaussian "
+              f"of σ = {results['filter']['sigma_s']} s, unfiltered = against its raw 60 Hz record; % of the mean "
+              "observed |F_R| over the in-soil samples.*"]
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", default="data/reference", help="reference directory with manifest.json")
@@ -412,7 +450,8 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="numpy seed (the methods are deterministic)")
     args = parser.parse_args(argv)
     if not (Path(args.data) / "manifest.json").exists():
-        print(f"no reference data in {args.data}: run python dem/run.py reference", file=sys.stderr)
+        print(f"no reference data in {args.data}: run wheelloader dem reference (DEM) or python -m "
+              "wheelloader.references.mpm.generate (MPM)", file=sys.stderr)
         return 2
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -422,6 +461,7 @@ def main(argv=None) -> int:
     (out / "results.json").write_text(json.dumps(results, indent=1, default=lambda o: o.tolist()
                                                  if hasattr(o, "tolist") else str(o)))
     (out / "report.md").write_text(report(results, args))
+    (out / "summary.md").write_text(summary_table(results, args) + "\n")
     print(report(results, args))
     return 0
 
