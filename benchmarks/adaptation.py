@@ -38,6 +38,8 @@ from typing import Any  # noqa: E402
 import numpy as np  # noqa: E402
 from _machine import machine_info  # noqa: E402
 
+from wheelloader.provenance import commit_label  # noqa: E402
+
 SOILS = ("gravel", "dirt", "modified_sand")
 PILES = {"trapezoid 30 deg": {"shape": "trapezoid"},
          "trapezoid 35 deg": {"shape": "trapezoid", "angle": math.radians(35.0)}}
@@ -195,8 +197,7 @@ def format_plan_passes(rows: list[dict[str, Any]]) -> str:
 def provenance_line(result: dict[str, Any]) -> str:
     """One italic line: command, commit, load and run time of this result."""
     machine = result["machine"]
-    git = machine.get("git") or {}
-    commit = (git.get("commit") or "unknown")[:10] + (" (uncommitted changes)" if git.get("dirty") else "")
+    commit = commit_label(machine)
     load = machine.get("loadavg_1_5_15min")
     load_text = "/".join(f"{v:.1f}" for v in load) if load else "unknown"
     return (f"*`python benchmarks/adaptation.py` at commit {commit}; {machine.get('cpu_count')} cores "

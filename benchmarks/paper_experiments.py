@@ -34,6 +34,8 @@ from pathlib import Path
 
 from _machine import machine_info
 
+from wheelloader.provenance import commit_label
+
 METHODS = ("default", "single-stage", "multi-stage")
 SOILS = ("gravel", "modified_sand", "dirt", "sand")
 #: DEM material values comparable with FEE parameters (Table 2 counterparts, see dem/README.md).
@@ -311,10 +313,9 @@ def plots(results: dict, args, out: Path) -> None:
 def report(results: dict, args) -> str:
     f = results["filter"]
     plant = {"mpm": "plane-strain MPM continuum", "yade": "Yade DEM"}.get(results.get("plant"), results.get("plant"))
-    git = results["machine"].get("git") or {}
     lines = [f"# Paper experiments on the {plant} reference data", "",
              f"`python benchmarks/paper_experiments.py --data {args.data}` at commit "
-             f"{(git.get('commit') or 'unknown')[:10]}{' (uncommitted changes)' if git.get('dirty') else ''}.", "",
+             f"{commit_label(results['machine'])}.", "",
              f"Filter of the reference forces: Gaussian, sigma = {f['sigma_s']} s, mode {f['mode']}. "
              "RMSE of F_R over in-soil samples, N and % of the mean observed |F_R|; "
              "'filtered' = against the filtered reference record, 'unfiltered' = against the raw 60 Hz record. "
@@ -433,9 +434,8 @@ def summary_table(results: dict, args) -> str:
     times = {m: results["table3"][m]["time_s"] for m in methods}
     lines.append("| calibration time, gravel path 1 | ≤ 0.1 s | "
                  + " | ".join(f"{times[m]:.2f} s" for m in methods) + " |")
-    git = results["machine"].get("git") or {}
     lines += ["", f"*`python benchmarks/paper_experiments.py --data {args.data}` at commit "
-              f"{(git.get('commit') or 'unknown')[:10]}; filtered = against the reference filtered with a Gaussian "
+              f"{commit_label(results['machine'])}; filtered = against the reference filtered with a Gaussian "
               f"of σ = {results['filter']['sigma_s']} s, unfiltered = against its raw 60 Hz record; % of the mean "
               "observed |F_R| over the in-soil samples.*"]
     return "\n".join(lines)

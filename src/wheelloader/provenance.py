@@ -62,3 +62,11 @@ def git_revision(where: str | Path | None = None) -> dict[str, object] | None:
             continue
         return {"commit": commit, "dirty": bool(status.strip()), "checkout": str(folder)}
     return None
+
+
+def commit_label(machine: dict[str, object]) -> str:
+    """The short git commit of a :func:`machine_info` record for report lines ("unknown" outside a checkout),
+    with "(uncommitted changes)" when the checkout was dirty."""
+    git = machine.get("git") or {}
+    commit = str(git.get("commit") or "unknown")[:10]  # type: ignore[union-attr]
+    return commit + (" (uncommitted changes)" if git.get("dirty") else "")  # type: ignore[union-attr]
