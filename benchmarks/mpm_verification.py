@@ -65,7 +65,7 @@ EXTRA_BLADE_SOILS = ("dirt",)
 
 def part_blade(args) -> dict:
     from wheelloader.references.mpm import ContinuumSoil
-    from wheelloader.references.mpm.verification import mckyes_blade, run_blade
+    from wheelloader.references.mpm.verification import mckyes_blade, mckyes_blade_with_heap, run_blade
 
     rows = []
     soils = [(name, soil, True) for name, soil in blade_soils().items()]
@@ -79,20 +79,32 @@ def part_blade(args) -> dict:
             horizontal = float(-np.mean(res.force[window, 0]))
             vertical = float(np.mean(res.force[window, 1]))
             ref = mckyes_blade(depth, soil)
+            # the heap on the wedge, averaged over the same window, as McKyes' surcharge q
+            heap = np.mean(res.extra["heap_mass"][window], axis=0)
+            edges = res.extra["heap_bin_edges"]
+            cumulative = np.concatenate([[0.0], np.cumsum(heap)])
+            heaped = mckyes_blade_with_heap(depth, soil, lambda length: float(np.interp(length, edges, cumulative)))
             early = (travel >= 0.25 * depth) & (travel <= 0.5 * depth)
             horizontal_early = float(-np.mean(res.force[early, 0]))
             rows.append({"soil": name, "criterion": criterion, "depth": depth, "dx": dx, "horizontal": horizontal,
                          "vertical": vertical, "horizontal_0.25_0.5d": horizontal_early,
                          "ratio_0.25_0.5d": horizontal_early / ref["horizontal"],
-                         "mckyes_horizontal": ref["horizontal"], "ratio": horizontal / ref["horizontal"],
+                         "mckyes_horizontal": ref["horizontal"], "ratio_flat": horizontal / ref["horizontal"],
+                         "mckyes_heap_horizontal": heaped["horizontal"], "heap_surcharge": heaped["surcharge"],
+                         "heap_wedge_length": heaped["wedge_length"], "heap_mass": float(heap.sum()),
+                         "ratio": horizontal / heaped["horizontal"],
                          "vertical_over_horizontal": vertical / horizontal,
                          "tan_delta": math.tan(soil.wall_friction_angle), "particles": res.particles,
                          "guard_impulse_share": res.extra["guard_impulse_share"],
                          "steps": res.steps, "wall_s": res.wall_s,
                          "travel": travel.tolist(), "fx": res.force[:, 0].tolist(), "fz": res.force[:, 1].tolist()})
-            progress(args, f"blade {name} d={depth}: {horizontal:.0f} N/m vs McKyes {ref['horizontal']:.0f} "
-                           f"({horizontal / ref['horizontal']:.3f}), {res.wall_s:.0f} s")
-    return {"rows": rows, "window": "mean over 0.5-1.0 depth of travel (ratio); 0.25-0.5 depth (ratio_0.25_0.5d)",
+            progress(args, f"blade {name} d={depth}: {horizontal:.0f} N/m vs McKyes {ref['horizontal']:.0f} flat "
+                           f"({horizontal / ref['horizontal']:.3f}), {heaped['horizontal']:.0f} with the measured heap "
+                           f"q={heaped['surcharge']:.0f} Pa ({horizontal / heaped['horizontal']:.3f}), {res.wall_s:.0f} s")
+    return {"rows": rows, "window": "mean over 0.5-1.0 depth of travel (ratio, ratio_flat); 0.25-0.5 depth "
+                                    "(ratio_0.25_0.5d, flat surface)",
+            "reference": "ratio: McKyes with the surcharge q of the soil heaped on the wedge, measured in the run "
+                         "over the same window (mckyes_blade_with_heap); ratio_flat: McKyes on a flat surface (q = 0)",
             "cells_over_cut": BLADE_CELLS,
             "speed": 0.2}
 
@@ -227,8 +239,9 @@ def report(out_dir: Path) -> dict:
     res = summary["results"]
     if "blade" in parts:
         rows = parts["blade"]["result"]["rows"]
-        keys = ("soil", "criterion", "depth", "dx", "horizontal", "mckyes_horizontal", "ratio", "ratio_0.25_0.5d",
-                "vertical_over_horizontal", "tan_delta", "guard_impulse_share", "wall_s")
+        keys = ("soil", "criterion", "depth", "dx", "horizontal", "mckyes_heap_horizontal", "heap_surcharge",
+                "ratio", "mckyes_horizontal", "ratio_flat", "ratio_0.25_0.5d", "vertical_over_horizontal",
+                "tan_delta", "guard_impulse_share", "wall_s")
         res["blade_vs_mckyes"] = [{k: r.get(k) for k in keys} for r in rows]
         res["blade_within_10_percent"] = all(abs(r["ratio"] - 1.0) <= 0.10 for r in rows if r.get("criterion", True))
     if "wall" in parts:
@@ -263,10 +276,13 @@ def figure(parts: dict, target: Path) -> None:
         for r in parts["blade"]["result"]["rows"]:
             d = r["depth"]
             line, = ax.plot(np.array(r["travel"]) / d, -np.array(r["fx"]), lw=0.8,
-                            label=f"{r['soil']} d={d:g} m ({r['ratio']:.2f}x)")
-            ax.axhline(r["mckyes_horizontal"], color=line.get_color(), ls="--", lw=0.8)
+                            label=f"{r['soil']} d={d:g} m ({r['ratio']:.2f}x; flat {r.get('ratio_flat', r['ratio']):.2f}x)")
+            ax.axhline(r["mckyes_horizontal"], color=line.get_color(), ls=":", lw=0.8)
+            if "mckyes_heap_horizontal" in r:
+                ax.plot([0.5, 1.0], [r["mckyes_heap_horizontal"]] * 2, color=line.get_color(), ls="--", lw=1.5)
         ax.axvspan(0.5, 1.0, color="0.9")
-        ax.set(xlabel="travel / depth", ylabel="horizontal force [N/m]", title="Vertical blade vs McKyes (dashed)")
+        ax.set(xlabel="travel / depth", ylabel="horizontal force [N/m]",
+               title="Vertical blade vs McKyes: flat surface (:), with the measured heap as q (--)")
         ax.legend(fontsize=7)
     ax = axes[0, 1]
     if "wall" in parts:
