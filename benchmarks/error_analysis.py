@@ -170,7 +170,8 @@ def _reference_density(log) -> float:
 
 def markdown(result: dict) -> str:
     lines = [f"# Error of the force model by phase and term ({result['data']}, method {result['method']})", "",
-             f"{commit_label(result['machine'])}; filter sigma {result['sigma_s']} s; curl: rho < {result['curl_rho_deg']:g} deg.", "",
+             f"{commit_label(result['machine'])}; filter sigma {result['sigma_s']} s; "
+             f"curl: rho < {result['curl_rho_deg']:g} deg.", "",
              "Share of squared F_R error per phase (and the phase's own RMSE in % of the cycle's mean |F_R|), "
              "and the term whose scaled copy removes most of that phase's residual (share of the residual's "
              "sum of squares):", "",
@@ -185,8 +186,8 @@ def markdown(result: dict) -> str:
                 continue
             shares = ph["residual_share_explained_by_term"]
             best = max(shares, key=shares.get)
-            cells.append(f"{100 * ph['share_of_squared_error']:.0f} % of error ({ph['rmse_percent_within_phase']:.0f} %);"
-                         f" {best} {100 * shares[best]:.0f} %")
+            cells.append(f"{100 * ph['share_of_squared_error']:.0f} % of error "
+                         f"({ph['rmse_percent_within_phase']:.0f} %); {best} {100 * shares[best]:.0f} %")
         exit_cell = ("-" if case["after_exit_mean_observed_F_R"] is None else
                      f"{case['after_exit_mean_observed_F_R']:.0f} / {case['after_exit_mean_carried_weight']:.0f} N")
         lines.append(f"| {case['label']} | {case['rmse_percent']:.1f} % | " + " | ".join(cells) + f" | {exit_cell} |")
@@ -213,7 +214,7 @@ def figures(result: dict, out: Path) -> None:
     ncol = 3
     nrow = math.ceil(len(cases) / ncol)
     fig, axes = plt.subplots(nrow, ncol, figsize=(5.2 * ncol, 3.6 * nrow), squeeze=False)
-    for ax, case in zip(axes.ravel(), cases):
+    for ax, case in zip(axes.ravel(), cases, strict=False):
         s = case["series"]
         t = np.array(s["t"])
         phase = np.array(s["phase"])
@@ -247,7 +248,7 @@ def figures(result: dict, out: Path) -> None:
     for k, p in enumerate(PHASES):
         share = [100 * c["phases"][p].get("share_of_squared_error", 0.0) for c in cases]
         bars = ax.bar(x + (k - 1) * width, share, width, color=list(colours.values())[k], edgecolor="0.3", label=p)
-        for bar, c in zip(bars, cases):
+        for bar, c in zip(bars, cases, strict=True):
             ph = c["phases"][p]
             if ph.get("samples") and ph["share_of_squared_error"] > 0.08:
                 s = ph["residual_share_explained_by_term"]

@@ -5,7 +5,8 @@ Parts (each writes ``OUT/part_<name>.json``; ``--report`` assembles ``OUT/mpm_ve
 
     blade     vertical blade vs the McKyes passive wedge, 3 depths x 2 soils (target +-10 %)
     wall      smooth wall: at rest (vs 1 - sin phi) and pushed (vs Rankine passive) (target +-15 %)
-    column    granular column collapse run-out vs Lube et al. 2005 / Lajeunesse et al. 2005
+    column    granular column collapse run-out at three resolutions vs Lube et al. 2005 (quasi-2-D) and
+              the true-2-D rod experiments of arXiv:1512.05180
     cycle     the default bucket cycle at three resolutions (finest two <= 7 % filtered F_R) and at
               three seeds of the default resolution (spread <= 5 %), with the mass balance
 
@@ -34,7 +35,7 @@ BLADE_CELLS = 10.0
 WALL_HEIGHT = 0.3
 WALL_DX = 0.015
 COLUMN_RATIOS = (0.5, 1.0, 3.0)
-COLUMN_DX = 0.01
+COLUMN_DXS = (0.02, 0.01, 0.005)
 CYCLE_RESOLUTIONS = (0.03, 0.02, 0.015)
 CYCLE_SEEDS = (0, 1, 2)
 
@@ -83,7 +84,8 @@ def part_blade(args) -> dict:
             heap = np.mean(res.extra["heap_mass"][window], axis=0)
             edges = res.extra["heap_bin_edges"]
             cumulative = np.concatenate([[0.0], np.cumsum(heap)])
-            heaped = mckyes_blade_with_heap(depth, soil, lambda length: float(np.interp(length, edges, cumulative)))
+            heaped = mckyes_blade_with_heap(
+                depth, soil, lambda length, e=edges, c=cumulative: float(np.interp(length, e, c)))
             early = (travel >= 0.25 * depth) & (travel <= 0.5 * depth)
             horizontal_early = float(-np.mean(res.force[early, 0]))
             rows.append({"soil": name, "criterion": criterion, "depth": depth, "dx": dx, "horizontal": horizontal,
@@ -100,7 +102,8 @@ def part_blade(args) -> dict:
                          "travel": travel.tolist(), "fx": res.force[:, 0].tolist(), "fz": res.force[:, 1].tolist()})
             progress(args, f"blade {name} d={depth}: {horizontal:.0f} N/m vs McKyes {ref['horizontal']:.0f} flat "
                            f"({horizontal / ref['horizontal']:.3f}), {heaped['horizontal']:.0f} with the measured heap "
-                           f"q={heaped['surcharge']:.0f} Pa ({horizontal / heaped['horizontal']:.3f}), {res.wall_s:.0f} s")
+                           f"q={heaped['surcharge']:.0f} Pa ({horizontal / heaped['horizontal']:.3f}), "
+                           f"{res.wall_s:.0f} s")
     return {"rows": rows, "window": "mean over 0.5-1.0 depth of travel (ratio, ratio_flat); 0.25-0.5 depth "
                                     "(ratio_0.25_0.5d, flat surface)",
             "reference": "ratio: McKyes with the surcharge q of the soil heaped on the wedge, measured in the run "
@@ -136,19 +139,32 @@ def part_wall(args) -> dict:
 
 def part_column(args) -> dict:
     from wheelloader.references.mpm import ContinuumSoil
-    from wheelloader.references.mpm.verification import column_runout_scaling, run_column_collapse
+    from wheelloader.references.mpm.verification import (
+        column_runout_scaling,
+        column_runout_true_2d,
+        run_column_collapse,
+    )
 
     soil = ContinuumSoil(1600.0, math.radians(30.0))
     rows = []
     for a in COLUMN_RATIOS:
-        res = run_column_collapse(a, soil, COLUMN_DX, threads=args.threads)
-        ref = column_runout_scaling(a)
-        rows.append({"aspect_ratio": a, "runout": res.extra["runout"], "lube_2005": ref["lube"],
-                     "lube_regime": ref["regime"], "over_lube": res.extra["runout"] / ref["lube"],
-                     "final_kinetic_energy": res.extra["kinetic_energy"], "particles": res.particles,
-                     "wall_s": res.wall_s})
-        progress(args, f"column a={a}: run-out {res.extra['runout']:.2f} vs Lube {ref['lube']:.2f}, {res.wall_s:.0f} s")
-    return {"rows": rows, "soil": soil.to_dict(), "dx": COLUMN_DX, "width": 0.2}
+        for dx in COLUMN_DXS:
+            res = run_column_collapse(a, soil, dx, threads=args.threads)
+            ref = column_runout_scaling(a)
+            true_2d = column_runout_true_2d(a)
+            bounds = [float(ref["lube"])] + ([true_2d] if true_2d is not None else [])
+            rows.append({"aspect_ratio": a, "dx": dx, "cells_across": 0.2 / dx, "runout": res.extra["runout"],
+                         "lube_2005": ref["lube"], "lube_regime": ref["regime"], "true_2d_2015": true_2d,
+                         "over_lube": res.extra["runout"] / ref["lube"],
+                         "within_published_envelope": (min(bounds) * 0.9 <= res.extra["runout"]
+                                                       <= max(bounds) * 1.1),
+                         "final_kinetic_energy": res.extra["kinetic_energy"], "particles": res.particles,
+                         "wall_s": res.wall_s})
+            progress(args, f"column a={a} dx={dx}: run-out {res.extra['runout']:.2f} vs Lube {ref['lube']:.2f}"
+                           f" / true 2-D {true_2d if true_2d is None else round(true_2d, 2)}, {res.wall_s:.0f} s")
+    return {"rows": rows, "soil": soil.to_dict(), "dxs": list(COLUMN_DXS), "width": 0.2,
+            "envelope": "between the quasi-2-D fit of Lube et al. 2005 and the true-2-D fit of arXiv:1512.05180, "
+                        "+-10 % (Lube alone below a = 0.65)"}
 
 
 def _filtered_resultant(log) -> np.ndarray:
@@ -264,6 +280,18 @@ def report(out_dir: Path) -> dict:
     return summary
 
 
+def column_runout_lube(a: float) -> float:
+    from wheelloader.references.mpm.verification import column_runout_scaling
+
+    return float(column_runout_scaling(a)["lube"])
+
+
+def column_runout_rods(a: float) -> float:
+    from wheelloader.references.mpm.verification import column_runout_true_2d
+
+    return float(column_runout_true_2d(a))
+
+
 def figure(parts: dict, target: Path) -> None:
     import matplotlib
 
@@ -276,7 +304,8 @@ def figure(parts: dict, target: Path) -> None:
         for r in parts["blade"]["result"]["rows"]:
             d = r["depth"]
             line, = ax.plot(np.array(r["travel"]) / d, -np.array(r["fx"]), lw=0.8,
-                            label=f"{r['soil']} d={d:g} m ({r['ratio']:.2f}x; flat {r.get('ratio_flat', r['ratio']):.2f}x)")
+                            label=f"{r['soil']} d={d:g} m ({r['ratio']:.2f}x; "
+                                  f"flat {r.get('ratio_flat', r['ratio']):.2f}x)")
             ax.axhline(r["mckyes_horizontal"], color=line.get_color(), ls=":", lw=0.8)
             if "mckyes_heap_horizontal" in r:
                 ax.plot([0.5, 1.0], [r["mckyes_heap_horizontal"]] * 2, color=line.get_color(), ls="--", lw=1.5)
@@ -303,11 +332,14 @@ def figure(parts: dict, target: Path) -> None:
     ax = axes[1, 1]
     if "column" in parts:
         rows = parts["column"]["result"]["rows"]
-        a = np.array([r["aspect_ratio"] for r in rows])
-        ax.plot(a, [r["runout"] for r in rows], "o", label="MPM")
-        aa = np.linspace(0.3, 3.0, 50)
-        ax.plot(aa, 1.2 * aa, "k--", lw=0.8, label="Lube et al. 2005: 1.2 a (a < 1.8)")
-        ax.plot(aa, 1.9 * aa ** (2 / 3), "k:", lw=0.8, label="Lube et al. 2005: 1.9 a^(2/3) (a > 2.8)")
+        for k, dx in enumerate(sorted({r.get("dx", 0.01) for r in rows}, reverse=True)):
+            sel = [r for r in rows if r.get("dx", 0.01) == dx]
+            ax.plot([r["aspect_ratio"] for r in sel], [r["runout"] for r in sel], "os^"[k % 3], ms=5,
+                    label=f"MPM, dx {dx * 100:g} cm ({0.2 / dx:.0f} cells across)")
+        aa = np.linspace(0.3, 3.2, 80)
+        ax.plot(aa, [column_runout_lube(x) for x in aa], "k--", lw=0.8, label="Lube et al. 2005 (quasi-2-D channel)")
+        a2 = aa[aa > 0.65]
+        ax.plot(a2, [column_runout_rods(x) for x in a2], "k:", lw=0.8, label="true 2-D rods (arXiv:1512.05180)")
         ax.set(xlabel="aspect ratio a = H0/L0", ylabel="(L_inf - L0) / L0", title="Column collapse run-out")
         ax.legend(fontsize=7)
     fig.tight_layout()

@@ -12,7 +12,9 @@ from wheelloader.references.mpm import ContinuumSoil
 from wheelloader.references.mpm.verification import (
     at_rest_force,
     column_runout_scaling,
+    column_runout_true_2d,
     mckyes_blade,
+    mckyes_blade_with_heap,
     rankine_passive,
 )
 
@@ -45,6 +47,38 @@ def test_mckyes_cohesion_and_adhesion_add_force():
         mckyes_blade(0.0, SOIL_A)
 
 
+def test_heap_surcharge_known_answers():
+    # no heap: the flat-surface wedge
+    flat = mckyes_blade(0.15, SOIL_A)
+    none = mckyes_blade_with_heap(0.15, SOIL_A, lambda length: 0.0)
+    assert none["horizontal"] == pytest.approx(flat["horizontal"])
+    assert none["surcharge"] == 0.0
+    # a heap spread evenly (mass proportional to the length it covers) is a uniform surcharge q
+    q = 400.0
+    even = mckyes_blade_with_heap(0.15, SOIL_A, lambda length: q * length / 9.81)
+    assert even["surcharge"] == pytest.approx(q)
+    assert even["horizontal"] == pytest.approx(mckyes_blade(0.15, SOIL_A, surcharge=q)["horizontal"])
+    # the fixed point is consistent: q is the heap on the wedge of the returned beta
+    assert even["wedge_length"] == pytest.approx(0.15 / math.tan(even["beta"]), rel=1e-6)
+    # by hand: q d N_q adds to the wedge weight term, N_q = cot(beta) / den for a vertical blade
+    beta, phi, delta = even["beta"], SOIL_A.friction_angle, SOIL_A.wall_friction_angle
+    den = math.cos(math.pi / 2 + delta) + math.sin(math.pi / 2 + delta) / math.tan(beta + phi)
+    n_gamma = (1.0 / math.tan(beta)) / (2.0 * den)
+    total = 1600 * 9.81 * 0.15**2 * n_gamma + q * 0.15 * (1.0 / math.tan(beta)) / den
+    assert even["total"] == pytest.approx(total, rel=1e-9)
+
+
+def test_true_2d_column_fit():
+    assert column_runout_true_2d(0.5) is None
+    assert column_runout_true_2d(1.0) == pytest.approx(3.25)
+    assert column_runout_true_2d(3.0) == pytest.approx(3.80 * 3.0**0.73)
+    # true-2-D columns run out further than quasi-2-D channels at every aspect ratio where both are given
+    for a in (0.8, 1.0, 2.0, 3.0):
+        assert column_runout_true_2d(a) > column_runout_scaling(a)["lube"]
+    with pytest.raises(ValueError):
+        column_runout_true_2d(-1.0)
+
+
 def test_rankine_and_at_rest():
     kp = (1 + 0.5) / (1 - 0.5)
     assert rankine_passive(0.3, SOIL_A) == pytest.approx(0.5 * kp * 1600 * 9.81 * 0.09)
@@ -70,13 +104,17 @@ def test_blade_matches_mckyes(soil):
     depth = 0.15
     res = run_blade(depth, soil, depth / 10)
     travel = res.extra["travel"]
-    # the wedge forms over the first half depth of travel; McKyes assumes the flat surface of that moment
-    early = (travel >= 0.25 * depth) & (travel <= 0.5 * depth)
-    assert -np.mean(res.force[early, 0]) == pytest.approx(mckyes_blade(depth, soil)["horizontal"], rel=0.15)
-    # then soil heaps up ahead and the force keeps rising
     window = (travel >= 0.5 * depth) & (travel <= depth)
     horizontal = -np.mean(res.force[window, 0])
-    assert horizontal > -np.mean(res.force[early, 0])
+    # soil heaps up ahead of the blade and loads the wedge: McKyes with that heap as its surcharge q
+    heap = np.mean(res.extra["heap_mass"][window], axis=0)
+    cumulative = np.concatenate([[0.0], np.cumsum(heap)])
+    edges = res.extra["heap_bin_edges"]
+    heaped = mckyes_blade_with_heap(depth, soil, lambda length: float(np.interp(length, edges, cumulative)))
+    assert heaped["surcharge"] > 0.0
+    assert horizontal == pytest.approx(heaped["horizontal"], rel=0.10)
+    # the force rises with the heap: above the flat-surface wedge over this window
+    assert horizontal > mckyes_blade(depth, soil)["horizontal"]
     # the soil slides up the blade: the vertical force is friction plus adhesion, lifting the blade
     vertical = np.mean(res.force[window, 1])
     assert vertical > 0.0

@@ -107,6 +107,22 @@ def at_rest_force(height: float, soil: ContinuumSoil, ratio: float | None = None
     return 0.5 * k0 * soil.density * GRAVITY * height**2
 
 
+def column_runout_true_2d(aspect_ratio: float) -> float | None:
+    """Normalised run-out ``(L_inf - L_0) / L_0`` of the true-2-D experiments with aluminium rods.
+
+    The fits of arXiv:1512.05180 (2015, "Failure mechanism of true 2D granular flows"): ``3.25 a^0.96`` for
+    0.65 < a < 1.5 and ``3.80 a^0.73`` for a > 1.5; below a = 0.65 the column keeps its height and the
+    paper gives no run-out law (None). Quasi-2-D channels (:func:`column_runout_scaling`) run out less:
+    the channel walls' friction; together they bracket the published 2-D data.
+    """
+    a = float(aspect_ratio)
+    if not a > 0.0:
+        raise ValueError(f"aspect_ratio must be > 0, got {aspect_ratio!r}")
+    if a <= 0.65:
+        return None
+    return 3.25 * a**0.96 if a < 1.5 else 3.80 * a**0.73
+
+
 def column_runout_scaling(aspect_ratio: float) -> dict[str, float | str]:
     """Normalised run-out ``(L_inf - L_0) / L_0`` of a 2-D granular column of ``aspect_ratio`` a = H0/L0.
 
