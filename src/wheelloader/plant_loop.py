@@ -1,0 +1,214 @@
+"""The adaptation loop on any reference plant: plan, dig in the plant, calibrate, plan again.
+
+:func:`wheelloader.adaptation.run_loop` closes the loop in the FEE env, i.e. in the model's own world.
+:func:`run_plant_loop` closes it on anything with the reference-plant interface
+(:class:`wheelloader.references.Plant`: ``dig(path, pile, soil, seed) -> CycleLog`` with the carved pile in
+``pile_after``): the plane-strain MPM continuum (:class:`~wheelloader.references.mpm.MPMPlant`), or the FEE
+env itself through :class:`~wheelloader.references.fee_env.FEEEnvPlant`. The strategies are those of
+:mod:`wheelloader.adaptation`; every metric is measured by the plant, the same way for every strategy:
+
+* energy: the work the bucket does on the soil along the path, ``-sum F . v dt`` with ``F`` the plant's
+  bucket force (F_T, F_N turned back into the world frame) and ``v`` the tip velocity
+  (:func:`wheelloader.references.metrics.cycle_work`); the carried load's weight is in ``F``, so lifting
+  it is counted;
+* fill: the plant's soil inside the bucket at the end of the path;
+* next-cycle prediction error: the F_R RMSE of the parameters the strategy planned with against the
+  plant's force, filtered with the references' Gaussian (σ 0.1 s), over the in-soil samples.
+
+Between cycles the strategies calibrate on the filtered log. Each cycle's log is saved as it finishes
+(``cache``), and a loop that finds a saved cycle whose path equals the one it planned reads it instead of
+digging again: an interrupted run resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wheelloader.adaptation import Calibrating, CycleRecord, Strategy
+from wheelloader.estimator import (
+    FLAG_OUT_OF_SOIL,
+    CycleLog,
+    Pile,
+    SoilParams,
+    WheelloaderError,
+    calibrate,
+    predict,
+)
+from wheelloader.references.filtering import DEFAULT_FILTER, filtered
+from wheelloader.references.metrics import cycle_work
+from wheelloader.references.plant import Plant
+
+
+def _cached(cache: Path | None, key: str) -> CycleLog | None:
+    if cache is None:
+        return None
+    csv = cache / f"{key}.csv"
+    if not csv.is_file():
+        return None
+    return CycleLog.load(csv)
+
+
+def path_digest(path: Any) -> str:
+    """SHA-256 of a path's samples (t, x, z, blade angle): which plan a saved cycle was dug for."""
+    h = hashlib.sha256()
+    for arr in (path.t, path.x, path.z, path.blade_angle):
+        h.update(np.ascontiguousarray(arr, dtype=np.float64).tobytes())
+    return h.hexdigest()
+
+
+def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParams | str, *, cycles: int = 5,
+                   seed: int = 0, cache: str | Path | None = None, sigma_s: float = DEFAULT_FILTER["sigma_s"],
+                   progress: Callable[[str], None] | None = None) -> tuple[list[CycleRecord], list[CycleLog]]:
+    """Run ``cycles`` cycles of ``strategy`` in ``plant``, each on the pile the previous one carved.
+
+    Parameters
+    ----------
+    plant : Plant
+        The plant that digs (its ``dig`` must return the carved surface in ``pile_after``).
+    strategy : Strategy
+        A strategy of :mod:`wheelloader.adaptation` that plans paths (a policy strategy, which needs the
+        env's observations, cannot run on a plant).
+    pile : Pile
+        Surface before the first cycle.
+    soil : SoilParams or str
+        The plant's soil (hidden from the strategy; the plant documents which fields it uses).
+    cycles : int
+        Cycles to dig (>= 1).
+    seed : int
+        Seed of the plant (packing, jitter).
+    cache : str or Path, optional
+        Folder where each cycle's log is saved as ``cycle<k>.csv`` + JSON as it finishes; an existing
+        one whose path equals the planned one is read instead of digging (resume).
+    sigma_s : float
+        Gaussian filter of the plant's force before calibration and for the prediction error [s].
+    progress : callable, optional
+        Called with one line per cycle.
+
+    Returns
+    -------
+    records, logs
+        One :class:`~wheelloader.adaptation.CycleRecord` and the plant's raw :class:`CycleLog` per cycle.
+    """
+    if not isinstance(cycles, int) or isinstance(cycles, bool) or cycles < 1:
+        raise WheelloaderError(f"cycles must be a positive integer, got {cycles!r}")
+    if not isinstance(pile, Pile):
+        raise WheelloaderError(f"pile must be a Pile, got {type(pile).__name__}")
+    if not callable(getattr(plant, "dig", None)):
+        raise WheelloaderError(f"plant must have a dig(path, pile, soil, seed=...) method, got {type(plant).__name__}")
+    folder = None if cache is None else Path(cache)
+    if folder is not None:
+        folder.mkdir(parents=True, exist_ok=True)
+    records: list[CycleRecord] = []
+    logs: list[CycleLog] = []
+    calib = (0.0, True, "prior parameters")
+    for k in range(1, cycles + 1):
+        plan = strategy.plan(pile)
+        if plan.path is None:
+            raise WheelloaderError(f"strategy {strategy.name!r} gives a controller, not a path: it needs the env's "
+                                   "observations and cannot dig in a reference plant")
+        params_used = strategy.params
+        log = _cached(folder, f"cycle{k}")
+        digest = path_digest(plan.path)
+        if log is not None and log.metadata.get("planned_path_sha256") != digest:
+            raise WheelloaderError(f"{folder}/cycle{k}.csv was dug along another path than the one planned now "
+                                   "(other settings or code); use another cache folder or remove it")
+        resumed = log is not None
+        if log is None:
+            start = time.perf_counter()
+            log = plant.dig(plan.path, pile, soil, seed=seed)
+            log.metadata.setdefault("plant_wall_s", time.perf_counter() - start)
+            log.metadata["planned_path_sha256"] = digest
+            if folder is not None:
+                log.save(folder / f"cycle{k}.csv", overwrite=True)
+        if log.pile_after is None:
+            raise WheelloaderError(f"plant {getattr(plant, 'name', plant)!r} did not return the carved pile "
+                                   "(CycleLog.pile_after)")
+        logs.append(log)
+        smooth = filtered(log, sigma_s)
+        pred = predict(params_used, smooth)
+        quality = pred.quality
+        in_soil = pred.state.depth > 0.0
+        violations = int(np.count_nonzero((pred.forces.flags & ~FLAG_OUT_OF_SOIL) & in_soil))
+        fill = float(log.fill_volume[-1]) if log.fill_volume is not None else math.nan
+        energy = cycle_work(log)
+        records.append(CycleRecord(
+            cycle=k, strategy=strategy.name, path=plan.path.name, calibration_s=calib[0], planning_s=plan.seconds,
+            prediction_rmse_N=quality.rmse_r if quality else math.nan,
+            prediction_rmse_percent=quality.percent_r if quality else math.nan,
+            fill_m3=fill, fill_fraction=fill / log.bucket.capacity, energy_J=energy,
+            energy_per_m3=energy / fill if fill > 0 else math.inf, stalled=False,
+            validity_violations=violations, end="resumed from cache" if resumed else "path end",
+            calibration_ok=calib[1], calibration_message=calib[2], plan_ok=plan.success, plan_message=plan.message,
+            params=params_used.to_dict()))
+        if progress is not None:
+            r = records[-1]
+            progress(f"  {r.strategy:>7} cycle {k}: fill {r.fill_fraction:5.0%}, energy {r.energy_J / 1e3:6.2f} kJ, "
+                     f"{r.energy_per_m3 / 1e3:6.1f} kJ/m^3, prediction F_R RMSE {r.prediction_rmse_percent:5.1f} %"
+                     f"{' (resumed)' if resumed else ''}")
+        pile = log.pile_after
+        if k < cycles:
+            calib = strategy.update(smooth, _true_soil(soil, strategy))
+    return records, logs
+
+
+def _true_soil(soil: SoilParams | str, strategy: Strategy) -> SoilParams:
+    """What :meth:`Strategy.update` receives as the plant's truth: on a plant that is not the model there is
+    none in FEE terms; the soil's FEE parameters (a preset or the given ones) stand in, and only the
+    simulation-world oracle reads them."""
+    from wheelloader.estimator import preset
+
+    return preset(soil) if isinstance(soil, str) else soil
+
+
+def save_records(records: list[CycleRecord], path: str | Path) -> Path:
+    """Write the records as JSON (one list)."""
+    path = Path(path)
+    path.write_text(json.dumps([r.to_dict() for r in records], indent=1))
+    return path
+
+
+class Hindsight(Calibrating):
+    """The hindsight oracle of a plant that is not the model: plan every cycle with one set of FEE
+    parameters fitted afterwards to the plant's cycles of that soil (:func:`hindsight_parameters`); it
+    learns nothing between cycles."""
+
+    def __init__(self, params: SoilParams, planner: Any = None, rate: float = 60.0) -> None:
+        super().__init__(params, "hindsight", planner, rate, name="oracle")
+
+    def update(self, log: CycleLog, true_soil: SoilParams) -> tuple[float, bool, str]:
+        return 0.0, True, "hindsight parameters"
+
+
+def hindsight_parameters(logs: list[CycleLog], method: str = "default",
+                         sigma_s: float = DEFAULT_FILTER["sigma_s"]) -> tuple[SoilParams, str]:
+    """FEE parameters fitted to all ``logs`` of one soil (filtered), and how they were fitted.
+
+    Uses the several-cycle calibration ``calibrate([log, ...])`` where the estimator has it; otherwise the
+    single-cycle fit, among one per log, whose F_R error summed over all logs is lowest (said in the
+    returned text).
+    """
+    if not logs:
+        raise WheelloaderError("hindsight_parameters needs at least one cycle log")
+    smooth = [filtered(lg, sigma_s) for lg in logs]
+    try:
+        result = calibrate(smooth, method=method)
+    except (TypeError, WheelloaderError) as exc:
+        fallback = f"several-cycle calibration unavailable ({exc})"
+    else:
+        return result.params, f"one {method} fit to all {len(logs)} cycles"
+    best, best_cost = None, math.inf
+    for lg in smooth:
+        candidate = calibrate(lg, method=method).params
+        cost = sum(predict(candidate, other).quality.rmse_r ** 2 for other in smooth)
+        if cost < best_cost:
+            best, best_cost = candidate, cost
+    assert best is not None  # logs is not empty
+    return best, f"best of {len(logs)} single-cycle {method} fits over all cycles; {fallback}"

@@ -1,0 +1,40 @@
+"""The FEE env as a reference plant: the model's own world behind the :class:`~wheelloader.references.Plant`
+interface, so that the plant loop (:func:`wheelloader.plant_loop.run_plant_loop`) runs on it exactly as on
+the MPM continuum (a fast check of the loop, and the model-world figure beside the independent one)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from wheelloader.envs import BucketLoadingEnv
+from wheelloader.envs.scripted import run_path
+from wheelloader.estimator import BucketPath, CycleLog, Pile, SoilParams
+
+
+class FEEEnvPlant:
+    """Digs a path in a :class:`~wheelloader.envs.BucketLoadingEnv` with a path tracker.
+
+    Parameters
+    ----------
+    **env_kwargs
+        Keyword arguments of the env besides ``soil`` and ``pile`` (e.g. ``sensor_noise``, ``truth``,
+        ``exit_min_fill``). The tracked trajectory, not the planned one, is what the log records.
+    """
+
+    name = "fee-env"
+
+    def __init__(self, **env_kwargs: Any) -> None:
+        for key in ("soil", "pile"):
+            if key in env_kwargs:
+                raise TypeError(f"FEEEnvPlant: {key!r} is an argument of dig(), not of the plant")
+        self.env_kwargs = env_kwargs
+
+    def dig(self, path: BucketPath, pile: Pile, soil: SoilParams | str, *, seed: int = 0) -> CycleLog:
+        """Dig ``path`` into ``pile`` of ``soil``; the log's ``pile_after`` is the carved surface."""
+        start = (float(path.x[0]), float(path.z[0]), float(path.blade_angle[0]))
+        env = BucketLoadingEnv(soil=soil, pile=pile, start_pose=start, start_noise=(0.0, 0.0, 0.0),
+                               **self.env_kwargs)
+        run_path(env, path, seed=seed)
+        log = env.unwrapped.last_cycle_log()
+        log.metadata["plant"] = self.name
+        return log
