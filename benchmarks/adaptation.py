@@ -18,6 +18,8 @@ Usage::
 
     python benchmarks/adaptation.py --out results/adaptation            # full run
     python benchmarks/adaptation.py --quick --out /tmp/adaptation        # smoke run
+    python benchmarks/adaptation.py --plant mpm --out DIR                # the loop in the MPM continuum
+                                                                         # (benchmarks/plant_adaptation.py)
 """
 
 from __future__ import annotations
@@ -77,6 +79,14 @@ def _plant_soil(name: str, seed: int):
 
 
 def main(argv: list[str] | None = None) -> int:
+    import sys
+
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if any(a == "--plant" or a.startswith("--plant=") for a in argv):
+        # the loop on a plant that is not the FEE env: benchmarks/plant_adaptation.py
+        import plant_adaptation
+
+        return plant_adaptation.main(argv)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="results/adaptation", help="output directory")
     parser.add_argument("--seeds", type=int, default=3, help="seeds per soil and pile")

@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 records, _ = run_plant_loop(plant, Hindsight(params, planner), Pile.trapezoid(), soil,
                                             cycles=args.cycles, seed=seed,
                                             cache=out / "cycles" / soil / f"seed{seed}" / "oracle",
-                                            progress=lambda line: print(line, flush=True))
+                                            progress=lambda line: print(line, flush=True), stale="redig")
                 rows += [dict(r.to_dict(), soil=soil, seed=seed) for r in records]
     return {"benchmark": "plant_adaptation", "plant": args.plant, "settings": vars(args) | {"out": str(args.out)},
             "machine": machine_info(), "rows": rows, "oracle": oracles, "wall_s": time.perf_counter() - started,

@@ -66,7 +66,8 @@ def path_digest(path: Any) -> str:
 
 def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParams | str, *, cycles: int = 5,
                    seed: int = 0, cache: str | Path | None = None, sigma_s: float = DEFAULT_FILTER["sigma_s"],
-                   progress: Callable[[str], None] | None = None) -> tuple[list[CycleRecord], list[CycleLog]]:
+                   progress: Callable[[str], None] | None = None, stale: str = "error"
+                   ) -> tuple[list[CycleRecord], list[CycleLog]]:
     """Run ``cycles`` cycles of ``strategy`` in ``plant``, each on the pile the previous one carved.
 
     Parameters
@@ -91,6 +92,9 @@ def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParam
         Gaussian filter of the plant's force before calibration and for the prediction error [s].
     progress : callable, optional
         Called with one line per cycle.
+    stale : {"error", "redig"}
+        What to do with a saved cycle dug along another path than the one planned now (other settings or
+        code): raise (default), or dig again and replace it (said in the progress line).
 
     Returns
     -------
@@ -101,6 +105,8 @@ def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParam
         raise WheelloaderError(f"cycles must be a positive integer, got {cycles!r}")
     if not isinstance(pile, Pile):
         raise WheelloaderError(f"pile must be a Pile, got {type(pile).__name__}")
+    if stale not in ("error", "redig"):
+        raise WheelloaderError(f"stale must be 'error' or 'redig', got {stale!r}")
     if not callable(getattr(plant, "dig", None)):
         raise WheelloaderError(f"plant must have a dig(path, pile, soil, seed=...) method, got {type(plant).__name__}")
     folder = None if cache is None else Path(cache)
@@ -117,9 +123,12 @@ def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParam
         params_used = strategy.params
         log = _cached(folder, f"cycle{k}")
         digest = path_digest(plan.path)
+        replaced = False
         if log is not None and log.metadata.get("planned_path_sha256") != digest:
-            raise WheelloaderError(f"{folder}/cycle{k}.csv was dug along another path than the one planned now "
-                                   "(other settings or code); use another cache folder or remove it")
+            if stale != "redig":
+                raise WheelloaderError(f"{folder}/cycle{k}.csv was dug along another path than the one planned "
+                                       "now (other settings or code); use another cache folder or remove it")
+            log, replaced = None, True
         resumed = log is not None
         if log is None:
             start = time.perf_counter()
@@ -152,7 +161,8 @@ def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParam
             r = records[-1]
             progress(f"  {r.strategy:>7} cycle {k}: fill {r.fill_fraction:5.0%}, energy {r.energy_J / 1e3:6.2f} kJ, "
                      f"{r.energy_per_m3 / 1e3:6.1f} kJ/m^3, prediction F_R RMSE {r.prediction_rmse_percent:5.1f} %"
-                     f"{' (resumed)' if resumed else ''}")
+                     + (" (resumed)" if resumed else "")
+                     + (" (saved cycle of another plan dug again)" if replaced else ""))
         pile = log.pile_after
         if k < cycles:
             calib = strategy.update(smooth, _true_soil(soil, strategy))
