@@ -302,6 +302,8 @@ def figure(parts: dict, target: Path) -> None:
     ax = axes[0, 0]
     if "blade" in parts:
         for r in parts["blade"]["result"]["rows"]:
+            if not r.get("criterion", True):
+                continue  # the "dirt" rows are in the JSON and the README table, not in this panel
             d = r["depth"]
             line, = ax.plot(np.array(r["travel"]) / d, -np.array(r["fx"]), lw=0.8,
                             label=f"{r['soil']} d={d:g} m ({r['ratio']:.2f}x; "
@@ -312,7 +314,8 @@ def figure(parts: dict, target: Path) -> None:
         ax.axvspan(0.5, 1.0, color="0.9")
         ax.set(xlabel="travel / depth", ylabel="horizontal force [N/m]",
                title="Vertical blade vs McKyes: flat surface (:), with the measured heap as q (--)")
-        ax.legend(fontsize=7)
+        ax.title.set_fontsize(10)
+        ax.legend(fontsize=7, loc="upper left")
     ax = axes[0, 1]
     if "wall" in parts:
         for r in parts["wall"]["result"]["rows"]:
