@@ -6,7 +6,7 @@ pile states, with soil drift between cycles and truths beyond the model
 one run:
 
 (a) ``fixed``  : fixed Bezier path, nominal parameters;
-(b) ``ours``   : calibrate (default method, warm start) + predict + plan;
+(b) ``ours``   : calibrate (default method on the last ``--window`` cycles, warm start) + predict + plan;
 (c) ``oracle`` : plan with the plant's true (drifting) soil;
 (d) ``paper``  : the paper's multi-stage calibrator in the same loop;
 (e) ``rl``     : a trained SB3 policy, when ``--rl-policy`` is given.
@@ -54,7 +54,8 @@ def _strategies(args: argparse.Namespace, planner: Any) -> dict[str, Any]:
 
     out = {
         "fixed": lambda: FixedBezier(preset(NOMINAL_SOIL)),
-        "ours": lambda: Calibrating(preset(NOMINAL_SOIL), "default", planner),
+        "ours": lambda: Calibrating(preset(NOMINAL_SOIL), "default", planner, window=args.window,
+                                    forgetting=args.forgetting, keep_untrustworthy=args.keep_untrustworthy),
         "oracle": lambda: Oracle(planner),
         "paper": lambda: Calibrating(preset(NOMINAL_SOIL), "multi-stage", planner, name="paper"),
     }
@@ -63,6 +64,11 @@ def _strategies(args: argparse.Namespace, planner: Any) -> dict[str, Any]:
 
         policy = PPO.load(args.rl_policy, device="cpu")
         out["rl"] = lambda: PolicyStrategy(policy)
+    if args.strategies:
+        unknown = sorted(set(args.strategies) - set(out))
+        if unknown:
+            raise SystemExit(f"--strategies: unknown {unknown}; choose from {sorted(out)}")
+        out = {k: v for k, v in out.items() if k in args.strategies}
     return out
 
 
@@ -95,6 +101,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-planner", action="store_true", help="dig Bezier paths only (no CasADi planning)")
     parser.add_argument("--mpc", action="store_true", help="execute plans with the receding-horizon MPC")
     parser.add_argument("--rl-policy", help="a stable-baselines3 PPO .zip to include as strategy (e)")
+    parser.add_argument("--window", type=int, default=None,
+                        help="ours: calibrate on the last WINDOW cycles together (default: "
+                             "wheelloader.adaptation.DEFAULT_WINDOW)")
+    parser.add_argument("--forgetting", type=float, default=None,
+                        help="ours: forgetting factor of the window's cycles (default: none, all weigh 1)")
+    parser.add_argument("--keep-untrustworthy", action="store_true",
+                        help="ours: adopt fits whose verdict is 'not trustworthy' (default: keep the previous fit)")
+    parser.add_argument("--strategies", nargs="+", help="run only these strategies (default: all)")
     args = parser.parse_args(argv)
 
     import gymnasium as gym
@@ -135,7 +149,9 @@ def main(argv: list[str] | None = None) -> int:
                   "truth_beyond_model": TRUTH, "plant_soil": "preset with 10 % log-normal perturbation per seed",
                   "planner": ("none (Bezier paths)" if planner is None
                               else "CasADi plan + MPC" if args.mpc else "CasADi plan, tracked"),
-                  "sensor_noise_N": 150.0},
+                  "sensor_noise_N": 150.0,
+                  "ours": {"window": window_used(args), "forgetting": args.forgetting,
+                           "keep_untrustworthy": args.keep_untrustworthy}},
         "summary": summary,
         "rows": rows,
         "wall_time_s": time.perf_counter() - start,
@@ -149,6 +165,13 @@ def main(argv: list[str] | None = None) -> int:
     print(table)
     print(f"\nwrote {out / 'adaptation.json'}, {out / 'adaptation.md'}, {out / 'adaptation.png'}")
     return 0
+
+
+def window_used(args: argparse.Namespace) -> int:
+    """The window of the ``ours`` strategy in this run."""
+    from wheelloader.adaptation import DEFAULT_WINDOW
+
+    return DEFAULT_WINDOW if args.window is None else args.window
 
 
 def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, float]]:

@@ -105,3 +105,26 @@ def test_broken_files_give_clear_errors_not_tracebacks(tmp_path, log_csv, capsys
         assert main(argv) == 2, argv
         err = capsys.readouterr().err
         assert err.startswith("wheelloader: error:") and match in err, (argv, err)
+
+
+def test_calibrate_several_logs(tmp_path, capsys):
+    rng = np.random.default_rng(2)
+    from wheelloader.estimator.synthetic import random_bezier_path
+
+    logs = []
+    for k in range(3):
+        path = tmp_path / f"c{k}.csv"
+        synthetic_cycle("dirt", random_bezier_path(rng, name=f"c{k}"), noise=0.0).save(path)
+        logs.append(str(path))
+    params, plot = tmp_path / "p.json", tmp_path / "p.png"
+    assert main(["calibrate", *logs, "--forgetting", "0.8", "-o", str(params), "--plot", str(plot)]) == 0
+    out = capsys.readouterr().out
+    assert "3 cycles fitted together" in out and "what each added cycle determined" in out
+    data = json.loads(params.read_text())
+    assert data["soil"]["gamma"] == pytest.approx(preset("dirt").gamma, rel=1e-4)
+    per = data["calibration"]["settings"]["cycles"]["per_cycle"]
+    assert [c["weight"] for c in per] == pytest.approx([0.64, 0.8, 1.0])
+    assert plot.stat().st_size > 0
+    assert main(["calibrate", *logs, "--method", "multi-stage", "-o", str(tmp_path / "m.json")]) == 2
+    assert "varpro method only" in capsys.readouterr().err
+    assert main(["calibrate", logs[0], "--forgetting", "0.5", "-o", str(tmp_path / "f.json")]) == 2

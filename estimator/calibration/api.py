@@ -80,8 +80,47 @@ def _coerce_initial(initial: Any) -> SoilParams | None:
         raise CalibrationError(f"initial: {exc}") from None
 
 
+def _coerce_cycles(cycle: Any) -> list[CycleLog]:
+    """One log or a non-empty sequence of logs, as a list (oldest first)."""
+    if isinstance(cycle, CycleLog):
+        return [cycle]
+    if isinstance(cycle, (list, tuple)):
+        if not cycle:
+            raise CalibrationError("cycle: an empty list of cycle logs; give at least one")
+        for k, log in enumerate(cycle):
+            if not isinstance(log, CycleLog):
+                raise CalibrationError(f"cycle[{k}] must be a CycleLog, got {type(log).__name__}")
+        return list(cycle)
+    raise CalibrationError(f"cycle must be a CycleLog or a list of CycleLogs, got {type(cycle).__name__}")
+
+
+def cycle_weights_for(count: int, forgetting: float | None = None,
+                      cycle_weights: Any = None) -> list[float] | None:
+    """Weights of ``count`` cycles (oldest first): ``forgetting ** (count - 1 - k)`` or the given list; None: all 1.
+
+    A forgetting factor ``f`` in (0, 1] weighs the newest cycle 1, the one before ``f``, then ``f**2``,
+    ...: the soil may drift between cycles, and old cycles then count less.
+    """
+    if forgetting is not None and cycle_weights is not None:
+        raise CalibrationError("give forgetting or cycle_weights, not both")
+    if forgetting is not None:
+        if isinstance(forgetting, bool) or not isinstance(forgetting, (int, float)) or not 0.0 < forgetting <= 1.0:
+            raise CalibrationError(f"forgetting must be a number in (0, 1], got {forgetting!r}")
+        return [float(forgetting) ** (count - 1 - k) for k in range(count)]
+    if cycle_weights is not None:
+        try:
+            w = [float(v) for v in cycle_weights]
+        except (TypeError, ValueError):
+            raise CalibrationError(f"cycle_weights must be {count} numbers > 0, got {cycle_weights!r}") from None
+        if len(w) != count or not all(math.isfinite(v) and v > 0.0 for v in w):
+            raise CalibrationError(f"cycle_weights must be {count} finite numbers > 0 (one per cycle), "
+                                   f"got {cycle_weights!r}")
+        return w
+    return None
+
+
 def calibrate(
-    cycle: CycleLog,
+    cycle: CycleLog | list[CycleLog],
     method: str = DEFAULT_METHOD,
     initial: Calibration | SoilParams | dict | str | None = None,
     bounds: dict[str, tuple[float, float]] | None = None,
@@ -95,13 +134,18 @@ def calibrate(
     slope_window: float = DEFAULT_SLOPE_WINDOW,
     min_samples: int = MIN_SAMPLES,
     regularize: bool = False,
+    forgetting: float | None = None,
+    cycle_weights: list[float] | None = None,
 ) -> Calibration:
-    """Calibrate the eight soil parameters from one cycle.
+    """Calibrate the eight soil parameters from one cycle or from several.
 
     Parameters
     ----------
-    cycle : CycleLog
-        The measured cycle (path, F_T, F_N, pile at the start, bucket).
+    cycle : CycleLog or list of CycleLog
+        The measured cycle (path, F_T, F_N, pile at the start, bucket), or several cycles of the
+        same soil and bucket, oldest first: one soil is fitted to all of them, each with the depth
+        measured to its own pile surface (varpro method only). A list of one log gives exactly the
+        one-log result.
     method : str
         ``"varpro"`` (our variable-projection method; alias ``"default"``),
         ``"single-stage"`` or ``"multi-stage"`` (the paper's, Section III).
@@ -138,10 +182,19 @@ def calibrate(
         bounds, standard deviation range / sqrt(12)) with the noise per
         independent sample estimated from the residuals' autocorrelation
         (:mod:`wheelloader.estimator.calibration.varpro`, step 6).
+    forgetting : float, optional
+        Several cycles: forgetting factor ``f`` in (0, 1]; cycle ``k`` of ``N`` (oldest first) weighs
+        ``f ** (N - 1 - k)`` in the cost (the newest 1). Default: every cycle weighs 1.
+    cycle_weights : list of float, optional
+        Several cycles: explicit weight of each cycle's squared residuals (instead of ``forgetting``).
 
     Returns
     -------
     Calibration
+        With several cycles, ``quality`` covers the in-soil samples of all of them,
+        ``predicted_*`` and ``in_soil`` are the cycles' series one after another, and
+        ``settings["cycles"]`` holds each cycle's sample count, weight and F_R error, and the
+        identifiability of the first 1, 2, ... cycles (:attr:`Calibration.identifiability_by_cycles`).
 
     Raises
     ------
@@ -150,8 +203,12 @@ def calibrate(
         samples, or no sample in soil.
     """
     method = canonical_method(method)
-    if not isinstance(cycle, CycleLog):
-        raise CalibrationError(f"cycle must be a CycleLog, got {type(cycle).__name__}")
+    logs = _coerce_cycles(cycle)
+    weights_per_cycle = cycle_weights_for(len(logs), forgetting, cycle_weights)
+    if len(logs) > 1 and method != "varpro":
+        raise CalibrationError(f"calibration from several cycles ({len(logs)} given) is implemented for the varpro "
+                               f"method only, not {method!r}")
+    cycle = logs[0]
     try:
         bnds = validate_bounds({} if bounds is None else bounds)
     except ParameterError as exc:
@@ -171,15 +228,22 @@ def calibrate(
         raise CalibrationError(f"min_samples must be a positive integer, got {min_samples!r}")
     if not isinstance(regularize, bool):
         raise CalibrationError(f"regularize must be True or False, got {regularize!r}")
-    if method == "multi-stage" and sigma > len(cycle):
+    if method == "multi-stage" and sigma > len(cycle):  # (one cycle: the paper's methods take no list)
         # gaussian_filter1d's kernel spans 8 sigma: a sigma of 1e9 samples asked for 60 GiB
         raise CalibrationError(f"sigma = {sigma:g} samples is wider than the cycle ({len(cycle)} samples); "
                                "the stage-2 filter needs sigma <= the number of samples")
     prior = _coerce_initial(initial)
     bucket = cycle.bucket
     b = bucket.edge_thickness
-    state = cycle.contact_state(slope_window)
-    data = FitData.from_state(state, cycle.tangential, cycle.normal, bucket, options, min_samples)
+    states = [log.contact_state(slope_window) for log in logs]
+    parts = []
+    for k, (log, st) in enumerate(zip(logs, states, strict=True)):
+        try:
+            parts.append(FitData.from_state(st, log.tangential, log.normal, log.bucket, options, min_samples))
+        except CalibrationError as exc:
+            raise CalibrationError(f"cycle {k}: {exc}" if len(logs) > 1 else str(exc)) from None
+    data = parts[0] if len(logs) == 1 else FitData.concat(parts, weights_per_cycle)
+    state = states[0]
     lo, hi = vector_bounds(bnds, b)
     settings: dict[str, Any] = {"lambda": lam}
     stride = -(-len(data) // MAX_FIT_SAMPLES)
@@ -240,22 +304,76 @@ def calibrate(
     else:
         soil = SoilParams.from_array(np.clip(pf.theta, [bnds[k][0] for k in PARAMETER_NAMES],
                                              [bnds[k][1] for k in PARAMETER_NAMES]))
-    pred_t, pred_n, flags = _forces_along(soil, state, bucket, options)
-    in_soil = np.zeros(len(cycle), dtype=bool)
-    in_soil[data.index] = True
-    quality = FitQuality.from_forces(data.y_t, data.y_n, pred_t[data.index], pred_n[data.index])
+    if len(logs) == 1:
+        pred_t, pred_n, flags = _forces_along(soil, state, bucket, options)
+        in_soil = np.zeros(len(cycle), dtype=bool)
+        in_soil[data.index] = True
+        at_t, at_n, at_flags = pred_t[data.index], pred_n[data.index], flags[data.index]
+    else:
+        along = [_forces_along(soil, st, log.bucket, options) for log, st in zip(logs, states, strict=True)]
+        masks = []
+        for k, log in enumerate(logs):
+            m = np.zeros(len(log), dtype=bool)
+            m[data.index[data.cycle == k]] = True
+            masks.append(m)
+        pred_t, pred_n, flags = (np.concatenate([a[j] for a in along]) for j in range(3))
+        in_soil = np.concatenate(masks)
+        at_t = np.concatenate([a[0][data.index[data.cycle == k]] for k, a in enumerate(along)])
+        at_n = np.concatenate([a[1][data.index[data.cycle == k]] for k, a in enumerate(along)])
+        at_flags = np.concatenate([a[2][data.index[data.cycle == k]] for k, a in enumerate(along)])
+    quality = FitQuality.from_forces(data.y_t, data.y_n, at_t, at_n)
     f_t, f_n, jt, jn = data.forces_and_jacobian(x)
     wt, wn = math.sqrt(lam), math.sqrt(1.0 - lam)
-    resid = np.concatenate([wt * (f_t - data.y_t), wn * (f_n - data.y_n)])
-    jac = np.vstack([wt * jt, wn * jn])
-    unc = analyse(jac, resid, x, lo, hi, float(np.mean(np.hypot(data.y_t, data.y_n))))
-    cost = float(0.5 * np.sum((f_t - data.y_t) ** 2) + 0.5 * np.sum((f_n - data.y_n) ** 2))
-    tension = int(np.count_nonzero(flags[data.index] & FLAG_TENSION))
-    warnings = assess(success=bool(success), obs_t=data.y_t, obs_n=data.y_n, pred_t=pred_t[data.index],
-                      pred_n=pred_n[data.index], percent_r=quality.percent_r, names=FIT_NAMES, values=x,
+    if data.weight is None:
+        resid = np.concatenate([wt * (f_t - data.y_t), wn * (f_n - data.y_n)])
+        jac = np.vstack([wt * jt, wn * jn])
+        cost = float(0.5 * np.sum((f_t - data.y_t) ** 2) + 0.5 * np.sum((f_n - data.y_n) ** 2))
+    else:
+        rw = data.root_weight
+        resid = np.concatenate([rw * wt * (f_t - data.y_t), rw * wn * (f_n - data.y_n)])
+        jac = np.vstack([rw[:, None] * wt * jt, rw[:, None] * wn * jn])
+        cost = float(0.5 * np.sum(data.weight * (f_t - data.y_t) ** 2)
+                     + 0.5 * np.sum(data.weight * (f_n - data.y_n) ** 2))
+    force_scale = float(np.mean(np.hypot(data.y_t, data.y_n)))
+    unc = analyse(jac, resid, x, lo, hi, force_scale)
+    if len(logs) > 1:
+        settings["cycles"] = _cycles_report(logs, data, weights_per_cycle, at_t, at_n, jac, resid, x, lo, hi,
+                                            force_scale)
+    tension = int(np.count_nonzero(at_flags & FLAG_TENSION))
+    warnings = assess(success=bool(success), obs_t=data.y_t, obs_n=data.y_n, pred_t=at_t,
+                      pred_n=at_n, percent_r=quality.percent_r, names=FIT_NAMES, values=x,
                       lower=lo, upper=hi)
     return Calibration(soil, method, float(x[5]), cost, bool(success), int(status), message, int(nfev), int(njev),
                        time_s, quality, stages, unc, prior, bnds, pred_t, pred_n, in_soil, tension, settings, warnings)
+
+
+def _cycles_report(logs: list[CycleLog], data: FitData, weights: list[float] | None, at_t: np.ndarray,
+                   at_n: np.ndarray, jac: np.ndarray, resid: np.ndarray, x: np.ndarray, lo: np.ndarray,
+                   hi: np.ndarray, force_scale: float) -> dict[str, Any]:
+    """Per cycle of a several-cycle calibration: samples, weight, fit, and what the first 1, 2, ... cycles determined.
+
+    The identifiability of the first ``j`` cycles is the analysis of
+    :func:`~wheelloader.estimator.calibration.uncertainty.analyse` on their rows of the weighted
+    Jacobian at the final solution (so it shows what each added cycle contributes, not the
+    solution each prefix alone would have given).
+    """
+    per_cycle = []
+    for k, log in enumerate(logs):
+        sel = data.cycle == k
+        q = FitQuality.from_forces(data.y_t[sel], data.y_n[sel], at_t[sel], at_n[sel])
+        per_cycle.append({"name": log.path.name, "samples": int(np.count_nonzero(sel)),
+                          "weight": 1.0 if weights is None else float(weights[k]), "rmse": q.to_dict()})
+    rows = np.concatenate([data.cycle, data.cycle])
+    prefixes = []
+    for j in range(1, len(logs) + 1):
+        sel = rows < j
+        u = analyse(jac[sel], resid[sel], x, lo, hi, force_scale)
+        prefixes.append({"cycles": j, "std_errors": {n: (float(v) if np.isfinite(v) else None)
+                                                     for n, v in zip(FIT_NAMES, u.std_errors, strict=True)},
+                         "relative_std_errors": {n: (float(v) if np.isfinite(v) else None)
+                                                 for n, v in zip(FIT_NAMES, u.relative_std_errors, strict=True)},
+                         "status": dict(u.status), "weak_combinations": u.weak_combinations})
+    return {"count": len(logs), "per_cycle": per_cycle, "identifiability": prefixes}
 
 
 def _forces_along(soil: SoilParams, state: ContactState, bucket, options: ModelOptions):

@@ -192,6 +192,12 @@ class FitData:
         Bucket width w and cutting-edge thickness b [m].
     options : ModelOptions
         Validity-domain options of the force model.
+    weight : numpy.ndarray or None
+        Weight of each sample's squared residual (None: every sample weighs 1). Set by
+        :meth:`concat` for a forgetting factor over several cycles.
+    cycle : numpy.ndarray or None
+        Which cycle (0, 1, ...) each sample comes from, when the data join several cycles
+        (:meth:`concat`); None for one cycle.
     """
 
     index: np.ndarray
@@ -206,6 +212,53 @@ class FitData:
     width: float
     edge_thickness: float
     options: ModelOptions = DEFAULT_OPTIONS
+    weight: np.ndarray | None = None
+    cycle: np.ndarray | None = None
+
+    @classmethod
+    def concat(cls, parts: list[FitData], cycle_weights: list[float] | None = None) -> FitData:
+        """Join the in-soil samples of several cycles into one data set (one soil fitted to all).
+
+        Each part keeps its own geometry (depth to its own pile surface). ``index`` stays each
+        cycle's own sample index; :attr:`cycle` says which cycle a sample comes from.
+
+        Parameters
+        ----------
+        parts : list of FitData
+            One per cycle, oldest first; same bucket (width, edge thickness) and options.
+        cycle_weights : list of float, optional
+            Weight of every squared residual of each cycle (e.g. a forgetting factor's powers);
+            None: all 1 (then :attr:`weight` is None).
+        """
+        if not parts:
+            raise CalibrationError("no cycles to join")
+        first = parts[0]
+        for k, part in enumerate(parts[1:], start=1):
+            if (part.width, part.edge_thickness) != (first.width, first.edge_thickness):
+                raise CalibrationError(f"cycle {k} has another bucket (width {part.width} m, edge thickness "
+                                       f"{part.edge_thickness} m) than cycle 0 ({first.width} m, "
+                                       f"{first.edge_thickness} m): one calibration needs one bucket")
+            if part.options != first.options:
+                raise CalibrationError(f"cycle {k} uses other force-model options than cycle 0")
+        if any(p.measured_load is not None for p in parts) and not all(p.measured_load is not None for p in parts):
+            raise CalibrationError("either every cycle or none must log W_load")
+        cat = lambda name: np.concatenate([getattr(p, name) for p in parts])  # noqa: E731
+        ml = None if first.measured_load is None else cat("measured_load")
+        cycle = np.concatenate([np.full(len(p), k, dtype=int) for k, p in enumerate(parts)])
+        weight = None
+        if cycle_weights is not None:
+            w = np.asarray(cycle_weights, dtype=float)
+            if w.shape != (len(parts),) or not np.all(np.isfinite(w)) or np.any(w <= 0.0):
+                raise CalibrationError(f"cycle weights must be {len(parts)} finite numbers > 0, got {cycle_weights!r}")
+            if not np.all(w == 1.0):
+                weight = w[cycle]
+        return cls(cat("index"), cat("depth"), cat("alpha"), cat("rho"), cat("blade_length"), cat("fill_volume"), ml,
+                   cat("y_t"), cat("y_n"), first.width, first.edge_thickness, first.options, weight, cycle)
+
+    @property
+    def root_weight(self) -> np.ndarray | float:
+        """``sqrt(weight)`` per sample, the factor of each residual row (1.0 when unweighted)."""
+        return 1.0 if self.weight is None else np.sqrt(self.weight)
 
     @classmethod
     def from_state(cls, state: ContactState, tangential, normal, bucket: Bucket,
@@ -245,7 +298,8 @@ class FitData:
         ml = None if self.measured_load is None else self.measured_load[sl]
         return FitData(self.index[sl], self.depth[sl], self.alpha[sl], self.rho[sl], self.blade_length[sl],
                        self.fill_volume[sl], ml, self.y_t[sl], self.y_n[sl], self.width, self.edge_thickness,
-                       self.options)
+                       self.options, None if self.weight is None else self.weight[sl],
+                       None if self.cycle is None else self.cycle[sl])
 
     @property
     def ramp(self) -> np.ndarray:

@@ -206,6 +206,21 @@ class Calibration:
         return self.uncertainty.to_dict()
 
     @property
+    def cycle_count(self) -> int:
+        """Number of cycles this calibration fitted (1 unless a list of logs was given)."""
+        return int(self.settings.get("cycles", {}).get("count", 1))
+
+    @property
+    def identifiability_by_cycles(self) -> list[dict[str, Any]]:
+        """What the first 1, 2, ... cycles determined (several cycles only; else an empty list).
+
+        One entry per prefix: ``{"cycles": j, "std_errors": {...}, "relative_std_errors": {...},
+        "status": {...}, "weak_combinations": [...]}``, from the rows of those cycles in the
+        weighted Jacobian at the final solution.
+        """
+        return list(self.settings.get("cycles", {}).get("identifiability", []))
+
+    @property
     def std_errors(self) -> dict[str, float]:
         """Standard errors of :data:`FIT_NAMES` (NaN for parameters on a bound)."""
         return {n: float(v) for n, v in zip(FIT_NAMES, self.uncertainty.std_errors, strict=True)}
@@ -255,8 +270,26 @@ class Calibration:
         for s in self.stages:
             lines.append(f"  stage {s.name}: {s.time_s * 1e3:.1f} ms, {s.nfev} evals, "
                          + ", ".join(f"{k} {v[0]:.1f} N ({v[1]:.2f} %)" for k, v in s.rmse.items()))
+        cycles = self.settings.get("cycles")
+        if cycles:
+            lines.append(f"  {cycles['count']} cycles fitted together:")
+            for k, c in enumerate(cycles["per_cycle"]):
+                lines.append(f"    cycle {k} ({c['name']}): {c['samples']} in-soil samples, weight {c['weight']:.3g}, "
+                             f"F_R {c['rmse']['F_R'][1]:.2f} %")
         lines.append("identifiability:")
         lines.append(self.uncertainty.describe())
+        if cycles:
+            lines.append("  what each added cycle determined (relative std. error at the effective noise; "
+                         "'bound' = at a bound):")
+            names = list(FIT_NAMES)
+            lines.append("    cycles " + " ".join(f"{n:>9}" for n in names))
+            for entry in cycles["identifiability"]:
+                cells = []
+                for n in names:
+                    rel = entry["relative_std_errors"][n]
+                    cells.append(f"{'bound':>9}" if entry["status"][n] == "at bound"
+                                 else f"{'inf':>9}" if rel is None else f"{rel:9.3g}")
+                lines.append(f"    {entry['cycles']:>6} " + " ".join(cells))
         if self.tension_samples:
             lines.append(f"  note: the FEE force is clamped at 0 on {self.tension_samples} samples")
         return "\n".join(lines)

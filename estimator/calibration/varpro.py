@@ -152,7 +152,10 @@ def projected_grid(data: FitData, lo: np.ndarray, hi: np.ndarray, phis: np.ndarr
     wt, wn = weights(lam)
     pp, dd = np.meshgrid(phis, deltas, indexing="ij")
     pp, dd = pp.ravel(), dd.ravel()
+    rw = data.root_weight  # per-sample sqrt(weight) of several cycles under a forgetting factor
     sk = wt * data.sinkage_basis(ns)  # (M, N)
+    if data.weight is not None:
+        sk = sk * rw[None, :]
     P, M = pp.size, len(ns)
     hkk = np.einsum("mn,mn->m", sk, sk)  # (M,)
     h33, h3k, g3, gk, c = np.empty((P, 3, 3)), np.empty((P, M, 3)), np.empty((P, 3)), np.empty((P, M)), np.empty(P)
@@ -165,6 +168,9 @@ def projected_grid(data: FitData, lo: np.ndarray, hi: np.ndarray, phis: np.ndarr
         at, an = wt * at, wn * an
         yt = wt * (data.y_t[None, :] - ot)  # (p, N)
         yn = wn * (data.y_n[None, :] - on)
+        if data.weight is not None:
+            at, an = at * rw[None, :, None], an * rw[None, :, None]
+            yt, yn = yt * rw[None, :], yn * rw[None, :]
         h33[sl] = np.einsum("pni,pnj->pij", at, at) + np.einsum("pni,pnj->pij", an, an)  # (p, 3, 3)
         h3k[sl] = np.einsum("pni,mn->pmi", at, sk)  # (p, M, 3)
         g3[sl] = np.einsum("pni,pn->pi", at, yt) + np.einsum("pni,pn->pi", an, yn)  # (p, 3)
@@ -270,6 +276,10 @@ def refine(data: FitData, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, lam: f
             cache["key"] = key
             r = [wt * (f_t - data.y_t), wn * (f_n - data.y_n)]
             jac = [wt * jt[:, free], wn * jn[:, free]]
+            if data.weight is not None:
+                rw = data.root_weight
+                r = [v * rw for v in r]
+                jac = [v * rw[:, None] for v in jac]
             if prior is not None:
                 r.append(pw * (z - pmean))
                 jac.append(prior_jac)
@@ -315,6 +325,9 @@ def polish_linear(data: FitData, x: np.ndarray, lo: np.ndarray, hi: np.ndarray, 
     counter.nfev += 1
     if np.any(tension):
         return None
+    if data.weight is not None:
+        return x_new, float(lam * np.sum(data.weight * (f_t - data.y_t) ** 2)
+                            + (1.0 - lam) * np.sum(data.weight * (f_n - data.y_n) ** 2))
     return x_new, float(lam * np.sum((f_t - data.y_t) ** 2) + (1.0 - lam) * np.sum((f_n - data.y_n) ** 2))
 
 
@@ -403,7 +416,9 @@ def fit_varpro(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5, 
         f_t, f_n, _ = data.forces(best.x)
         counter.nfev += 1
         wt, wn = weights(lam)
-        nu, tau = noise_per_effective_sample([wt * (f_t - data.y_t), wn * (f_n - data.y_n)], int(np.sum(hi > lo)))
+        rw = data.root_weight
+        nu, tau = noise_per_effective_sample([rw * wt * (f_t - data.y_t), rw * wn * (f_n - data.y_n)],
+                                             int(np.sum(hi > lo)))
         if nu > 0.0:
             prior = weak_prior(lo, hi, nu, initial)
             r = refine(data, best.x, lo, hi, lam, counter, max_nfev=max_nfev, prior=prior)

@@ -7,13 +7,16 @@ cycles, which soil parameters to believe and which path to dig next:
 
 * ``fixed``: the default Bezier path (moved to the current pile face) and
   nominal parameters, never recalibrated — the baseline;
-* ``ours``: calibrate with the default method (warm-started), plan with them;
+* ``ours``: calibrate with the default method on the last ``window`` cycles together
+  (:data:`DEFAULT_WINDOW`; warm-started from the previous fit), plan with them;
 * ``paper``: calibrate with the paper's multi-stage method, plan with them;
 * ``oracle``: plan with the plant's true soil (an upper bound on what
   calibration can give).
 
 Nothing hides a failure: a calibration that raises or reports
-``success=False`` keeps the previous parameters, a plan that fails falls back
+``success=False`` keeps the previous parameters, and so does (with
+``keep_untrustworthy=False``, the default) a fit whose verdict says the data
+could not determine the soil while an earlier, trustworthy fit exists; a plan that fails falls back
 to the Bezier path moved to the current face, and both are reported in the
 cycle's record.
 """
@@ -51,6 +54,9 @@ from wheelloader.planner import (
     plan_next_cycle,
 )
 
+#: Cycles the ``ours`` strategy calibrates on together (the last ``DEFAULT_WINDOW`` cycles), chosen by measurement
+#: on ``benchmarks/adaptation.py`` (README, "Calibration from several cycles").
+DEFAULT_WINDOW = 3
 #: Nominal (uncalibrated) parameters of the baselines: the "sand" preset, a middle-of-the-road soil.
 NOMINAL_SOIL = "sand"
 #: Keyword arguments of the loop's env besides soil, pile and truth: slump the pile between cycles, the
@@ -123,28 +129,70 @@ class FixedBezier(Strategy):
 
 
 class Calibrating(Strategy):
-    """Calibrate after every cycle (warm start), then plan with ``planner`` (or dig the Bezier path)."""
+    """Calibrate after every cycle (warm start), then plan with ``planner`` (or dig the Bezier path).
+
+    Parameters
+    ----------
+    nominal : SoilParams
+        Parameters believed before the first calibration.
+    method : str
+        Calibration method (``"default"``: varpro; the paper's methods take one cycle only).
+    planner : callable, optional
+        ``planner(params, pile) -> PlanOutcome``; None digs the Bezier path.
+    rate : float
+        Control rate [Hz] of the Bezier fallback.
+    name : str, optional
+        Strategy name in the tables.
+    window : int, optional
+        Calibrate on the last ``window`` cycles together (each on its own carved pile). Default
+        :data:`DEFAULT_WINDOW` for the varpro method, 1 for the paper's methods.
+    forgetting : float, optional
+        Forgetting factor of the window's cycles (the newest weighs 1, the one before ``forgetting``, ...).
+    keep_untrustworthy : bool
+        Adopt a fit whose verdict is "not trustworthy" (:attr:`Calibration.trustworthy`) even when an
+        earlier trustworthy fit exists. Default False: keep the earlier fit and say so.
+    """
 
     def __init__(self, nominal: SoilParams, method: str = "default", planner: Any = None, rate: float = 60.0,
-                 name: str | None = None) -> None:
+                 name: str | None = None, *, window: int | None = None, forgetting: float | None = None,
+                 keep_untrustworthy: bool = False) -> None:
         super().__init__(nominal, rate)
         self.method = method
         self.planner = planner
         self.previous = None
         self.name = name or ("ours" if method == "default" else "paper")
+        paper = method not in ("default", "varpro")
+        if window is None:
+            window = 1 if paper else DEFAULT_WINDOW
+        if isinstance(window, bool) or not isinstance(window, int) or window < 1:
+            raise WheelloaderError(f"window must be a positive integer (cycles), got {window!r}")
+        if paper and window > 1:
+            raise WheelloaderError(f"the paper's method {method!r} calibrates on one cycle: window must be 1")
+        self.window = window
+        self.forgetting = forgetting
+        self.keep_untrustworthy = keep_untrustworthy
+        self.recent: list[CycleLog] = []
 
     def update(self, log: CycleLog, true_soil: SoilParams) -> tuple[float, bool, str]:
+        self.recent = [*self.recent, log][-self.window:]
         start = time.perf_counter()
+        cycles = self.recent if len(self.recent) > 1 else log
         try:
-            result = calibrate(log, method=self.method, initial=self.previous)
+            result = calibrate(cycles, method=self.method, initial=self.previous,
+                               forgetting=self.forgetting if len(self.recent) > 1 else None)
         except WheelloaderError as exc:
             return time.perf_counter() - start, False, f"calibration failed, previous parameters kept: {exc}"
         seconds = time.perf_counter() - start
         if not result.success:
             return seconds, False, f"calibration did not converge, previous parameters kept: {result.message}"
+        used = f"{len(self.recent)} cycles" if len(self.recent) > 1 else "1 cycle"
+        if (not result.trustworthy and not self.keep_untrustworthy and self.previous is not None
+                and self.previous.trustworthy):
+            codes = ", ".join(w.code for w in result.warnings)
+            return seconds, False, f"fit on {used} not trustworthy ({codes}), previous parameters kept"
         self.previous = result
         self.params = result.params
-        return seconds, True, f"F_R fit {result.quality.percent_r:.1f} %"
+        return seconds, True, f"F_R fit {result.quality.percent_r:.1f} % on {used}"
 
     def plan(self, pile: Pile) -> PlanOutcome:
         if self.planner is None:

@@ -173,6 +173,26 @@ def plot_prediction(prediction: Prediction, pile=None, out: str | Path | None = 
     return finish_figure(fig, out, title)
 
 
+def plot_cycles_fit(cycles: Sequence[CycleLog], calibration: Calibration, out: str | Path | None = None,
+                    title: str | None = None) -> Any:
+    """A calibration from several cycles: observed vs fitted F_R of each cycle, one panel per cycle."""
+    from wheelloader.estimator import predict
+
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, len(cycles), figsize=(4.5 * len(cycles), 3.8), squeeze=False)
+    for k, (ax, cycle) in enumerate(zip(axes[0], cycles, strict=True)):
+        pred = predict(calibration, cycle)
+        ax.plot(cycle.path.t, cycle.resultant, color="0.5", lw=1, label="observed F_R")
+        ax.plot(cycle.path.t, pred.resultant, lw=1.6, label="fitted F_R")
+        q = pred.quality
+        ax.set_title(f"cycle {k}: {cycle.path.name}" + (f" ({q.percent_r:.1f} %)" if q is not None else ""),
+                     fontsize=9)
+        ax.set_xlabel("t [s]")
+        ax.legend(fontsize=7)
+    axes[0][0].set_ylabel("F_R [N]")
+    return finish_figure(fig, out, title)
+
+
 def finish_figure(fig: Any, out: str | Path | None = None, title: str | None = None, dpi: int = 120) -> Any:
     """Add the title, lay out, and with ``out`` save the figure there and close it; return the figure."""
     plt = _pyplot()

@@ -1,8 +1,9 @@
 """``wheelloader calibrate`` and ``wheelloader predict``.
 
-* ``wheelloader calibrate LOG.csv [--method M] [--initial params.json] -o params.json [--plot fig.png]``
-  calibrates the soil from one logged cycle (CSV + JSON sidecar) and prints timing, fit quality and
-  what the cycle determined.
+* ``wheelloader calibrate LOG.csv [LOG2.csv ...] [--method M] [--initial params.json] -o params.json
+  [--plot fig.png]`` calibrates the soil from one logged cycle (CSV + JSON sidecar), or from several
+  (oldest first, one soil fitted to all, ``--forgetting F`` weighs older cycles less), and prints
+  timing, fit quality and what the cycle(s) determined.
 * ``wheelloader predict params.json PATH.csv -o forces.csv [--pile P] [--plot fig.png]`` predicts the
   forces of a path. ``PATH.csv`` is either a path (columns ``t, x, z, blade_angle``; the pile comes from
   ``--pile``, default the trapezoid pile) or a cycle log (then its own pile is used unless ``--pile`` is
@@ -26,7 +27,12 @@ def register(subparsers: Any) -> None:
     p = subparsers.add_parser("calibrate", help="calibrate the soil parameters from one logged cycle",
                               description="Calibrate the soil parameters from one logged cycle (CSV + JSON "
                                           "sidecar); print timing, fit quality and what the cycle determined.")
-    p.add_argument("log", help="cycle log CSV (with its JSON sidecar of the same stem)")
+    p.add_argument("logs", nargs="+", metavar="log",
+                   help="cycle log CSV (with its JSON sidecar of the same stem); several logs (oldest first) are "
+                        "fitted together with one soil (varpro method)")
+    p.add_argument("--forgetting", type=float,
+                   help="several logs: forgetting factor in (0, 1]; the newest log weighs 1, the one before F, "
+                        "then F^2, ... (default: all weigh 1)")
     p.add_argument("--method", default="varpro",
                    help="calibration method: varpro (ours, the default; alias 'default'), single-stage or "
                         "multi-stage (the paper's baselines; aliases 'single', 'multi')")
@@ -67,19 +73,34 @@ def _check_sigma(sigma: float, samples: int) -> None:
 
 def run_calibrate(args: argparse.Namespace) -> int:
     """Handler of ``wheelloader calibrate``."""
-    from wheelloader.estimator import METHODS, CycleLog, calibrate, canonical_method
+    from wheelloader.estimator import METHODS, CalibrationError, CycleLog, calibrate, canonical_method
 
     method = canonical_method(args.method)
-    inputs = [args.log, sidecar_of(args.log), args.initial]
+    several = len(args.logs) > 1
+    if several and method != "varpro":
+        raise CalibrationError(f"several logs are fitted together by the varpro method only, not {method!r}")
+    if several and args.compare:
+        raise CalibrationError("--compare needs one log (the paper's methods calibrate on one cycle)")
+    if args.forgetting is not None and not several:
+        raise CalibrationError("--forgetting needs several logs")
+    inputs = [*args.logs, *(sidecar_of(log) for log in args.logs), args.initial]
     check_outputs([("-o/--output", args.output), ("--plot", args.plot)], inputs, args.force)
-    cycle = CycleLog.load(args.log)
+    cycles = [CycleLog.load(log) for log in args.logs]
+    cycle = cycles[0]
     _check_sigma(args.sigma, len(cycle))
     initial = check_physical(load_soil(args.initial), "--initial", args.strict) if args.initial else None
-    cal = calibrate(cycle, method, initial=initial, sigma=args.sigma)
+    if several:
+        cal = calibrate(cycles, method, initial=initial, forgetting=args.forgetting)
+    else:
+        cal = calibrate(cycle, method, initial=initial, sigma=args.sigma)
     others = []
     if args.compare:
         others = [calibrate(cycle, m, initial=initial, sigma=args.sigma) for m in METHODS if m != cal.method]
-    print(f"{args.log}: {len(cycle)} samples, {int(cal.in_soil.sum())} in soil")
+    if several:
+        for k, (log, c) in enumerate(zip(args.logs, cycles, strict=True)):
+            print(f"{log}: {len(c)} samples, {cal.settings['cycles']['per_cycle'][k]['samples']} in soil")
+    else:
+        print(f"{args.logs[0]}: {len(cycle)} samples, {int(cal.in_soil.sum())} in soil")
     print(cal.summary())
     for other in others:
         flag = "converged" if other.success else "NOT CONVERGED"
@@ -88,10 +109,13 @@ def run_calibrate(args: argparse.Namespace) -> int:
     write_json(args.output, cal.to_dict())
     print(f"parameters written to {args.output}")
     if args.plot:
-        from wheelloader.plotting import plot_calibration
+        from wheelloader.plotting import plot_calibration, plot_cycles_fit
 
         with atomic_output(args.plot) as tmp:
-            plot_calibration(cycle, [cal, *others], tmp, title=f"calibration of {Path(args.log).name}")
+            if several:
+                plot_cycles_fit(cycles, cal, tmp, title=f"calibration on {len(cycles)} cycles")
+            else:
+                plot_calibration(cycle, [cal, *others], tmp, title=f"calibration of {Path(args.logs[0]).name}")
         print(f"figure written to {args.plot}")
     if not cal.trustworthy:
         print("the fit is NOT trustworthy: " + "; ".join(w.message for w in cal.warnings)
