@@ -25,8 +25,6 @@ be importable on the workers (a function of an installed module) or defined in t
 
 from __future__ import annotations
 
-import argparse
-import importlib.util
 import logging
 import math
 import time
@@ -36,14 +34,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from wheelloader.estimator import ParameterError, WheelloaderError
+from wheelloader.ray_mode import LOCAL, OFF, add_ray_arguments, default_ray_mode, parse_ray_mode, ray_available
 
 __all__ = ["OFF", "LOCAL", "Unit", "UnitFailure", "SweepError", "SweepResult", "add_ray_arguments",
            "default_ray_mode", "format_duration", "parse_ray_mode", "ray_available", "run_sweep"]
-
-#: Serial mode: no Ray.
-OFF = "off"
-#: Ray on this machine (``ray.init()`` with this machine's CPUs, or ``--ray-cpus``).
-LOCAL = "local"
 
 logger = logging.getLogger("wheelloader.sweep")
 
@@ -129,50 +123,6 @@ class SweepResult:
                 "failed": [{"index": f.index, "label": f.label, "attempts": f.attempts, "error": f.error}
                            for f in self.failures],
                 "retried": list(self.retried), "wall_s": self.wall_s, "unit_seconds_total": busy}
-
-
-# ------------------------------------------------------------------ modes and command line
-def ray_available() -> bool:
-    """Whether Ray is installed (looked up without importing it)."""
-    return importlib.util.find_spec("ray") is not None
-
-
-def default_ray_mode() -> str:
-    """``"local"`` when Ray is installed, else ``"off"``."""
-    return LOCAL if ray_available() else OFF
-
-
-def parse_ray_mode(text: str) -> str:
-    """Validate a ``--ray`` value: ``off``, ``local``, ``auto``, ``ray://HOST:PORT`` or ``HOST:PORT``."""
-    value = str(text).strip()
-    if value.lower() in (OFF, LOCAL, "auto"):
-        return value.lower()
-    if value.startswith("ray://") and len(value) > len("ray://"):
-        return value
-    host, sep, port = value.rpartition(":")
-    if sep and host and port.isdigit():
-        return value
-    raise ParameterError(f"--ray must be 'off', 'local', 'auto', 'ray://HOST:PORT' or 'HOST:PORT', got {text!r}")
-
-
-def _ray_mode_arg(text: str) -> str:
-    try:
-        return parse_ray_mode(text)
-    except ParameterError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def add_ray_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add ``--ray`` (default ``local`` with Ray installed, else ``off``) and ``--ray-cpus`` to ``parser``."""
-    default = default_ray_mode()
-    parser.add_argument("--ray", type=_ray_mode_arg, default=default, metavar="MODE",
-                        help="run the units as Ray tasks: 'local' (ray.init() on this machine), 'auto' or "
-                             "'ray://HOST:10001' (an existing cluster), or 'off' (serial, no Ray); default "
-                             f"{default!r} (Ray is {'' if default == LOCAL else 'not '}installed: pip install "
-                             "-e \".[scale]\")")
-    parser.add_argument("--ray-cpus", type=int, default=None, metavar="N",
-                        help="with --ray local: CPUs Ray may use, i.e. parallel units (default: all of this "
-                             "machine's)")
 
 
 # ------------------------------------------------------------------ progress
@@ -271,7 +221,10 @@ def run_sweep(units: Sequence[Unit], ray: str = OFF, *, ray_cpus: int | None = N
             raise ParameterError(f"sweep unit {k} must be a wheelloader.sweep.Unit, got {type(unit).__name__}")
     if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
         raise ParameterError(f"retries must be an int >= 0, got {retries!r}")
-    mode = parse_ray_mode(ray)
+    try:
+        mode = parse_ray_mode(ray)
+    except ValueError as exc:
+        raise ParameterError(str(exc)) from None
     if ray_cpus is not None and (isinstance(ray_cpus, bool) or not isinstance(ray_cpus, int) or ray_cpus < 1):
         raise ParameterError(f"ray_cpus must be an int >= 1, got {ray_cpus!r}")
     if mode == OFF:
