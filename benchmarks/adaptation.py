@@ -20,6 +20,11 @@ Usage::
     python benchmarks/adaptation.py --quick --out /tmp/adaptation        # smoke run
     python benchmarks/adaptation.py --plant mpm --out DIR                # the loop in the MPM continuum
                                                                          # (benchmarks/plant_adaptation.py)
+    python benchmarks/adaptation.py --ray off --out results/adaptation   # serial, without Ray
+
+Each loop (soil x pile x seed x strategy) is one unit of :mod:`wheelloader.sweep`: ``--ray local`` (the
+default with Ray installed) runs them as Ray tasks on this machine, ``--ray auto`` / ``--ray ray://HOST:10001``
+on a cluster, ``--ray off`` one after the other; the tables are the same (times aside).
 """
 
 from __future__ import annotations
@@ -41,6 +46,7 @@ import numpy as np  # noqa: E402
 from _machine import machine_info  # noqa: E402
 
 from wheelloader.provenance import commit_label  # noqa: E402
+from wheelloader.sweep import add_ray_arguments  # noqa: E402
 
 SOILS = ("gravel", "dirt", "modified_sand")
 PILES = {"trapezoid 30 deg": {"shape": "trapezoid"},
@@ -48,27 +54,25 @@ PILES = {"trapezoid 30 deg": {"shape": "trapezoid"},
 TRUTH = {"compaction": 0.5, "rate_resistance": 1.0e4, "stone_rate": 0.5, "stone_force": 3000.0, "drift": 0.05}
 
 
-def _strategies(args: argparse.Namespace, planner: Any) -> dict[str, Any]:
-    from wheelloader.adaptation import NOMINAL_SOIL, Calibrating, FixedBezier, Oracle, PolicyStrategy
-    from wheelloader.estimator import preset
-
-    out = {
-        "fixed": lambda: FixedBezier(preset(NOMINAL_SOIL)),
-        "ours": lambda: Calibrating(preset(NOMINAL_SOIL), "default", planner, window=args.window,
-                                    forgetting=args.forgetting, keep_untrustworthy=args.keep_untrustworthy),
-        "oracle": lambda: Oracle(planner),
-        "paper": lambda: Calibrating(preset(NOMINAL_SOIL), "multi-stage", planner, name="paper"),
-    }
-    if args.rl_policy:
-        from stable_baselines3 import PPO
-
-        policy = PPO.load(args.rl_policy, device="cpu")
-        out["rl"] = lambda: PolicyStrategy(policy)
+def _strategy_names(args: argparse.Namespace) -> list[str]:
+    names = ["fixed", "ours", "oracle", "paper"] + (["rl"] if args.rl_policy else [])
     if args.strategies:
-        unknown = sorted(set(args.strategies) - set(out))
+        unknown = sorted(set(args.strategies) - set(names))
         if unknown:
-            raise SystemExit(f"--strategies: unknown {unknown}; choose from {sorted(out)}")
-        out = {k: v for k, v in out.items() if k in args.strategies}
+            raise SystemExit(f"--strategies: unknown {unknown}; choose from {names}")
+        names = [n for n in names if n in args.strategies]
+    return names
+
+
+def _ours_options(args: argparse.Namespace) -> dict[str, Any]:
+    """Keyword arguments of strategy ``ours`` from the command line (only those given)."""
+    out: dict[str, Any] = {}
+    if args.window is not None:
+        out["window"] = args.window
+    if args.forgetting is not None:
+        out["forgetting"] = args.forgetting
+    if args.keep_untrustworthy:
+        out["keep_untrustworthy"] = True
     return out
 
 
@@ -109,52 +113,49 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--keep-untrustworthy", action="store_true",
                         help="ours: adopt fits whose verdict is 'not trustworthy' (default: keep the previous fit)")
     parser.add_argument("--strategies", nargs="+", help="run only these strategies (default: all)")
+    add_ray_arguments(parser)
     args = parser.parse_args(argv)
 
-    import gymnasium as gym
-
-    import wheelloader.envs  # noqa: F401
-    from wheelloader.adaptation import LOOP_ENV_KWARGS, default_planner, run_loop
+    from wheelloader.adaptation import strategy_loop
+    from wheelloader.sweep import Unit, run_sweep
 
     soils, piles, seeds, cycles = SOILS, PILES, range(args.seeds), args.cycles
     if args.quick:
         soils, piles, seeds, cycles = SOILS[:1], dict(list(PILES.items())[:1]), range(1), 3
-    planner = None if args.no_planner else default_planner(mpc=args.mpc)
-    makers = _strategies(args, planner)
+    planner = None if args.no_planner else "mpc" if args.mpc else "plan"
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    rows: list[dict[str, Any]] = []
-    total = len(soils) * len(piles) * len(seeds) * len(makers)
-    done = 0
-    start = time.perf_counter()
+    # one unit of work = one soil x pile x seed x strategy loop; the table is built in this (submission) order
+    keys, units = [], []
     for soil_name in soils:
         for pile_name, pile_kwargs in piles.items():
             for seed in seeds:
                 hidden = _plant_soil(soil_name, seed)
-                for name, make in makers.items():
-                    env = gym.make("wheelloader/BucketLoading-v0", soil=hidden, pile=pile_kwargs, truth=TRUTH,
-                                   **LOOP_ENV_KWARGS)
-                    records, _ = run_loop(env, make(), cycles=cycles, seed=seed)
-                    env.close()
-                    for r in records:
-                        rows.append({"soil": soil_name, "pile": pile_name, "seed": seed, **r.to_dict()})
-                    done += 1
-                    print(f"[{done:3d}/{total}] {soil_name:>13} | {pile_name} | seed {seed} | {name:>6}: "
-                          f"fill {np.mean([r.fill_fraction for r in records]):4.0%}, "
-                          f"{np.mean([r.energy_per_m3 for r in records]) / 1e3:6.1f} kJ/m^3", flush=True)
+                for name in _strategy_names(args):
+                    keys.append({"soil": soil_name, "pile": pile_name, "seed": seed})
+                    units.append(Unit(strategy_loop, {"soil": hidden, "pile": pile_kwargs, "truth": TRUTH,
+                                                      "strategy": name, "cycles": cycles, "seed": seed,
+                                                      "planner": planner, "rl_policy": args.rl_policy,
+                                                      "ours_options": _ours_options(args)},
+                                      label=f"{soil_name:>13} | {pile_name} | seed {seed} | {name:>6}"))
+    start = time.perf_counter()
+    sweep = run_sweep(units, args.ray, ray_cpus=args.ray_cpus, describe=_describe, progress=_print)
+    loops = sweep.values_or_raise()
+    rows: list[dict[str, Any]] = [{**key, **r} for key, records in zip(keys, loops, strict=True) for r in records]
     summary = summarise(rows)
     result = {
         "benchmark": "adaptation",
         "setup": {"soils": list(soils), "piles": list(piles), "seeds": len(seeds), "cycles": cycles,
                   "truth_beyond_model": TRUTH, "plant_soil": "preset with 10 % log-normal perturbation per seed",
                   "planner": ("none (Bezier paths)" if planner is None
-                              else "CasADi plan + MPC" if args.mpc else "CasADi plan, tracked"),
+                              else "CasADi plan + MPC" if planner == "mpc" else "CasADi plan, tracked"),
                   "sensor_noise_N": 150.0,
                   "ours": {"window": window_used(args), "forgetting": args.forgetting,
                            "keep_untrustworthy": args.keep_untrustworthy}},
         "summary": summary,
         "rows": rows,
         "wall_time_s": time.perf_counter() - start,
+        "sweep": sweep.summary(),
         "machine": machine_info(),
     }
     (out / "adaptation.json").write_text(json.dumps(result, indent=2, default=float))
@@ -172,6 +173,15 @@ def window_used(args: argparse.Namespace) -> int:
     from wheelloader.adaptation import DEFAULT_WINDOW
 
     return DEFAULT_WINDOW if args.window is None else args.window
+
+
+def _print(line: str) -> None:
+    print(line, flush=True)
+
+
+def _describe(records: list[dict[str, Any]]) -> str:
+    return (f"fill {np.mean([r['fill_fraction'] for r in records]):4.0%}, "
+            f"{np.mean([r['energy_per_m3'] for r in records]) / 1e3:6.1f} kJ/m^3")
 
 
 def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
@@ -233,7 +243,10 @@ def provenance_line(result: dict[str, Any]) -> str:
     commit = commit_label(machine)
     load = machine.get("loadavg_1_5_15min")
     load_text = "/".join(f"{v:.1f}" for v in load) if load else "unknown"
-    return (f"*`python benchmarks/adaptation.py` at commit {commit}; {machine.get('cpu_count')} cores "
+    sweep = result.get("sweep") or {"mode": "off"}
+    how = ("loops run one after the other" if sweep["mode"] == "off"
+           else f"loops as Ray tasks ({sweep['mode']}, {sweep.get('workers')} CPUs)")
+    return (f"*`python benchmarks/adaptation.py` at commit {commit}, {how}; {machine.get('cpu_count')} cores "
             f"({machine.get('cpu') or 'CPU'}), load average {load_text} at the end, {result['wall_time_s']:.0f} s. "
             "Tables are deterministic for the seeds; times depend on the machine and its load.*")
 

@@ -28,13 +28,13 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
 from dataclasses import replace
 from pathlib import Path
 
 from _machine import machine_info
 
 from wheelloader.provenance import commit_label
+from wheelloader.sweep import add_ray_arguments
 
 METHODS = ("default", "single-stage", "multi-stage")
 SOILS = ("gravel", "modified_sand", "dirt", "sand")
@@ -65,7 +65,6 @@ def fmt(pair) -> str:
 def run(args) -> dict:
     import numpy as np
 
-    from wheelloader.estimator.calibration import calibrate
     from wheelloader.references import dem
 
     np.random.default_rng(args.seed)  # the methods are deterministic; kept for the record
@@ -77,21 +76,27 @@ def run(args) -> dict:
         return raw, dem.filtered(raw, args.sigma)
 
     results_plant = plant_name(dem.load_reference("gravel_path1", data))
+    # every calibration is one unit of the sweep (serial or Ray tasks, --ray); the tables read them below
+    seeds = [s for s in (2, 3) if all(f"gravel_path{k}_seed{s}" in names for k in range(1, 5))]
+    avg = seed_averaged(load, seeds) if seeds else {}
+    train_logs = {"gravel": load("gravel_path1")[1]}
+    if avg:
+        train_logs["gravel_seed_avg"] = avg[1][1]
+    if {"gravel_dual_cycle1", "gravel_dual_cycle2"} <= names:
+        train_logs["dual"] = load("gravel_dual_cycle1")[1]
+    train_logs.update({soil: load(f"{soil}_path1")[1] for soil in SOILS[1:] if f"{soil}_path1" in names})
+    cals, walls = calibrate_all(train_logs, args.methods, args.ray, args.ray_cpus)
 
     results: dict = {"benchmark": "paper_experiments", "plant": results_plant, "machine": machine_info(),
                      "settings": vars(args),
                      "filter": {"kind": "gaussian", "sigma_s": args.sigma, "mode": "nearest"},
                      "rmse_definition": "F_R RMSE over in-soil samples; % of mean observed |F_R| (same samples)"}
-    cals: dict = {}
     # ---- Table 3 and Fig. 8: gravel, train path 1, test paths 2-4
     train_raw, train = load("gravel_path1")
     table3, fig8 = {}, {}
     tests = {k: load(f"gravel_path{k}") for k in (2, 3, 4) if f"gravel_path{k}" in names}
     for method in args.methods:
-        t0 = time.perf_counter()
-        cal = calibrate(train, method)
-        wall = time.perf_counter() - t0
-        cals[("gravel", method)] = cal
+        cal, wall = cals[("gravel", method)], walls[("gravel", method)]
         table3[method] = {"train": rmse_pair(cal, train_raw, train), "time_s": cal.time_s, "wall_s": wall,
                           "success": cal.success, "params": cal.params.to_dict(), "K": cal.sinkage_modulus,
                           "stages": [{"name": st.name, "time_s": st.time_s, "nfev": st.nfev} for st in cal.stages]}
@@ -101,26 +106,10 @@ def run(args) -> dict:
     results["table3"] = table3
     results["fig8"] = fig8
     # ---- Table 3 / Fig. 8 again on the seed-averaged gravel reference (mean of the depositions present)
-    seeds = [s for s in (2, 3) if all(f"gravel_path{k}_seed{s}" in names for k in range(1, 5))]
     if seeds:
-        import numpy as np
-
-        avg = {}
-        for k in range(1, 5):
-            logs = [load(f"gravel_path{k}")] + [load(f"gravel_path{k}_seed{s}") for s in seeds]
-            raw0, filt0 = logs[0]
-            meta = dict(filt0.metadata, seed_average=[1, *seeds])
-
-            def mean_log(base, items, meta=meta):
-                return replace(base, tangential=np.mean([lg.tangential for lg in items], axis=0),
-                               normal=np.mean([lg.normal for lg in items], axis=0),
-                               fill_volume=np.mean([lg.fill_volume for lg in items], axis=0), metadata=meta)
-
-            avg[k] = (mean_log(raw0, [r for r, _ in logs]), mean_log(filt0, [f for _, f in logs]))
         seed_avg: dict = {"seeds": [1, *seeds], "table3": {}, "fig8": {}}
         for method in args.methods:
-            cal = calibrate(avg[1][1], method)
-            cals[("gravel_seed_avg", method)] = cal
+            cal = cals[("gravel_seed_avg", method)]
             seed_avg["table3"][method] = {"train": rmse_pair(cal, *avg[1]), "time_s": cal.time_s,
                                           "params": cal.params.to_dict(), "K": cal.sinkage_modulus}
             seed_avg["fig8"][method] = {f"path{k}": rmse_pair(cal, *avg[k]) for k in (2, 3, 4)}
@@ -133,8 +122,7 @@ def run(args) -> dict:
         c2_raw, c2 = load("gravel_dual_cycle2")
         fig9 = {}
         for method in args.methods:
-            cal = calibrate(c1, method)
-            cals[("dual", method)] = cal
+            cal = cals[("dual", method)]
             fig9[method] = {"cycle1": rmse_pair(cal, c1_raw, c1),
                             "cycle2_carved_surface": rmse_pair(cal, c2_raw, c2),
                             "cycle2_initial_surface": rmse_pair(cal, c2_raw, c2, pile=c1.pile)}
@@ -149,8 +137,7 @@ def run(args) -> dict:
         raw, filt = load(f"{soil}_path1")
         table4[soil] = {"dem": reference_material(raw, soil), "bulk_density_measured": raw.metadata.get("bulk_density")}
         for method in args.methods:
-            cal = cals.get((soil, method)) or calibrate(filt, method)
-            cals[(soil, method)] = cal
+            cal = cals[(soil, method)]
             table4[soil][method] = {"params": cal.params.to_dict(), "K": cal.sinkage_modulus,
                                     "rmse": rmse_pair(cal, raw, filt), "time_s": cal.time_s}
     results["table4"] = table4
@@ -177,6 +164,40 @@ def run(args) -> dict:
     results["acceptance"] = acceptance(results)
     results["_cals"] = cals
     return results
+
+
+def seed_averaged(load, seeds: list[int]) -> dict:
+    """Per gravel path k (1-4): (raw, filtered) logs averaged over seed 1 and ``seeds`` (F_T, F_N, fill)."""
+    import numpy as np
+
+    avg = {}
+    for k in range(1, 5):
+        logs = [load(f"gravel_path{k}")] + [load(f"gravel_path{k}_seed{s}") for s in seeds]
+        raw0, filt0 = logs[0]
+        meta = dict(filt0.metadata, seed_average=[1, *seeds])
+
+        def mean_log(base, items, meta=meta):
+            return replace(base, tangential=np.mean([lg.tangential for lg in items], axis=0),
+                           normal=np.mean([lg.normal for lg in items], axis=0),
+                           fill_volume=np.mean([lg.fill_volume for lg in items], axis=0), metadata=meta)
+
+        avg[k] = (mean_log(raw0, [r for r, _ in logs]), mean_log(filt0, [f for _, f in logs]))
+    return avg
+
+
+def calibrate_all(train_logs: dict, methods, ray: str, ray_cpus: int | None) -> tuple[dict, dict]:
+    """Every (training log, method) calibration as one unit of :func:`wheelloader.sweep.run_sweep`:
+    ``{(key, method): Calibration}`` and ``{(key, method): wall time [s]}``; a calibration that fails twice
+    stops the run with the failures named. The soils' keys reuse gravel's calibrations."""
+    from wheelloader.estimator.calibration import calibrate
+    from wheelloader.sweep import Unit, run_sweep
+
+    keys = [(key, method) for key in train_logs for method in methods]
+    units = [Unit(calibrate, {"cycle": train_logs[key], "method": method}, label=f"{key} {method}")
+             for key, method in keys]
+    sweep = run_sweep(units, ray, ray_cpus=ray_cpus, progress=lambda line: print(line, flush=True))
+    values = sweep.values_or_raise()
+    return dict(zip(keys, values, strict=True)), dict(zip(keys, sweep.unit_seconds, strict=True))
 
 
 def plant_name(log) -> str:
@@ -462,6 +483,7 @@ def main(argv=None) -> int:
     parser.add_argument("--sigma", type=float, default=0.1, help="Gaussian filter sigma of the reference [s]")
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
     parser.add_argument("--seed", type=int, default=0, help="numpy seed (the methods are deterministic)")
+    add_ray_arguments(parser)
     args = parser.parse_args(argv)
     if not (Path(args.data) / "manifest.json").exists():
         print(f"no reference data in {args.data}: run wheelloader dem reference (DEM) or python -m "

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import inspect
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -40,6 +41,7 @@ from .config import (
     DEFAULT_LOOKAHEAD,
     DEFAULT_START_NOISE,
     NOISE_CHUNK,
+    STEPS_PER_CYCLE,
     EnvConfig,
     RewardWeights,
     SoilRandomization,
@@ -50,9 +52,21 @@ from .config import (
     next_pile,
 )
 from .cycle_logs import RECORD_KEYS, CycleHistory, to_cycle_log
+from .env_config import accepts_env_config
 from .truth import TruthOptions, as_truth, model_excess, stone_decay, stone_step
 
 __all__ = ["RESET_OPTIONS", "BucketLoadingEnv"]
+
+def env_config_episode_limit(settings: dict[str, Any]) -> dict[str, Any]:
+    """Built from an env_config (RLlib's way, no ``gym.make`` and so no ``TimeLimit`` wrapper), an episode
+    ends at the registered limit unless the config says otherwise: :data:`~wheelloader.envs.config.
+    STEPS_PER_CYCLE` steps per cycle."""
+    if "max_episode_steps" not in settings:
+        cycles = settings.get("cycles_per_episode", 1)
+        if isinstance(cycles, int) and not isinstance(cycles, bool) and cycles >= 1:
+            settings = {**settings, "max_episode_steps": STEPS_PER_CYCLE * cycles}
+    return settings
+
 
 def _pick(condition: Any, a: Any, b: Any) -> Any:
     """``where`` for Python scalars."""
@@ -160,7 +174,8 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
       (25 kN), for ``stall_patience`` consecutive steps (default 1). A stalled
       step does not move the bucket (pose held, velocity zeroed, carving undone).
     * Truncation: ``max_episode_steps`` from :func:`gymnasium.register`
-      (600 steps = 10 s at 60 Hz for ``BucketLoading-v0``).
+      (600 steps = 10 s at 60 Hz for ``BucketLoading-v0``), or the env's own
+      ``max_episode_steps`` argument.
 
     ## Arguments
 
@@ -192,6 +207,17 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
       (sweeps of :meth:`Pile.relaxed` per new cycle, default 500: a partial
       slump of steep carved walls), ``cycles_per_episode`` (default 1).
     * ``render_mode``: ``None``, ``"rgb_array"`` or ``"human"``.
+    * ``max_episode_steps``: truncate the episode after this many steps
+      (default None: ``gym.make`` adds its ``TimeLimit`` wrapper instead).
+
+    RLlib's way works too: a mapping (a dict or RLlib's ``EnvContext``) as
+    the first positional argument holds the same settings,
+    ``BucketLoadingEnv({"soil": "random"})``, and may be combined with
+    keyword arguments; an unknown key, or a key given both ways with
+    different values, raises :class:`ParameterError`. Built from such a
+    mapping the env truncates at 600 steps per cycle (the registered limit)
+    unless it sets ``max_episode_steps``. By id without an import, in a
+    fresh process (RLlib's workers): ``"wheelloader.envs:wheelloader/BucketLoading-v0"``.
 
     ``reset(options=...)`` accepts ``keep_pile`` (bool), ``relax`` (bool or
     repose angle in (0, pi/2) rad), ``soil`` (``"keep"``, ``"resample"`` or a
@@ -216,6 +242,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 60}
 
+    @accepts_env_config(known=lambda: _SINGLE_ENV_KEYS, defaults=env_config_episode_limit)
     def __init__(
         self,
         render_mode: str | None = None,
@@ -243,7 +270,12 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         relax: bool | float = False,
         relax_iterations: int = 500,
         cycles_per_episode: int = 1,
+        max_episode_steps: int | None = None,
     ) -> None:
+        if max_episode_steps is not None and (isinstance(max_episode_steps, bool)
+                                              or not isinstance(max_episode_steps, int) or max_episode_steps < 1):
+            raise ParameterError(f"max_episode_steps must be None or an int >= 1, got {max_episode_steps!r}")
+        self.max_episode_steps = max_episode_steps
         self.cfg: EnvConfig = make_config(
             soil=soil, pile=pile, loader=loader, bucket=bucket, control_rate=control_rate,
             sensor_noise=sensor_noise, sensor_range=sensor_range, reward_weights=reward_weights, truth=truth,
@@ -434,7 +466,9 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         obs = self._observation(self._mt, self._mn)  # a new cycle of the multi-cycle variant measured its start
         if self.render_mode == "human":
             self.render()
-        return obs, reward, terminated, False, info
+        truncated = (not terminated and self.max_episode_steps is not None
+                     and self._k >= self.max_episode_steps)
+        return obs, reward, terminated, truncated, info
 
     def _move(self, action: np.ndarray) -> tuple[float, float, float, float, float, float]:
         """Kinematics: the action (clipped to [-1, 1], NaN counts as 0) moves the rate-limited velocity;
@@ -630,3 +664,8 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         state = self.__dict__.copy()
         state["_renderer"] = None
         return state
+
+
+#: Keys an env_config of :class:`BucketLoadingEnv` may hold: its keyword arguments (with ``render_mode``).
+_SINGLE_ENV_KEYS: tuple[str, ...] = tuple(
+    name for name in inspect.signature(BucketLoadingEnv.__init__).parameters if name != "self")

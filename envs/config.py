@@ -35,6 +35,9 @@ __all__ = ["BASE_OBS_NAMES", "BASE_OBS_UNITS", "DEFAULT_BLADE_ANGLE_LIMITS", "DE
 
 #: Noise values are drawn in chunks of this many steps (one RNG call per chunk).
 NOISE_CHUNK = 256
+#: Episode limit per digging cycle of the registered envs [steps] (10 s at 60 Hz); the env applies it itself
+#: when built from an env_config mapping (RLlib), where no ``gym.make`` adds a ``TimeLimit``.
+STEPS_PER_CYCLE = 600
 
 #: Names of the observation entries, in order (see the env docstring for units).
 BASE_OBS_NAMES: tuple[str, ...] = (

@@ -21,6 +21,7 @@ Not supported here (use ``gym.make_vec(..., vectorization_mode="sync")``):
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -62,6 +63,7 @@ from .config import (
     make_config,
     next_pile,
 )
+from .env_config import accepts_env_config
 from .truth import model_excess, stone_decay, stone_step
 
 __all__ = ["STEP_INFO_KEYS", "BucketLoadingVectorEnv"]
@@ -90,6 +92,12 @@ class BucketLoadingVectorEnv(VectorEnv):
     **kwargs
         The single env's keyword arguments (``cycles_per_episode`` must be 1).
 
+    RLlib's way works too: a mapping (a dict or RLlib's ``EnvContext``) as the
+    first positional argument holds the same settings, ``num_envs`` included
+    (RLlib's ``gym_env_vectorize_mode="vector_entry_point"`` with the class
+    passes ``{**env_config, "num_envs": n}``); an unknown key, or a key given
+    both ways with different values, raises ``ParameterError``.
+
     Notes
     -----
     ``reset(options=...)`` takes the single env's options (one parser,
@@ -103,6 +111,8 @@ class BucketLoadingVectorEnv(VectorEnv):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 60, "autoreset_mode": AutoresetMode.NEXT_STEP}
 
+    @accepts_env_config(known=lambda: ("num_envs", "max_episode_steps", "render_mode",
+                                       *inspect.signature(make_config).parameters))
     def __init__(self, num_envs: int = 1, max_episode_steps: int = 600, render_mode: str | None = None,
                  **kwargs: Any) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:

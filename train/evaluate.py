@@ -17,6 +17,7 @@ Usage::
 
     python train/evaluate.py --ppo results/ppo_randomized/model.zip --ppo results/ppo_twin/model.zip \
         --sac results/sac_randomized/model.zip --out results/evaluate
+    python train/evaluate.py --rllib results/rllib_ppo/checkpoint --out results/evaluate_rllib   # RLlib PPO
 """
 
 from __future__ import annotations
@@ -27,9 +28,8 @@ import time
 from pathlib import Path
 
 from common import int_list, machine_info, set_torch_threads, str_list, write_json
-from curves import plot_learning_curves
 from evaluation import evaluate, summarize
-from policies import PathPolicy, RandomPolicy, load_sb3, mpc_policy
+from policies import PathPolicy, RandomPolicy, load_rllib, load_sb3, mpc_policy
 
 _COLUMNS = (("return", "return", "{:.3f}"), ("fill", "fill_fraction", "{:.3f}"), ("energy [kJ]", "energy_J", None),
             ("energy/m^3 [kJ/m^3]", "energy_per_m3_J", None), ("stall rate", "stall_rate", "{:.2f}"),
@@ -42,6 +42,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--ppo", type=Path, action="append", default=[], help="PPO model.zip (repeatable)")
     parser.add_argument("--sac", type=Path, action="append", default=[], help="SAC model.zip (repeatable)")
+    parser.add_argument("--rllib", type=Path, action="append", default=[],
+                        help="RLlib PPO checkpoint directory of train/rllib_ppo.py, OUT/checkpoint (repeatable)")
     parser.add_argument("--soils", type=str_list, default="all", help="plant soils, comma-separated or 'all'")
     parser.add_argument("--seeds", type=int_list, default="2000-2004", help="env seeds, e.g. 2000-2004 or 1,2,3")
     parser.add_argument("--mpc", action=argparse.BooleanOptionalAction, default=True,
@@ -117,6 +119,8 @@ def write_outputs(report: dict, out: Path) -> None:
         if curve.exists():
             curves[name] = json.loads(curve.read_text())
     if curves:
+        from curves import plot_learning_curves  # needs stable-baselines3 (its callback lives there too)
+
         base = {k: v["overall"] for k, v in results.items() if not k.startswith(("ppo", "sac"))}
         worst = min((k for k in base if k.startswith("bezier")), key=lambda k: base[k]["return"], default=None)
         most = max(b["episodes"] for b in base.values())
@@ -149,6 +153,13 @@ def main(argv: list[str] | None = None) -> int:
                 name += "'"
             policies.append(load_sb3(path, name))
             runs[name] = {"model": str(path), "setup": setup}
+    for path in args.rllib:
+        folder = path.parent.name if path.name == "checkpoint" else path.name
+        name = folder if folder.startswith("rllib") else f"rllib_{folder}"
+        while name in runs:
+            name += "'"
+        policies.append(load_rllib(path, name))
+        runs[name] = {"model": str(path), "setup": {"algo": "rllib ppo"}}
     skipped: list[str] = []
     if args.mpc:
         mpc = mpc_policy()

@@ -1,5 +1,5 @@
 """Controllers behind one interface for the evaluation: random actions, the paper's fixed Bezier paths,
-the MPC planner of ``wheelloader.planner`` and trained SB3 models."""
+the MPC planner of ``wheelloader.planner``, trained SB3 models and trained RLlib modules."""
 
 from __future__ import annotations
 
@@ -87,6 +87,42 @@ def load_sb3(path: str | Path, name: str | None = None) -> SB3Policy:
     cls = {"ppo": PPO, "sac": SAC}[algo.lower()]
     model = cls.load(path, device="cpu")
     return SB3Policy(model, name or f"{algo.lower()}:{path.parent.name}")
+
+
+class RLlibPolicy(Policy):
+    """A trained RLlib RLModule (new API stack), deterministic actions (the mean of its Gaussian), as RLlib's
+    own inference does; actions beyond [-1, 1] are clipped by the env, as RLlib's action unsquashing would."""
+
+    def __init__(self, module: Any, name: str) -> None:
+        import torch
+
+        self.module = module
+        self.name = name
+        self._torch = torch
+        self._dist = module.get_inference_action_dist_cls()
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        torch = self._torch
+        with torch.no_grad():
+            out = self.module.forward_inference({"obs": torch.from_numpy(np.asarray(obs, dtype=np.float32)[None])})
+            action = self._dist.from_logits(out["action_dist_inputs"]).to_deterministic().sample()
+        return np.clip(action.numpy()[0], -1.0, 1.0).astype(np.float32)
+
+
+def rllib_module_path(checkpoint: str | Path) -> Path:
+    """The default policy's RLModule inside an RLlib algorithm checkpoint (``Algorithm.save_to_path``), or
+    ``checkpoint`` itself if it already is a module directory."""
+    checkpoint = Path(checkpoint)
+    inner = checkpoint / "learner_group" / "learner" / "rl_module" / "default_policy"
+    return inner if inner.is_dir() else checkpoint
+
+
+def load_rllib(checkpoint: str | Path, name: str | None = None) -> RLlibPolicy:
+    """Load the RLModule of an RLlib PPO checkpoint (``train/rllib_ppo.py`` writes ``OUT/checkpoint``)."""
+    from ray.rllib.core.rl_module.rl_module import RLModule
+
+    module = RLModule.from_checkpoint(str(rllib_module_path(checkpoint).resolve()))
+    return RLlibPolicy(module, name or f"rllib:{Path(checkpoint).parent.name}")
 
 
 def mpc_policy() -> Policy | None:

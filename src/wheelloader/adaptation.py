@@ -26,7 +26,7 @@ from __future__ import annotations
 import functools
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -296,6 +296,83 @@ def run_loop(env: Any, strategy: Strategy, cycles: int = 5, seed: int = 0,
         if k < cycles:
             calib = strategy.update(log, base.soil)
     return records, logs
+
+
+#: Strategy names of :func:`make_strategy` (``rl`` needs a trained policy).
+STRATEGY_NAMES: tuple[str, ...] = ("fixed", "ours", "oracle", "paper", "rl")
+
+
+def make_strategy(name: str, planner: Any = None, rl_policy: str | None = None,
+                  ours_options: Mapping[str, Any] | None = None) -> Strategy:
+    """A fresh strategy by name: ``fixed``, ``ours``, ``oracle``, ``paper`` or ``rl`` (a stable-baselines3
+    PPO ``.zip`` at ``rl_policy``); ``planner`` plans between cycles (None: Bezier paths);
+    ``ours_options``: keyword arguments of ``ours``' :class:`Calibrating` (``window``, ``forgetting``,
+    ``keep_untrustworthy``)."""
+    if name == "fixed":
+        return FixedBezier(preset(NOMINAL_SOIL))
+    if name == "ours":
+        return Calibrating(preset(NOMINAL_SOIL), "default", planner, **dict(ours_options or {}))
+    if name == "oracle":
+        return Oracle(planner)
+    if name == "paper":
+        return Calibrating(preset(NOMINAL_SOIL), "multi-stage", planner, name="paper")
+    if name == "rl":
+        if not rl_policy:
+            raise WheelloaderError("strategy 'rl' needs a trained policy (rl_policy=PATH of a PPO .zip)")
+        from stable_baselines3 import PPO
+
+        return PolicyStrategy(PPO.load(rl_policy, device="cpu"))
+    raise WheelloaderError(f"unknown strategy {name!r}; choose from {STRATEGY_NAMES}")
+
+
+@functools.lru_cache(maxsize=2)
+def _process_planner(mpc: bool) -> Callable[[SoilParams, Pile], PlanOutcome]:
+    """:func:`default_planner`, built once per process (the NLPs are cached per process anyway)."""
+    return default_planner(mpc=mpc)
+
+
+def strategy_loop(*, soil: SoilParams, pile: Mapping[str, Any] | Pile, truth: Mapping[str, float],
+                  strategy: str, cycles: int, seed: int, planner: str | None = "plan",
+                  rl_policy: str | None = None, ours_options: Mapping[str, Any] | None = None
+                  ) -> list[dict[str, Any]]:
+    """One loop of the adaptation benchmark, self-contained so that it can run in another process (a
+    :class:`wheelloader.sweep.Unit`): build the plant env and a fresh strategy, run :func:`run_loop`.
+
+    Parameters
+    ----------
+    soil, pile, truth
+        The plant's hidden soil, its pile and its truths beyond the model (env keyword arguments, with
+        :data:`LOOP_ENV_KWARGS`).
+    strategy : str
+        A name of :data:`STRATEGY_NAMES`.
+    cycles, seed
+        As :func:`run_loop`.
+    planner : str or None
+        ``"plan"`` (:func:`default_planner`), ``"mpc"`` (with the MPC) or None (Bezier paths only).
+    rl_policy : str, optional
+        The PPO ``.zip`` of strategy ``rl``.
+    ours_options : mapping, optional
+        Keyword arguments of strategy ``ours`` (:func:`make_strategy`).
+
+    Returns
+    -------
+    list of dict
+        :meth:`CycleRecord.to_dict` of every cycle.
+    """
+    import gymnasium as gym
+
+    import wheelloader.envs  # noqa: F401  (registers the env ids in this process)
+
+    if planner not in ("plan", "mpc", None):
+        raise WheelloaderError(f"planner must be 'plan', 'mpc' or None, got {planner!r}")
+    plan_fn = None if planner is None else _process_planner(planner == "mpc")
+    env = gym.make("wheelloader/BucketLoading-v0", soil=soil, pile=pile, truth=dict(truth), **LOOP_ENV_KWARGS)
+    try:
+        records, _ = run_loop(env, make_strategy(strategy, plan_fn, rl_policy, ours_options), cycles=cycles,
+                              seed=seed)
+    finally:
+        env.close()
+    return [r.to_dict() for r in records]
 
 
 def _finish(env: Any) -> CycleLog:

@@ -8,9 +8,11 @@ figures of a reference directory).
 from __future__ import annotations
 
 import json
-import time
+import sys
 from pathlib import Path
 from typing import Any
+
+from wheelloader.ray_mode import add_ray_arguments
 
 from .output import check_outputs, write_json
 
@@ -25,9 +27,15 @@ def _config_from_args(args: Any, soil: str) -> Any:
                      seed=args.seed, bulk_density=args.bulk_density, threads=args.threads)
 
 
+def _print_indented(line: str) -> None:
+    print("   " + line, flush=True)
+
+
 def _cmd_reference(args: Any) -> int:
     from wheelloader.estimator import ParameterError
-    from wheelloader.references.dem import generate_reference, reference_cases
+    from wheelloader.ray_mode import OFF
+    from wheelloader.references.dem import reference_cases, run_reference, write_reference
+    from wheelloader.sweep import Unit, run_sweep
 
     cases = reference_cases()
     if args.only:
@@ -37,14 +45,27 @@ def _cmd_reference(args: Any) -> int:
             raise ParameterError(f"unknown reference case(s) {unknown}; choose from {sorted(known)}")
         cases = [known[n] for n in args.only]
     out = Path(args.out)
+    todo = []
     for k, case in enumerate(cases):
         if args.skip_existing and all((out / f"{s}.csv").exists() for s in case.file_stems()):
             print(f"[{k + 1}/{len(cases)}] {case.name}: exists, skipped", flush=True)
             continue
-        print(f"[{k + 1}/{len(cases)}] {case.name}: soil={case.config.soil} paths={','.join(case.paths)}", flush=True)
-        t0 = time.time()
-        generate_reference(case, out, cache_dir=args.cache_dir, progress=lambda s: print("   " + s, flush=True))
-        print(f"[{k + 1}/{len(cases)}] {case.name}: done in {time.time() - t0:.1f} s", flush=True)
+        todo.append(case)
+    # one unit = one case (one Yade run of its cycles); each is written as soon as it finishes, so an
+    # interrupted run keeps the finished cases (resume with --skip-existing)
+    units = [Unit(run_reference, {"case": case, "cache_dir": args.cache_dir,
+                                  "progress": _print_indented if args.ray == OFF else None},
+                  label=f"{case.name} (soil={case.config.soil} paths={','.join(case.paths)})",
+                  num_cpus=case.config.threads) for case in todo]
+    sweep = run_sweep(units, args.ray, ray_cpus=args.ray_cpus,
+                      on_result=lambda k, run: write_reference(run, out),
+                      progress=lambda line: print(line, flush=True))
+    for failure in sweep.failures:
+        print(f"FAILED {failure}\n{failure.traceback}", file=sys.stderr)
+    if sweep.failures:
+        print(f"{len(sweep.failures)} of {len(units)} cases failed (the others are written); re-run them with "
+              "--only NAME ... or the whole set with --skip-existing", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -108,6 +129,7 @@ def register(subparsers: Any) -> None:
                    help="output directory (default: %(default)s, relative to the working directory)")
     p.add_argument("--cache-dir", default=None, help="settled-pile cache (default ~/.cache/wheelloader/dem)")
     p.add_argument("--skip-existing", action="store_true", help="skip cases whose files exist")
+    add_ray_arguments(p)
     p.set_defaults(func=_cmd_reference)
     p = sub.add_parser("list", help="list the reference cases and their regeneration commands")
     p.set_defaults(func=_cmd_list)

@@ -28,20 +28,24 @@ from .reference_set import (
     MASS_TOLERANCE,
     REFERENCE_DIR,
     ReferenceCase,
+    ReferenceRun,
     generate_reference,
     load_reference,
     reference_cases,
     regenerate_command,
+    run_reference,
     sanity_figures,
     sanity_report,
     update_manifest,
+    write_reference,
 )
 from .runner import DEFAULT_CACHE, DemRun, find_yade, read_raw, read_raw_cycle, run_scenario, scenario_script
 
 __all__ = [
     "BACK_HEIGHT", "DEFAULT_CACHE", "DEFAULT_FILTER", "MASS_TOLERANCE", "REFERENCE_DIR", "SOILS", "TOP_PLATE",
-    "YADE_INSTALL", "DemConfig", "DemRun", "DemRunError", "ReferenceCase", "YadeNotFoundError", "dual_cycle_paths",
-    "filtered", "find_yade", "generate_reference", "load_reference", "moving_average", "read_raw", "read_raw_cycle",
-    "reference_cases", "regenerate_command", "relative_noise", "run_scenario", "sanity_figures", "sanity_report",
-    "scenario_paths", "scenario_script", "smooth", "tiny_config", "tiny_path", "update_manifest", "write_path_csv",
+    "YADE_INSTALL", "DemConfig", "DemRun", "DemRunError", "ReferenceCase", "ReferenceRun", "YadeNotFoundError",
+    "dual_cycle_paths", "filtered", "find_yade", "generate_reference", "load_reference", "moving_average",
+    "read_raw", "read_raw_cycle", "reference_cases", "regenerate_command", "relative_noise", "run_reference",
+    "run_scenario", "sanity_figures", "sanity_report", "scenario_paths", "scenario_script", "smooth", "tiny_config",
+    "tiny_path", "update_manifest", "write_path_csv", "write_reference",
 ]

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import shutil
 import sys
 import tempfile
 from collections.abc import Callable
@@ -74,29 +73,37 @@ def regenerate_command(name: str) -> str:
     return f"wheelloader dem reference --only {name}"
 
 
-def generate_reference(
+@dataclass(frozen=True)
+class ReferenceRun:
+    """The output of one reference case before it is written: its cycle logs (metadata complete), the
+    raw Yade records (CSV text) and the manifest entries. Picklable, so a case can run in another process
+    or on another machine (:func:`run_reference`) and be written where the data set lives
+    (:func:`write_reference`)."""
+
+    case: ReferenceCase
+    logs: tuple[CycleLog, ...]
+    raw_csv: tuple[str, ...]
+    entries: tuple[dict[str, Any], ...]
+
+
+def run_reference(
     case: ReferenceCase,
-    out_dir: str | Path = REFERENCE_DIR,
     *,
     cache_dir: str | Path | None = None,
     work_dir: str | Path | None = None,
     progress: Callable[[str], None] | None = None,
-) -> list[dict[str, Any]]:
-    """Run one reference case, write its cycle logs into ``out_dir`` and update ``manifest.json``."""
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "raw").mkdir(exist_ok=True)
+) -> ReferenceRun:
+    """Run one reference case with Yade and return its logs and manifest entries (nothing is written to
+    the data set; see :func:`write_reference`)."""
     with tempfile.TemporaryDirectory(prefix=f"dem-{case.name}-") as tmp:
         work = Path(work_dir) / case.name if work_dir is not None else Path(tmp)
         run = run_scenario(case.config, case.path_objects(), work, cache_dir=cache_dir, progress=progress,
                            names=[f"{case.name} {p}" for p in case.paths])
-        entries = []
+        logs, raws, entries = [], [], []
         for i, (log, stem) in enumerate(zip(run.logs, case.file_stems(), strict=True)):
-            log = replace(log, metadata=dict(log.metadata, name=stem, regenerate=regenerate_command(case.name),
-                                             run_wall_s=run.wall_s))
-            log.save(out / f"{stem}.csv", overwrite=True)
-            shutil.copyfile(run.raw_dir / f"cycle{i + 1}.csv", out / "raw" / f"{stem}.csv")
+            logs.append(replace(log, metadata=dict(log.metadata, name=stem, regenerate=regenerate_command(case.name),
+                                                   run_wall_s=run.wall_s)))
+            raws.append((run.raw_dir / f"cycle{i + 1}.csv").read_text())
             cycle = run.summary["cycles"][i]
             entries.append({
                 "name": stem,
@@ -120,8 +127,34 @@ def generate_reference(
                 "config": asdict(case.config),
                 "command": regenerate_command(case.name),
             })
+    return ReferenceRun(case, tuple(logs), tuple(raws), tuple(entries))
+
+
+def write_reference(run: ReferenceRun, out_dir: str | Path = REFERENCE_DIR) -> list[dict[str, Any]]:
+    """Write a case's cycle logs and raw records into ``out_dir`` and enter them in ``manifest.json``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "raw").mkdir(exist_ok=True)
+    for log, raw, entry in zip(run.logs, run.raw_csv, run.entries, strict=True):
+        log.save(out / entry["csv"], overwrite=True)
+        (out / entry["raw_csv"]).write_text(raw)
+    entries = [dict(e) for e in run.entries]
     update_manifest(out, entries)
     return entries
+
+
+def generate_reference(
+    case: ReferenceCase,
+    out_dir: str | Path = REFERENCE_DIR,
+    *,
+    cache_dir: str | Path | None = None,
+    work_dir: str | Path | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Run one reference case, write its cycle logs into ``out_dir`` and update ``manifest.json``."""
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    run = run_reference(case, cache_dir=cache_dir, work_dir=work_dir, progress=progress)
+    return write_reference(run, out_dir)
 
 
 def update_manifest(out_dir: Path, entries: list[dict[str, Any]]) -> Path:

@@ -15,12 +15,15 @@ Bekker parameters are unused). Pile: :meth:`Pile.trapezoid` (1 m high, 30 deg; i
 
 Each cycle is written as ``NAME.csv`` + ``NAME.json`` (:class:`~wheelloader.estimator.CycleLog`) and
 entered in ``manifest.json`` with the command that regenerates it, its cost and its settings. A case
-whose files and manifest entry exist is skipped; progress lines go to ``OUT/progress.log``.
+whose files and manifest entry exist is skipped; progress lines go to ``OUT/progress.log``. Cases run as
+units of :mod:`wheelloader.sweep` (``--ray local``, the default with Ray installed: Ray tasks, one per free
+CPU, each with ``--threads`` CPUs; ``--ray off``: one after the other).
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import sys
@@ -32,6 +35,8 @@ from typing import Any
 
 from wheelloader.estimator import BucketPath, CycleLog, Pile, bezier_path, paper_paths
 from wheelloader.provenance import machine_info
+from wheelloader.ray_mode import add_ray_arguments
+from wheelloader.sweep import Unit, run_sweep
 
 from .plant import DEFAULT_RESOLUTION, MPMPlant
 
@@ -115,25 +120,39 @@ def done(out: Path, case: Case) -> bool:
     return all((out / f"{s}.csv").exists() and (out / f"{s}.json").exists() and s in names for s in case.stems())
 
 
-def generate_case(case: Case, out: Path, plant: MPMPlant, seed: int = 0, log=print) -> list[dict[str, Any]]:
-    """Run ``case`` (skipping cycles already written) and enter its cycles in the manifest."""
-    out.mkdir(parents=True, exist_ok=True)
-    pile = case.pile()
-    entries = []
-    for i, (key, stem) in enumerate(zip(case.paths, case.stems(), strict=True)):
+def existing_cycles(case: Case, out: Path, seed: int = 0) -> dict[str, CycleLog]:
+    """The cycles of ``case`` already written in ``out`` (by stem), and for a dual pair whose first cycle is
+    path 1 on the fresh pile, ``SOIL_path1`` (the same run) under that name; :func:`dig_case` reuses them."""
+    found = {}
+    for key, stem in zip(case.paths, case.stems(), strict=True):
         csv = out / f"{stem}.csv"
         same = out / f"{case.soil}_path1.csv"
         if csv.exists() and csv.with_suffix(".json").exists():
-            cyc = CycleLog.load(csv)
-            log(f"{stem}: exists, reused")
+            found[stem] = CycleLog.load(csv)
         elif key == "dual1" and case.slope == math.radians(30.0) and same.exists() and seed == 0:
+            found[same.stem] = CycleLog.load(same)
+    return found
+
+
+def dig_case(case: Case, plant: MPMPlant, seed: int = 0, existing: dict[str, CycleLog] | None = None,
+             log=print) -> list[CycleLog]:
+    """The cycles of ``case``, each with its metadata (name, case, cycle, regenerate command, load): reused
+    from ``existing`` (:func:`existing_cycles`) where there, else dug with ``plant``. Writes nothing."""
+    existing = existing or {}
+    pile = case.pile()
+    cycles = []
+    for i, (key, stem) in enumerate(zip(case.paths, case.stems(), strict=True)):
+        same = f"{case.soil}_path1"
+        if stem in existing:
+            cyc = existing[stem]
+            log(f"{stem}: exists, reused")
+        elif key == "dual1" and case.slope == math.radians(30.0) and same in existing and seed == 0:
             # the first cycle of the pair is path 1 on the fresh pile: the same run as SOIL_path1
-            cyc = CycleLog.load(same)
+            cyc = existing[same]
             cyc = CycleLog(cyc.path, cyc.tangential, cyc.normal, cyc.pile, cyc.bucket, cyc.fill_volume,
                            cyc.measured_load, cyc.pile_after,
-                           dict(cyc.metadata, name=stem, case=case.name, cycle=i + 1, copied_from=same.name))
-            cyc.save(csv, overwrite=True)
-            log(f"{stem}: copied from {same.name} (the same path, pile, soil and seed)")
+                           dict(cyc.metadata, name=stem, case=case.name, cycle=i + 1, copied_from=f"{same}.csv"))
+            log(f"{stem}: copied from {same}.csv (the same path, pile, soil and seed)")
         else:
             load = machine_info()["loadavg_1_5_15min"]
             log(f"{stem}: start ({case.soil}, {key}, dx {plant.settings.resolution:g} m, load {load})")
@@ -143,9 +162,21 @@ def generate_case(case: Case, out: Path, plant: MPMPlant, seed: int = 0, log=pri
                            cyc.measured_load, cyc.pile_after,
                            dict(cyc.metadata, name=stem, case=case.name, cycle=i + 1, regenerate=cmd,
                                 loadavg_start=load, loadavg_end=machine_info()["loadavg_1_5_15min"]))
-            cyc.save(csv, overwrite=True)
             log(f"{stem}: done in {cyc.metadata['wall_s']:.0f} s, max F_R {max(cyc.resultant):.0f} N, "
                 f"fill {cyc.fill_volume[-1]:.3f} m^3")
+        cycles.append(cyc)
+        pile = cyc.pile_after
+    return cycles
+
+
+def write_case(case: Case, cycles: Sequence[CycleLog], out: Path) -> list[dict[str, Any]]:
+    """Save the cycles of ``case`` in ``out`` (``NAME.csv`` + ``NAME.json``) and enter them in the manifest."""
+    out.mkdir(parents=True, exist_ok=True)
+    entries = []
+    for i, (key, stem, cyc) in enumerate(zip(case.paths, case.stems(), cycles, strict=True)):
+        csv = out / f"{stem}.csv"
+        if not (csv.exists() and csv.with_suffix(".json").exists()):
+            cyc.save(csv, overwrite=True)
         m = cyc.metadata
         entries.append({
             "name": stem, "case": case.name, "csv": f"{stem}.csv", "soil": case.soil, "path": key,
@@ -158,13 +189,35 @@ def generate_case(case: Case, out: Path, plant: MPMPlant, seed: int = 0, log=pri
             "loadavg_end": m.get("loadavg_end"), "mass_balance": m.get("mass_balance"),
             "settings": m.get("settings"), "continuum": m.get("continuum"), "command": m.get("regenerate"),
         })
-        pile = cyc.pile_after
     manifest = _manifest(out)
     names = {e["name"] for e in entries}
     manifest["cycles"] = [e for e in manifest["cycles"] if e["name"] not in names] + entries
     manifest["generated_with"] = {k: v for k, v in machine_info().items() if k != "loadavg_1_5_15min"}
     _write_manifest(out, manifest)
     return entries
+
+
+def generate_case(case: Case, out: Path, plant: MPMPlant, seed: int = 0, log=print) -> list[dict[str, Any]]:
+    """Run ``case`` (skipping cycles already written) and enter its cycles in the manifest."""
+    out.mkdir(parents=True, exist_ok=True)
+    return write_case(case, dig_case(case, plant, seed, existing_cycles(case, out, seed), log), out)
+
+
+@functools.lru_cache(maxsize=2)
+def _process_plant(resolution: float, threads: int) -> MPMPlant:
+    """One plant per process and settings (Taichi is initialised once per process)."""
+    return MPMPlant(resolution, threads=threads)
+
+
+def _timestamped(message: str) -> None:
+    print(f"{time.strftime('%Y-%m-%d %H:%M:%S')} {message}", flush=True)
+
+
+def dig_case_unit(case: Case, resolution: float, threads: int, seed: int, existing: dict[str, CycleLog],
+                  log=None) -> list[CycleLog]:
+    """:func:`dig_case` as a sweep unit (:mod:`wheelloader.sweep`): builds the plant in the process it runs in;
+    ``log`` defaults to timestamped lines on stdout (a Ray worker's reach the driver's terminal)."""
+    return dig_case(case, _process_plant(resolution, threads), seed, existing, log=log or _timestamped)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -177,6 +230,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--force", action="store_true", help="re-run cases that are done")
     parser.add_argument("--list", action="store_true", help="list the cases and exit")
+    add_ray_arguments(parser)
     args = parser.parse_args(argv)
     all_cases = {c.name: c for c in cases()}
     if args.list:
@@ -196,8 +250,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         with open(progress, "a") as fh:
             fh.write(line + "\n")
 
-    plant = MPMPlant(args.resolution, threads=args.threads)
     todo = [all_cases[n] for n in args.only] if args.only else list(all_cases.values())
+    pending = []
     for case in todo:
         if done(out, case) and not args.force:
             log(f"{case.name}: done, skipped")
@@ -206,7 +260,26 @@ def main(argv: Sequence[str] | None = None) -> int:
             for stem in case.stems():
                 for suffix in (".csv", ".json"):
                     (out / f"{stem}{suffix}").unlink(missing_ok=True)
-        generate_case(case, out, plant, seed=args.seed, log=log)
+        pending.append(case)
+    # one sweep unit per case (serial, or Ray tasks with --ray); each case is written here as soon as it
+    # finishes, so an interrupted run resumes where it stopped. The dual pairs go second: their first cycle
+    # is copied from SOIL_path1 once that exists.
+    waves = [[c for c in pending if not c.name.endswith("_dual")], [c for c in pending if c.name.endswith("_dual")]]
+    failed = []
+    for wave in (w for w in waves if w):
+        units = [Unit(dig_case_unit, {"case": case, "resolution": args.resolution, "threads": args.threads,
+                                      "seed": args.seed, "existing": existing_cycles(case, out, args.seed),
+                                      "log": log if args.ray == "off" else None},
+                      label=case.name, num_cpus=args.threads) for case in wave]
+        sweep = run_sweep(units, args.ray, ray_cpus=args.ray_cpus, progress=log,
+                          on_result=lambda k, cycles, wave=wave: write_case(wave[k], cycles, out))
+        failed += sweep.failures
+    for failure in failed:
+        log(f"FAILED {failure}\n{failure.traceback}")
+    if failed:
+        log(f"{len(failed)} case(s) failed: {', '.join(f.label for f in failed)}; the others are written, "
+            "run again to retry them")
+        return 1
     log("all requested cases done")
     return 0
 

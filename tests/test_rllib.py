@@ -1,0 +1,107 @@
+"""RLlib by env id and by class: an env runner samples the batched env built through
+``gym_env_vectorize_mode="vector_entry_point"`` (fast smoke tests, in this process); a PPO with 2 remote
+env runners on the env by id trains one iteration (slow: starting Ray and the runners takes about a
+minute here). The env in a fresh interpreter by its module-qualified id is tested without Ray.
+
+Needs the optional ``rllib`` extra (``pip install torch==2.13.0 && pip install -e ".[rllib]"``); skipped
+without it unless ``WHEELLOADER_REQUIRE_RAY=1`` (then a missing install fails).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+if os.environ.get("WHEELLOADER_REQUIRE_RAY") == "1":
+    import ray  # noqa: F401
+    import torch  # noqa: F401
+    from ray.rllib.algorithms.ppo import PPOConfig
+else:
+    _reason = 'install the RLlib extra: pip install torch==2.13.0 && pip install -e ".[rllib]"'
+    pytest.importorskip("torch", reason=_reason)
+    pytest.importorskip("ray.rllib", reason=_reason)
+    from ray.rllib.algorithms.ppo import PPOConfig
+
+from wheelloader.envs import BucketLoadingEnv, BucketLoadingVectorEnv
+
+pytestmark = pytest.mark.ray
+
+ENV_ID = "wheelloader.envs:wheelloader/BucketLoading-v0"
+
+
+def _sample(env, mode: str, steps: int = 64) -> tuple[object, int]:
+    """Build a local env runner (no Ray actors) for ``env`` and sample ``steps`` env-steps."""
+    from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
+
+    config = (PPOConfig().environment(env, env_config={"soil": "random", "sensor_noise": 0.0})
+              .env_runners(num_env_runners=0, num_envs_per_env_runner=4, gym_env_vectorize_mode=mode)
+              .debugging(seed=0))
+    runner = SingleAgentEnvRunner(config=config)
+    try:
+        episodes = runner.sample(num_timesteps=steps)
+        return runner.env.unwrapped, sum(len(e) for e in episodes)
+    finally:
+        runner.stop()
+
+
+def test_env_runner_samples_the_batched_env_by_id():
+    env, steps = _sample(ENV_ID, "vector_entry_point")
+    assert isinstance(env, BucketLoadingVectorEnv) and env.num_envs == 4
+    assert env.cfg.sensor_noise == 0.0 and env.max_episode_steps == 600  # env_config and the registered limit
+    assert steps >= 64
+
+
+def test_env_runner_builds_the_env_classes_from_env_config():
+    """RLlib calls a class with its env_config (an EnvContext) as the first positional argument."""
+    env, steps = _sample(BucketLoadingEnv, "sync")
+    assert [type(e.unwrapped) for e in env.envs] == [BucketLoadingEnv] * 4 and steps >= 64
+    assert all(e.unwrapped.max_episode_steps == 600 for e in env.envs)
+    env, steps = _sample(BucketLoadingVectorEnv, "vector_entry_point")
+    assert isinstance(env, BucketLoadingVectorEnv) and env.num_envs == 4 and steps >= 64
+
+
+def test_env_context_and_keywords_merge():
+    from ray.rllib.env.env_context import EnvContext
+
+    ctx = EnvContext({"soil": "sand", "sensor_noise": 0.0}, worker_index=1, num_workers=2)
+    env = BucketLoadingEnv(ctx, render_mode="rgb_array")
+    assert env.render_mode == "rgb_array" and env.cfg.sensor_noise == 0.0
+    obs, _ = env.reset(seed=0)
+    assert np.all(np.isfinite(obs))
+
+
+def test_module_qualified_id_in_a_fresh_interpreter():
+    """Gymnasium imports ``wheelloader.envs`` itself for the ``module:id`` form (what RLlib's workers do)."""
+    code = ("import sys, gymnasium as gym\n"
+            f"env = gym.make({ENV_ID!r}, soil='sand')\n"
+            "obs, _ = env.reset(seed=0)\n"
+            f"vec = gym.make_vec({ENV_ID!r}, num_envs=3, vectorization_mode='vector_entry_point')\n"
+            "print(env.spec.max_episode_steps, obs.shape, type(vec).__name__, vec.num_envs,\n"
+            "      'ray' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=os.path.dirname(__file__)).stdout.split()
+    assert out == ["600", "(17,)", "BucketLoadingVectorEnv", "3", "False"]
+
+
+@pytest.mark.slow
+def test_ppo_by_id_with_two_env_runners_trains_one_iteration():
+    import ray
+
+    ray.init(num_cpus=2, include_dashboard=False, logging_level="ERROR")
+    try:
+        config = (PPOConfig().environment(ENV_ID, env_config={"soil": "random"})
+                  .env_runners(num_env_runners=2, num_envs_per_env_runner=4,
+                               gym_env_vectorize_mode="vector_entry_point", rollout_fragment_length=64)
+                  .training(train_batch_size_per_learner=512, minibatch_size=128, num_epochs=1)
+                  .debugging(seed=0))
+        algo = config.build_algo()
+        result = algo.train()
+        algo.stop()
+    finally:
+        ray.shutdown()
+    assert result["env_runners"]["num_env_steps_sampled"] >= 512
+    assert result["fault_tolerance"]["num_env_runners_dropped_lifetime"] == 0
