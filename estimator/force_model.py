@@ -24,12 +24,29 @@ The angle clamps and flags are in :mod:`~wheelloader.estimator.validity`
 
 Every clamp is continuous, so forces are finite, non-negative and continuous
 along smooth paths everywhere.
+
+Opt-in term beyond the paper: the carried load
+------------------------------------------------
+With ``ModelOptions(carried_load=True)`` the soil already in the bucket (mass
+``m = W_load / g``) adds the force it exerts on the bucket, ``m (g_vec - a)``
+(weight, and inertia when the tip acceleration ``a`` is known), resolved in
+the blade frame of eqs 16-17 (:func:`carried_load_factors`): with the blade
+angle theta above +x,
+
+    F_T += W_load (a_x cos theta + (g + a_z) sin theta) / g,
+    F_N += W_load ((g + a_z) cos theta - a_x sin theta) / g,
+
+in and out of soil (after the tip leaves the soil the bucket still carries
+its load). A tip pointing down (theta < 0) makes the weight's share of F_T
+negative, so F_T can be negative with this term. ``W_load`` is the same
+load as the surcharge's (``gamma g V_fill`` or the logged load), so the
+forces stay linear in gamma.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -52,8 +69,8 @@ from .validity import (
 __all__ = [
     "DEFAULT_OPTIONS", "FLAG_ALPHA_CLAMPED", "FLAG_NAMES", "FLAG_OUT_OF_SOIL", "FLAG_RHO_HIGH", "FLAG_RHO_LOW",
     "FLAG_TENSION", "GRAVITY", "ModelOptions", "SoilForces", "bearing_factors", "bearing_factors_cotangent",
-    "beta_bounds", "clamp_angles", "log_ngamma_slope", "optimal_beta", "optimal_beta_scalar", "soil_forces",
-    "soil_forces_single",
+    "beta_bounds", "carried_load_factors", "clamp_angles", "log_ngamma_slope", "optimal_beta", "optimal_beta_scalar",
+    "soil_forces", "soil_forces_single",
 ]
 
 #: Standard gravity [m/s^2].
@@ -90,6 +107,30 @@ def bearing_factors_cotangent(alpha, rho, beta, phi, delta):
     n_a = (1.0 - cot(rho) * cot(beta + phi)) / den
     n_q = (np.cos(alpha) + np.sin(alpha) * cot(beta + phi)) / den
     return n_gamma, n_c, n_a, n_q
+
+
+def carried_load_factors(blade_angle, acceleration=None) -> tuple[np.ndarray, np.ndarray]:
+    """Blade-frame force of a carried load per newton of its weight: ``(c_T, c_N)`` (module docstring).
+
+    Parameters
+    ----------
+    blade_angle : array_like
+        Blade direction above +x [rad].
+    acceleration : array_like, optional
+        Tip acceleration ``(a_x, a_z)``, shape ``(n, 2)`` [m/s^2]; None: weight only.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``c_T = (a_x cos theta + (g + a_z) sin theta) / g``, ``c_N = ((g + a_z) cos theta - a_x sin theta) / g``.
+    """
+    th = np.asarray(blade_angle, dtype=float)
+    c, s = np.cos(th), np.sin(th)
+    if acceleration is None:
+        return s, c
+    acc = np.asarray(acceleration, dtype=float)
+    ax, gz = acc[:, 0] / GRAVITY, 1.0 + acc[:, 1] / GRAVITY
+    return ax * c + gz * s, gz * c - ax * s
 
 
 # ----------------------------------------------------------------- forces
@@ -176,6 +217,10 @@ def soil_forces(soil: SoilParams, state: ContactState, bucket: Bucket,
     tangential = (w * bucket.edge_thickness * pressure + fee * math.sin(delta)
                   + soil.adhesion * w * state.blade_length)  # eq 16
     normal = fee * math.cos(delta)  # eq 17
+    if options.carried_load:  # opt-in: the carried load's weight and inertia (module docstring)
+        c_t, c_n = carried_load_factors(state.blade_angle, state.acceleration)
+        tangential = tangential + w_load * c_t
+        normal = normal + w_load * c_n
     flags = np.where(out, FLAG_OUT_OF_SOIL, flags)  # out of soil: other flags are moot
     return SoilForces(tangential, normal, np.hypot(tangential, normal), fee, pressure, beta,
                       n_gamma, n_c, n_a, n_q, flags)
@@ -183,14 +228,25 @@ def soil_forces(soil: SoilParams, state: ContactState, bucket: Bucket,
 
 def soil_forces_single(soil: SoilParams, depth: float, rho: float, alpha: float, blade_length: float,
                        load_weight: float, bucket: Bucket, options: ModelOptions = DEFAULT_OPTIONS,
-                       beta_guess: float | None = None) -> tuple[float, float, float, int]:
+                       beta_guess: float | None = None,
+                       acceleration: tuple[float, float] = (0.0, 0.0)) -> tuple[float, float, float, int]:
     """Fast scalar path for one sample (environment steps).
+
+    ``acceleration`` (tip ``(a_x, a_z)`` [m/s^2]) is used only by the opt-in carried-load term.
 
     Returns
     -------
     tuple
         ``(F_T, F_N, beta, flags)``; same equations and clamps as :func:`soil_forces`.
     """
+    if options.carried_load:
+        theta = alpha - rho
+        ax, gz = acceleration[0] / GRAVITY, 1.0 + acceleration[1] / GRAVITY
+        c_t = ax * math.cos(theta) + gz * math.sin(theta)
+        c_n = gz * math.cos(theta) - ax * math.sin(theta)
+        f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, blade_length, load_weight, bucket,
+                                                   replace(options, carried_load=False), beta_guess)
+        return f_t + load_weight * c_t, f_n + load_weight * c_n, beta, flags
     if depth <= 0.0:
         return 0.0, 0.0, options.eps1, FLAG_OUT_OF_SOIL
     phi, delta = soil.phi, soil.delta

@@ -57,6 +57,9 @@ class ContactState:
         otherwise the load is ``gamma * g * fill_volume``.
     carve : CarveResult or None
         The carving that produced ``fill_volume``, when it was computed.
+    acceleration : numpy.ndarray or None
+        Tip acceleration ``(a_x, a_z)`` per sample, shape ``(n, 2)`` [m/s^2], when known: the
+        inertia of the carried soil (``ModelOptions.carried_load``); None counts as 0.
     """
 
     depth: np.ndarray
@@ -66,6 +69,7 @@ class ContactState:
     fill_volume: np.ndarray
     measured_load: np.ndarray | None = None
     carve: CarveResult | None = field(default=None, repr=False)
+    acceleration: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return int(self.depth.size)
@@ -84,8 +88,14 @@ class ContactState:
     def subset(self, mask: np.ndarray) -> ContactState:
         """The samples where ``mask`` is true."""
         ml = None if self.measured_load is None else self.measured_load[mask]
+        acc = None if self.acceleration is None else self.acceleration[mask]
         return ContactState(self.depth[mask], self.rho[mask], self.alpha[mask], self.blade_length[mask],
-                            self.fill_volume[mask], ml, None)
+                            self.fill_volume[mask], ml, None, acc)
+
+    @property
+    def blade_angle(self) -> np.ndarray:
+        """Blade direction above +x per sample [rad] (``alpha - rho``)."""
+        return self.alpha - self.rho
 
 
 def blade_length_in_soil(depth, rho, floor_length: float):
@@ -105,6 +115,7 @@ def contact_state(
     initial_fill: float = 0.0,
     fill_volume: object | None = None,
     measured_load: object | None = None,
+    acceleration: object | None = None,
 ) -> ContactState:
     """Contact geometry along a tip path on a pile (vectorised).
 
@@ -125,6 +136,10 @@ def contact_state(
         carving ``pile`` along the path.
     measured_load : array_like, optional
         Logged soil weight in the bucket per sample [N].
+    acceleration : array_like, optional
+        Tip acceleration per sample, shape ``(n, 2)`` [m/s^2] (e.g. from
+        :meth:`~wheelloader.estimator.paths.BucketPath.acceleration`); used only by the
+        opt-in carried-load term.
 
     Returns
     -------
@@ -154,7 +169,12 @@ def contact_state(
     else:
         fill = _optional_series("fill_volume", fill_volume, xs.size)
     load = None if measured_load is None else _optional_series("measured_load", measured_load, xs.size)
-    return ContactState(depth, rho, alpha, blade_length, fill, load, carve)
+    acc = None
+    if acceleration is not None:
+        acc = np.asarray(acceleration, dtype=float)
+        if acc.shape != (xs.size, 2) or not np.all(np.isfinite(acc)):
+            raise ParameterError(f"acceleration must be finite with shape ({xs.size}, 2), got {acc.shape}")
+    return ContactState(depth, rho, alpha, blade_length, fill, load, carve, acc)
 
 
 def contact_single(pile: Pile, x: float, z: float, blade_angle: float, floor_length: float,

@@ -78,6 +78,14 @@ class ModelOptions:
         (module docstring).
     contact_depth : float
         Depth over which the surcharge ``W_load N_q`` ramps in [m]; default 0.02 m.
+    carried_load : bool
+        Opt-in term beyond the paper (default False, the paper's model): the soil already in the
+        bucket pushes on it with its weight and, when the tip's acceleration is known, its inertia,
+        ``m (g - a)`` with ``m = W_load / g``, resolved in the blade frame and added to F_T and F_N
+        in and out of soil (:func:`~wheelloader.estimator.force_model.carried_load_factors`). The
+        env's plant (the FEE world) and the planner's CasADi model do not implement it: the env
+        always uses the paper's model, and a planner given these options must refuse them
+        (:attr:`extra_terms` names the opt-in terms that are on).
     """
 
     eps1: float = math.radians(5.0)
@@ -86,8 +94,16 @@ class ModelOptions:
     alpha_max: float = math.radians(60.0)
     contact_depth: float = 0.02
     slope_margin: float = math.radians(5.0)
+    carried_load: bool = False
+
+    @property
+    def extra_terms(self) -> tuple[str, ...]:
+        """Names of the opt-in terms beyond the paper's model that are on (empty: the paper's model)."""
+        return ("carried_load",) if self.carried_load else ()
 
     def __post_init__(self) -> None:
+        if not isinstance(self.carried_load, bool):
+            raise ParameterError(f"ModelOptions.carried_load must be True or False, got {self.carried_load!r}")
         for name in ("eps1", "eps2", "rho_min", "alpha_max", "contact_depth", "slope_margin"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):

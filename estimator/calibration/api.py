@@ -19,6 +19,7 @@ Fit quality: :mod:`wheelloader.estimator.calibration.result`; fit verdict:
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -136,6 +137,7 @@ def calibrate(
     regularize: bool = False,
     forgetting: float | None = None,
     cycle_weights: list[float] | None = None,
+    fill: str = "log",
 ) -> Calibration:
     """Calibrate the eight soil parameters from one cycle or from several.
 
@@ -187,6 +189,10 @@ def calibrate(
         ``f ** (N - 1 - k)`` in the cost (the newest 1). Default: every cycle weighs 1.
     cycle_weights : list of float, optional
         Several cycles: explicit weight of each cycle's squared residuals (instead of ``forgetting``).
+    fill : str
+        Where the bucket load ``W_load`` comes from: ``"log"`` (default) the logged fill or load
+        when the log has one, ``"model"`` the model's own bookkeeping (carving the pile along the
+        path), the quantity a prediction of a new path has (:meth:`CycleLog.contact_state`).
 
     Returns
     -------
@@ -209,6 +215,11 @@ def calibrate(
         raise CalibrationError(f"calibration from several cycles ({len(logs)} given) is implemented for the varpro "
                                f"method only, not {method!r}")
     cycle = logs[0]
+    if fill not in ("log", "model"):
+        raise CalibrationError(f'fill must be "log" or "model", got {fill!r}')
+    if options.extra_terms and method != "varpro":
+        raise CalibrationError(f"the paper's methods fit the paper's model only; the opt-in term(s) "
+                               f"{list(options.extra_terms)} need the varpro method")
     try:
         bnds = validate_bounds({} if bounds is None else bounds)
     except ParameterError as exc:
@@ -235,7 +246,7 @@ def calibrate(
     prior = _coerce_initial(initial)
     bucket = cycle.bucket
     b = bucket.edge_thickness
-    states = [log.contact_state(slope_window) for log in logs]
+    states = [log.contact_state(slope_window, fill) for log in logs]
     parts = []
     for k, (log, st) in enumerate(zip(logs, states, strict=True)):
         try:
@@ -246,6 +257,9 @@ def calibrate(
     state = states[0]
     lo, hi = vector_bounds(bnds, b)
     settings: dict[str, Any] = {"lambda": lam}
+    if options != DEFAULT_OPTIONS or fill != "log":  # recorded so that predict() uses the same model
+        settings["model_options"] = dataclasses.asdict(options)
+        settings["fill"] = fill
     stride = -(-len(data) // MAX_FIT_SAMPLES)
     if stride > 1:
         _log.warning("calibrate: %d in-soil samples exceed MAX_FIT_SAMPLES = %d; fitting every %d-th sample",
@@ -386,8 +400,9 @@ def _forces_along(soil: SoilParams, state: ContactState, bucket, options: ModelO
     for s in range(0, n, FORCE_CHUNK):
         sl = slice(s, min(s + FORCE_CHUNK, n))
         load = None if state.measured_load is None else np.asarray(state.measured_load)[sl]
+        acc = None if state.acceleration is None else state.acceleration[sl]
         part = ContactState(state.depth[sl], state.rho[sl], state.alpha[sl], state.blade_length[sl],
-                            state.fill_volume[sl], load)
+                            state.fill_volume[sl], load, None, acc)
         f = soil_forces(soil, part, bucket, options)
         f_t[sl], f_n[sl], flags[sl] = f.tangential, f.normal, f.flags
     return f_t, f_n, flags

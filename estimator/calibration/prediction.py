@@ -87,9 +87,10 @@ def predict(
     pile: Pile | None = None,
     bucket: Bucket | None = None,
     *,
-    options: ModelOptions = DEFAULT_OPTIONS,
+    options: ModelOptions | None = None,
     slope_window: float = DEFAULT_SLOPE_WINDOW,
     initial_fill: float = 0.0,
+    fill: str | None = None,
 ) -> Prediction:
     """Forces of the calibrated model along a path.
 
@@ -108,41 +109,58 @@ def predict(
         correction). Default: the cycle's pile, else ``Pile.trapezoid()``.
     bucket : Bucket, optional
         Default: the cycle's bucket, else ``Bucket()``.
-    options : ModelOptions
-        Force-model options.
+    options : ModelOptions, optional
+        Force-model options; default: those the calibration fitted when ``params`` is a
+        :class:`Calibration` (:attr:`Calibration.model_options`), else the paper's model.
     slope_window : float
         Half-width of the local slope chord [m].
     initial_fill : float
         Soil already in the bucket [m^3] (new paths only).
+    fill : str, optional
+        For a cycle log: ``"log"`` uses its logged fill or load (what the paper's experiments
+        do), ``"model"`` the model's own bookkeeping (carving the pile along the path), which is
+        what a prediction of a path not yet dug has. Default: the calibration's
+        (:attr:`Calibration.fill_source`), else ``"log"``.
 
     Returns
     -------
     Prediction
     """
     soil = load_params(params)
+    if options is None:
+        options = params.model_options if isinstance(params, Calibration) else DEFAULT_OPTIONS
+    if fill is None:
+        fill = params.fill_source if isinstance(params, Calibration) else "log"
+    if fill not in ("log", "model"):
+        raise ParameterError(f'fill must be "log" or "model", got {fill!r}')
     observed_t = observed_n = None
+    acceleration = None
     if isinstance(path_or_cycle, CycleLog):
         cycle = path_or_cycle
         path = cycle.path
         same_surface = pile is None
         pile = cycle.pile if pile is None else pile
         bucket = cycle.bucket if bucket is None else bucket
-        fill = cycle.fill_volume if same_surface else None
-        load = cycle.measured_load
+        logged = same_surface and fill == "log"
+        fill_volume = cycle.fill_volume if logged else None
+        load = cycle.measured_load if fill == "log" else None
         observed_t, observed_n = cycle.tangential, cycle.normal
     elif isinstance(path_or_cycle, BucketPath):
         path = path_or_cycle
         pile = Pile.trapezoid() if pile is None else pile
         bucket = Bucket() if bucket is None else bucket
-        fill = load = None
+        fill_volume = load = None
     else:
         raise ParameterError(f"path_or_cycle must be a BucketPath or a CycleLog, got {type(path_or_cycle).__name__}")
     if not isinstance(pile, Pile):
         raise ParameterError(f"pile must be a Pile, got {type(pile).__name__}")
     if not isinstance(bucket, Bucket):
         raise ParameterError(f"bucket must be a Bucket, got {type(bucket).__name__}")
+    if options.carried_load:
+        acceleration = np.column_stack(path.acceleration())
     state = contact_state(path.x, path.z, path.blade_angle, pile, bucket, slope_window=slope_window,
-                          initial_fill=initial_fill, fill_volume=fill, measured_load=load)
+                          initial_fill=initial_fill, fill_volume=fill_volume, measured_load=load,
+                          acceleration=acceleration)
     forces = soil_forces(soil, state, bucket, options)
     quality = None
     if observed_t is not None:

@@ -206,6 +206,19 @@ class Calibration:
         return self.uncertainty.to_dict()
 
     @property
+    def model_options(self):
+        """The :class:`~wheelloader.estimator.ModelOptions` this calibration fitted (the defaults unless set)."""
+        from ..validity import DEFAULT_OPTIONS, ModelOptions
+
+        stored = self.settings.get("model_options")
+        return DEFAULT_OPTIONS if stored is None else ModelOptions(**stored)
+
+    @property
+    def fill_source(self) -> str:
+        """``"log"`` or ``"model"``: where the calibration took the bucket load from (:func:`calibrate`'s ``fill``)."""
+        return str(self.settings.get("fill", "log"))
+
+    @property
     def cycle_count(self) -> int:
         """Number of cycles this calibration fitted (1 unless a list of logs was given)."""
         return int(self.settings.get("cycles", {}).get("count", 1))

@@ -134,6 +134,11 @@ def _linear_columns(data: FitData, phis: np.ndarray, deltas: np.ndarray):
     wl = data.width * data.blade_length[None, :]
     at = np.stack([sd * bg, sd * bc, sd * ba + wl], axis=-1)
     an = np.stack([cd * bg, cd * bc, cd * ba], axis=-1)
+    carried = data.carried_basis()
+    if carried is not None:  # opt-in carried load: linear in gamma (or an offset with a logged load)
+        at[..., 0] += carried[0][None, :]
+        an[..., 0] += carried[1][None, :]
+        return at, an, sd * q0 + carried[2][None, :], cd * q0 + carried[3][None, :]
     return at, an, sd * q0, cd * q0
 
 
