@@ -456,6 +456,8 @@ STUDY_VARIANTS = {
     "paper model, model fill": {"fill": "model"},
     "+ carried load, model fill": {"fill": "model", "carried_load": True},
 }
+#: Level of the prediction bands whose coverage the study measures.
+BAND_LEVEL = 0.9
 #: Training sets of the study: calibrate on these paths of a soil, predict the others.
 STUDY_TRAIN = {"path 1": (1,), "paths 1+2": (1, 2)}
 
@@ -516,15 +518,28 @@ def estimator_study(load, names, args) -> dict:
                 times.setdefault(len(train), []).append(cal.time_s)
                 unseen = {}
                 for k in sorted(set(logs) - set(train)):
-                    qf = predict(cal, logs[k][1]).quality
+                    pf = predict(cal, logs[k][1], band=BAND_LEVEL)
                     qr = predict(cal, logs[k][0]).quality
-                    unseen[f"path{k}"] = {"filtered": qf.percent_r, "unfiltered": qr.percent_r}
+                    mask = pf.state.depth > 0.0
+                    unseen[f"path{k}"] = {"filtered": pf.quality.percent_r, "unfiltered": qr.percent_r,
+                                          "band_coverage": pf.band.coverage(logs[k][1].resultant, mask)}
                 per[set_name][train_name] = {"train_F_R": cal.quality.percent_r, "unseen": unseen,
                                              "params": cal.params.to_dict(), "K": cal.sinkage_modulus,
                                              "time_s": cal.time_s, "trustworthy": cal.trustworthy}
                 print(f"study {label:40s} {set_name:24s} train {train_name:9s}: unseen "
                       + " ".join(f"{k} {v['filtered']:.1f}" for k, v in unseen.items()) + " %", flush=True)
         out["variants"][label] = per
+        # the next cycle: calibrate on path k alone, predict path k + 1 (error and band coverage)
+        nxt: dict = {}
+        for set_name, logs in sets.items():
+            nxt[set_name] = {}
+            for k in range(1, 4):
+                cal = calibrate(logs[k][1], options=options, fill=spec["fill"])
+                pf = predict(cal, logs[k + 1][1], band=BAND_LEVEL)
+                nxt[set_name][f"path{k}->path{k + 1}"] = {
+                    "filtered": pf.quality.percent_r,
+                    "band_coverage": pf.band.coverage(logs[k + 1][1].resultant, pf.state.depth > 0.0)}
+        out.setdefault("next_path", {})[label] = nxt
     out["times_s"] = {f"{n} cycle(s)": {"median": statistics.median(v), "max": max(v), "count": len(v)}
                       for n, v in sorted(times.items())}
     return out
@@ -544,13 +559,22 @@ def estimator_report(results: dict, args) -> str:
              "the model's own bookkeeping (carving the pile along the path), which a prediction of a new path has.",
              ""]
     for label, per in study["variants"].items():
-        lines += [f"## {label}", "", "| soil | trained on | training F_R | unseen paths (filtered / unfiltered) |",
-                  "|---|---|---|---|"]
+        lines += [f"## {label}", "", "| soil | trained on | training F_R | unseen paths (filtered / unfiltered) | "
+                  f"{BAND_LEVEL:.0%} band coverage (filtered) |", "|---|---|---|---|---|"]
         for set_name, by_train in per.items():
             for train_name, r in by_train.items():
                 cells = ", ".join(f"{k[4:]}: {v['filtered']:.1f} / {v['unfiltered']:.1f} %"
                                   for k, v in r["unseen"].items())
-                lines.append(f"| {set_name} | {train_name} | {r['train_F_R']:.1f} % | {cells} |")
+                cover = ", ".join(f"{k[4:]}: {v['band_coverage']:.0%}" for k, v in r["unseen"].items())
+                lines.append(f"| {set_name} | {train_name} | {r['train_F_R']:.1f} % | {cells} | {cover} |")
+        nxt = study.get("next_path", {}).get(label, {})
+        if nxt:
+            lines += ["", f"Next path (calibrate on path k alone, predict path k + 1): F_R RMSE filtered, "
+                      f"{BAND_LEVEL:.0%} band coverage.", "", "| soil | " + " | ".join(next(iter(nxt.values())))
+                      + " |", "|---|" + "---|" * len(next(iter(nxt.values())))]
+            for set_name, r in nxt.items():
+                lines.append(f"| {set_name} | " + " | ".join(f"{v['filtered']:.1f} %, covers {v['band_coverage']:.0%}"
+                                                             for v in r.values()) + " |")
         lines.append("")
     lines += ["## Calibration time (varpro, all variants and soils)", "", "| cycles | median | max | fits |",
               "|---|---|---|---|"]

@@ -34,10 +34,11 @@ from ..kinematics import DEFAULT_SLOPE_WINDOW, ContactState
 from ..soil import PARAMETER_NAMES, SoilParams, as_soil, validate_bounds
 from ..soil_vector import SOIL_VECTOR_NAMES as FIT_NAMES
 from ..soil_vector import soil_from_vector, soil_vector, vector_bounds
+from .bands import BandModel, residual_noise_model
 from .fitmodel import MIN_SAMPLES, FitData
 from .paper_methods import fit_multi_stage, fit_single_stage
 from .result import Calibration, FitQuality, StageResult
-from .uncertainty import analyse
+from .uncertainty import analyse, integrated_autocorrelation_time
 from .varpro import fit_varpro
 from .verdict import assess
 
@@ -350,6 +351,10 @@ def calibrate(
                      + 0.5 * np.sum(data.weight * (f_n - data.y_n) ** 2))
     force_scale = float(np.mean(np.hypot(data.y_t, data.y_n)))
     unc = analyse(jac, resid, x, lo, hi, force_scale)
+    obs_r, fit_r = np.hypot(data.y_t, data.y_n), np.hypot(at_t, at_n)
+    sigma_0, relative = residual_noise_model(obs_r, fit_r)
+    settings["band_model"] = BandModel(unc.covariance, integrated_autocorrelation_time(obs_r - fit_r), sigma_0,
+                                       relative).to_dict()
     if len(logs) > 1:
         settings["cycles"] = _cycles_report(logs, data, weights_per_cycle, at_t, at_n, jac, resid, x, lo, hi,
                                             force_scale)

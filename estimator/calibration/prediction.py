@@ -16,6 +16,7 @@ from ..machine import Bucket
 from ..paths import BucketPath
 from ..pile import Pile
 from ..soil import SoilParams
+from .bands import BandModel, PredictionBand, prediction_band
 from .result import Calibration, FitQuality, load_params
 
 
@@ -37,6 +38,8 @@ class Prediction:
         Measured forces when a cycle log was given.
     quality : FitQuality or None
         RMSE against the measured forces (in-soil samples), when available.
+    band : PredictionBand or None
+        Prediction band (``predict(..., band=level)``), else None.
     """
 
     path: BucketPath
@@ -46,6 +49,7 @@ class Prediction:
     observed_tangential: np.ndarray | None = field(default=None, repr=False)
     observed_normal: np.ndarray | None = field(default=None, repr=False)
     quality: FitQuality | None = None
+    band: PredictionBand | None = None
 
     @property
     def tangential(self) -> np.ndarray:
@@ -69,6 +73,8 @@ class Prediction:
             raise FileExistsError(f"{csv_path} exists; pass overwrite=True to replace it")
         cols = {"t": self.path.t, "x": self.path.x, "z": self.path.z, "blade_angle": self.path.blade_angle,
                 "depth": self.state.depth, "F_T": self.tangential, "F_N": self.normal, "F_R": self.resultant}
+        if self.band is not None:
+            cols["F_R_lower"], cols["F_R_upper"] = self.band.lower_r, self.band.upper_r
         if self.observed_tangential is not None:
             cols["F_T_obs"] = self.observed_tangential
             cols["F_N_obs"] = self.observed_normal
@@ -91,6 +97,8 @@ def predict(
     slope_window: float = DEFAULT_SLOPE_WINDOW,
     initial_fill: float = 0.0,
     fill: str | None = None,
+    band: float | None = None,
+    band_model: BandModel | None = None,
 ) -> Prediction:
     """Forces of the calibrated model along a path.
 
@@ -121,6 +129,13 @@ def predict(
         do), ``"model"`` the model's own bookkeeping (carving the pile along the path), which is
         what a prediction of a path not yet dug has. Default: the calibration's
         (:attr:`Calibration.fill_source`), else ``"log"``.
+    band : float, optional
+        Level of a prediction band (e.g. 0.9): mean +- the spread from the calibration's
+        parameter covariance and residual noise model (:mod:`~.bands`); needs ``params`` to be
+        a :class:`Calibration` (or ``band_model``).
+    band_model : BandModel, optional
+        The band's inputs when ``params`` is not a :class:`Calibration` (e.g. read from a
+        params.json: ``BandModel.from_dict(data["calibration"]["settings"]["band_model"])``).
 
     Returns
     -------
@@ -162,10 +177,18 @@ def predict(
                           initial_fill=initial_fill, fill_volume=fill_volume, measured_load=load,
                           acceleration=acceleration)
     forces = soil_forces(soil, state, bucket, options)
+    pband = None
+    if band is not None:
+        if band_model is None:
+            if not isinstance(params, Calibration):
+                raise ParameterError("a prediction band needs a Calibration (its covariance and residual noise "
+                                     "model) or band_model")
+            band_model = params.band_model
+        pband = prediction_band(band_model, soil, state, bucket, options, forces.tangential, forces.normal, band)
     quality = None
     if observed_t is not None:
         mask = state.depth > 0.0
         if np.any(mask):
             quality = FitQuality.from_forces(observed_t[mask], observed_n[mask], forces.tangential[mask],
                                              forces.normal[mask])
-    return Prediction(path, forces, state, soil, observed_t, observed_n, quality)
+    return Prediction(path, forces, state, soil, observed_t, observed_n, quality, pband)
