@@ -455,6 +455,7 @@ STUDY_VARIANTS = {
     "paper model, logged fill (tables above)": {"fill": "log"},
     "paper model, model fill": {"fill": "model"},
     "+ carried load, model fill": {"fill": "model", "carried_load": True},
+    "paper model, model fill, granular prior": {"fill": "model", "prior": "granular"},
 }
 #: Level of the prediction bands whose coverage the study measures.
 BAND_LEVEL = 0.9
@@ -514,7 +515,8 @@ def estimator_study(load, names, args) -> dict:
         for set_name, logs in sets.items():
             per[set_name] = {}
             for train_name, train in STUDY_TRAIN.items():
-                cal = calibrate([logs[k][1] for k in train], options=options, fill=spec["fill"])
+                cal = calibrate([logs[k][1] for k in train], options=options, fill=spec["fill"],
+                                prior=spec.get("prior"))
                 times.setdefault(len(train), []).append(cal.time_s)
                 unseen = {}
                 for k in sorted(set(logs) - set(train)):
@@ -534,7 +536,7 @@ def estimator_study(load, names, args) -> dict:
         for set_name, logs in sets.items():
             nxt[set_name] = {}
             for k in range(1, 4):
-                cal = calibrate(logs[k][1], options=options, fill=spec["fill"])
+                cal = calibrate(logs[k][1], options=options, fill=spec["fill"], prior=spec.get("prior"))
                 pf = predict(cal, logs[k + 1][1], band=BAND_LEVEL)
                 nxt[set_name][f"path{k}->path{k + 1}"] = {
                     "filtered": pf.quality.percent_r,
