@@ -456,6 +456,7 @@ STUDY_VARIANTS = {
     "paper model, model fill": {"fill": "model"},
     "+ carried load, model fill": {"fill": "model", "carried_load": True},
     "paper model, model fill, granular prior": {"fill": "model", "prior": "granular"},
+    "+ slip-mobilised friction, model fill": {"fill": "model", "slip_friction": True},
 }
 #: Level of the prediction bands whose coverage the study measures.
 BAND_LEVEL = 0.9
@@ -510,7 +511,8 @@ def estimator_study(load, names, args) -> dict:
     out: dict = {"variants": {}, "train_sets": {k: list(v) for k, v in STUDY_TRAIN.items()}, "times_s": {}}
     times: dict = {}
     for label, spec in STUDY_VARIANTS.items():
-        options = ModelOptions(carried_load=bool(spec.get("carried_load", False)))
+        options = ModelOptions(carried_load=bool(spec.get("carried_load", False)),
+                               slip_friction=bool(spec.get("slip_friction", False)))
         per: dict = {}
         for set_name, logs in sets.items():
             per[set_name] = {}

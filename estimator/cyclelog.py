@@ -133,11 +133,12 @@ class CycleLog:
         if fill not in ("log", "model"):
             raise ParameterError(f'fill must be "log" or "model", got {fill!r}')
         ax, az = self.path.acceleration()
+        vx, vz, _ = self.path.velocity()
         logged = fill == "log"
         return contact_state(self.path.x, self.path.z, self.path.blade_angle, self.pile, self.bucket,
                              slope_window=slope_window, fill_volume=self.fill_volume if logged else None,
                              measured_load=self.measured_load if logged else None,
-                             acceleration=np.column_stack([ax, az]))
+                             acceleration=np.column_stack([ax, az]), velocity=np.column_stack([vx, vz]))
 
     # ----------------------------------------------------------------- io
     def save(self, csv_path: str | Path, overwrite: bool = False) -> Path:

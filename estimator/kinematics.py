@@ -60,6 +60,9 @@ class ContactState:
     acceleration : numpy.ndarray or None
         Tip acceleration ``(a_x, a_z)`` per sample, shape ``(n, 2)`` [m/s^2], when known: the
         inertia of the carried soil (``ModelOptions.carried_load``); None counts as 0.
+    velocity : numpy.ndarray or None
+        Tip velocity ``(v_x, v_z)`` per sample, shape ``(n, 2)`` [m/s], when known (the opt-in
+        ``ModelOptions.slip_friction``); None counts as standing still.
     """
 
     depth: np.ndarray
@@ -70,6 +73,7 @@ class ContactState:
     measured_load: np.ndarray | None = None
     carve: CarveResult | None = field(default=None, repr=False)
     acceleration: np.ndarray | None = field(default=None, repr=False)
+    velocity: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return int(self.depth.size)
@@ -89,8 +93,9 @@ class ContactState:
         """The samples where ``mask`` is true."""
         ml = None if self.measured_load is None else self.measured_load[mask]
         acc = None if self.acceleration is None else self.acceleration[mask]
+        vel = None if self.velocity is None else self.velocity[mask]
         return ContactState(self.depth[mask], self.rho[mask], self.alpha[mask], self.blade_length[mask],
-                            self.fill_volume[mask], ml, None, acc)
+                            self.fill_volume[mask], ml, None, acc, vel)
 
     @property
     def blade_angle(self) -> np.ndarray:
@@ -116,6 +121,7 @@ def contact_state(
     fill_volume: object | None = None,
     measured_load: object | None = None,
     acceleration: object | None = None,
+    velocity: object | None = None,
 ) -> ContactState:
     """Contact geometry along a tip path on a pile (vectorised).
 
@@ -140,6 +146,8 @@ def contact_state(
         Tip acceleration per sample, shape ``(n, 2)`` [m/s^2] (e.g. from
         :meth:`~wheelloader.estimator.paths.BucketPath.acceleration`); used only by the
         opt-in carried-load term.
+    velocity : array_like, optional
+        Tip velocity per sample, shape ``(n, 2)`` [m/s]; used only by the opt-in slip-friction term.
 
     Returns
     -------
@@ -169,12 +177,18 @@ def contact_state(
     else:
         fill = _optional_series("fill_volume", fill_volume, xs.size)
     load = None if measured_load is None else _optional_series("measured_load", measured_load, xs.size)
-    acc = None
-    if acceleration is not None:
-        acc = np.asarray(acceleration, dtype=float)
-        if acc.shape != (xs.size, 2) or not np.all(np.isfinite(acc)):
-            raise ParameterError(f"acceleration must be finite with shape ({xs.size}, 2), got {acc.shape}")
-    return ContactState(depth, rho, alpha, blade_length, fill, load, carve, acc)
+    acc, vel = (_optional_pairs(name, value, xs.size) for name, value in (("acceleration", acceleration),
+                                                                          ("velocity", velocity)))
+    return ContactState(depth, rho, alpha, blade_length, fill, load, carve, acc, vel)
+
+
+def _optional_pairs(name: str, values: object | None, size: int) -> np.ndarray | None:
+    if values is None:
+        return None
+    arr = np.asarray(values, dtype=float)
+    if arr.shape != (size, 2) or not np.all(np.isfinite(arr)):
+        raise ParameterError(f"{name} must be finite with shape ({size}, 2), got {arr.shape}")
+    return arr
 
 
 def contact_single(pile: Pile, x: float, z: float, blade_angle: float, floor_length: float,

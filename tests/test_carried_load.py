@@ -100,3 +100,62 @@ def test_options_are_checked():
     with pytest.raises(CalibrationError, match="varpro"):
         calibrate(log, method="multi-stage", options=ON)
     assert ON.extra_terms == ("carried_load",) and ModelOptions().extra_terms == ()
+
+
+# ------------------------------------------------------------------ slip-mobilised friction
+BOTH = ModelOptions(carried_load=True, slip_friction=True)
+
+
+def _state_with_velocity():
+    path = default_path()
+    return contact_state(path.x, path.z, path.blade_angle, Pile.trapezoid(), Bucket(),
+                         acceleration=np.column_stack(path.acceleration()),
+                         velocity=np.column_stack(path.velocity()[:2]))
+
+
+def test_slip_factor_values():
+    from wheelloader.estimator.force_model import slip_factor
+
+    th = np.zeros(4)
+    vel = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, 0.0]])  # along, normal, backwards, at rest
+    m = slip_factor(th, vel, 0.05)
+    assert m[0] == pytest.approx(1.0) and m[3] == pytest.approx(1.0)
+    assert m[1] == pytest.approx(0.05 / 1.05) and m[2] == pytest.approx(0.05 / 1.05)
+    assert np.all(slip_factor(th) == 1.0)
+
+
+def test_slip_friction_everywhere_alike():
+    soil, state, bucket = preset("dirt"), _state_with_velocity(), Bucket()
+    f = soil_forces(soil, state, bucket, BOTH)
+    paper = soil_forces(soil, state, bucket)
+    slip_only = soil_forces(soil, state, bucket, ModelOptions(slip_friction=True))
+    np.testing.assert_array_equal(slip_only.normal, paper.normal)  # friction acts along the blade only
+    assert np.all(slip_only.tangential <= paper.tangential + 1e-9)  # scaled by a factor in [0, 1]
+    assert np.any(np.abs(f.tangential - paper.tangential) > 1.0)
+    for i in range(0, len(state), 13):
+        f_t, f_n, _, _ = soil_forces_single(soil, state.depth[i], state.rho[i], state.alpha[i], state.blade_length[i],
+                                            state.load_weight(soil.gamma)[i], bucket, BOTH,
+                                            acceleration=tuple(state.acceleration[i]),
+                                            velocity=tuple(state.velocity[i]))
+        assert f_t == pytest.approx(f.tangential[i], rel=1e-9, abs=1e-6)
+        assert f_n == pytest.approx(f.normal[i], rel=1e-9, abs=1e-6)
+    data = FitData.from_state(state, f.tangential, f.normal, bucket, BOTH)
+    p = soil_to_fit(soil, bucket.edge_thickness)
+    p[2] = 800.0  # adhesion off zero for the finite differences
+    f_t, f_n, jt, jn = data.forces_and_jacobian(p)
+    jac = np.vstack([jt, jn])
+    for j in range(len(FIT_NAMES)):
+        h = 1e-6 * max(abs(p[j]), 1.0 if j not in (3, 4, 6) else 0.1)
+        up, dn = p.copy(), p.copy()
+        up[j] += h
+        dn[j] -= h
+        fd = (np.concatenate(data.forces(up)[:2]) - np.concatenate(data.forces(dn)[:2])) / (2 * h)
+        assert np.max(np.abs(jac[:, j] - fd)) <= 1e-5 * (np.max(np.abs(fd)) + 1e-12), FIT_NAMES[j]
+
+
+def test_calibration_recovers_a_soil_with_slip_friction():
+    opts = ModelOptions(slip_friction=True)
+    log = synthetic_cycle("dirt", noise=0.0, options=opts)
+    cal = calibrate(log, options=opts)
+    assert cal.quality.percent_r <= 0.1
+    assert predict(cal, log).quality.percent_r == pytest.approx(cal.quality.percent_r, abs=1e-6)

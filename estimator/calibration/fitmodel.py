@@ -33,7 +33,7 @@ import numpy as np
 
 from ..errors import CalibrationError
 from ..failure_angle import BETA_AT_RHO_LIMIT, BETA_AT_SLOPE_LIMIT, BETA_INTERIOR, optimal_beta
-from ..force_model import DEFAULT_OPTIONS, GRAVITY, ModelOptions, carried_load_factors
+from ..force_model import DEFAULT_OPTIONS, GRAVITY, ModelOptions, carried_load_factors, slip_factor
 from ..kinematics import ContactState
 from ..machine import Bucket
 from ..soil_vector import (
@@ -201,6 +201,9 @@ class FitData:
     carried : tuple of numpy.ndarray or None
         ``(c_T, c_N)`` of :func:`~wheelloader.estimator.force_model.carried_load_factors` per sample
         when ``options.carried_load`` is on (the opt-in carried-load term), else None.
+    slip : numpy.ndarray or None
+        :func:`~wheelloader.estimator.force_model.slip_factor` per sample when ``options.slip_friction``
+        is on (it scales the blade friction and adhesion in F_T), else None.
     """
 
     index: np.ndarray
@@ -218,6 +221,7 @@ class FitData:
     weight: np.ndarray | None = None
     cycle: np.ndarray | None = None
     carried: tuple[np.ndarray, np.ndarray] | None = None
+    slip: np.ndarray | None = None
 
     @classmethod
     def concat(cls, parts: list[FitData], cycle_weights: list[float] | None = None) -> FitData:
@@ -259,8 +263,10 @@ class FitData:
         carried = None
         if first.carried is not None:
             carried = (np.concatenate([p.carried[0] for p in parts]), np.concatenate([p.carried[1] for p in parts]))
+        slip = None if first.slip is None else cat("slip")
         return cls(cat("index"), cat("depth"), cat("alpha"), cat("rho"), cat("blade_length"), cat("fill_volume"), ml,
-                   cat("y_t"), cat("y_n"), first.width, first.edge_thickness, first.options, weight, cycle, carried)
+                   cat("y_t"), cat("y_n"), first.width, first.edge_thickness, first.options, weight, cycle, carried,
+                   slip)
 
     @property
     def root_weight(self) -> np.ndarray | float:
@@ -295,9 +301,13 @@ class FitData:
         if options.carried_load:
             acc = None if state.acceleration is None else state.acceleration[idx]
             carried = carried_load_factors(state.blade_angle[idx], acc)
+        slip = None
+        if options.slip_friction:
+            vel = None if state.velocity is None else state.velocity[idx]
+            slip = slip_factor(state.blade_angle[idx], vel, options.slip_speed)
         return cls(idx, state.depth[idx], state.alpha[idx], state.rho[idx], state.blade_length[idx],
                    state.fill_volume[idx], ml, f_t[idx], f_n[idx], bucket.width, bucket.edge_thickness, options,
-                   carried=carried)
+                   carried=carried, slip=slip)
 
     def __len__(self) -> int:
         return int(self.index.size)
@@ -312,7 +322,8 @@ class FitData:
                        self.fill_volume[sl], ml, self.y_t[sl], self.y_n[sl], self.width, self.edge_thickness,
                        self.options, None if self.weight is None else self.weight[sl],
                        None if self.cycle is None else self.cycle[sl],
-                       None if self.carried is None else (self.carried[0][sl], self.carried[1][sl]))
+                       None if self.carried is None else (self.carried[0][sl], self.carried[1][sl]),
+                       None if self.slip is None else self.slip[sl])
 
     @property
     def ramp(self) -> np.ndarray:
@@ -374,7 +385,10 @@ class FitData:
         tension = fee < 0.0
         fee = np.maximum(fee, 0.0)
         sink = self.sinkage_basis(n)
-        f_t = k * sink + fee * math.sin(delta) + ca * self.width * self.blade_length  # eqs 15-16
+        friction = fee * math.sin(delta) + ca * self.width * self.blade_length
+        if self.slip is not None:  # opt-in slip-mobilised friction (force_model)
+            friction = friction * self.slip
+        f_t = k * sink + friction  # eqs 15-16
         f_n = fee * math.cos(delta)  # eq 17
         carried = self.carried_basis()
         if carried is not None:  # opt-in carried load (force_model)
@@ -397,6 +411,9 @@ class FitData:
         sd, cd = math.sin(delta), math.cos(delta)
         sink = self.sinkage_basis(n)
         wl = self.width * self.blade_length
+        if self.slip is not None:  # opt-in slip-mobilised friction: F_T's friction share scaled per sample
+            sd = sd * self.slip
+            wl = wl * self.slip
         f_t = k * sink + fee * sd + ca * wl
         f_n = fee * cd
         m = len(self)
@@ -407,7 +424,8 @@ class FitData:
         jt[:, 1], jn[:, 1] = sd * bc_on, cd * bc_on
         jt[:, 2], jn[:, 2] = sd * ba_on + wl, cd * ba_on
         jt[:, 3], jn[:, 3] = sd * dfee_phi, cd * dfee_phi
-        jt[:, 4], jn[:, 4] = cd * fee + sd * dfee_delta, -sd * fee + cd * dfee_delta
+        cd_t = cd if self.slip is None else cd * self.slip  # d(sin delta)/d delta in the F_T row
+        jt[:, 4], jn[:, 4] = cd_t * fee + sd * dfee_delta, -math.sin(delta) * fee + cd * dfee_delta
         jt[:, 5] = sink
         jt[:, 6] = k * sink * np.log(self.depth)
         carried = self.carried_basis()

@@ -173,9 +173,10 @@ def predict(
         raise ParameterError(f"bucket must be a Bucket, got {type(bucket).__name__}")
     if options.carried_load:
         acceleration = np.column_stack(path.acceleration())
+    velocity = np.column_stack(path.velocity()[:2]) if options.slip_friction else None
     state = contact_state(path.x, path.z, path.blade_angle, pile, bucket, slope_window=slope_window,
                           initial_fill=initial_fill, fill_volume=fill_volume, measured_load=load,
-                          acceleration=acceleration)
+                          acceleration=acceleration, velocity=velocity)
     forces = soil_forces(soil, state, bucket, options)
     pband = None
     if band is not None:

@@ -136,6 +136,9 @@ def _linear_columns(data: FitData, phis: np.ndarray, deltas: np.ndarray):
     sd = np.sin(deltas)[:, None]
     cd = np.cos(deltas)[:, None]
     wl = data.width * data.blade_length[None, :]
+    if data.slip is not None:  # opt-in slip-mobilised friction: F_T's friction share scaled per sample
+        sd = sd * data.slip[None, :]
+        wl = wl * data.slip[None, :]
     at = np.stack([sd * bg, sd * bc, sd * ba + wl], axis=-1)
     an = np.stack([cd * bg, cd * bc, cd * ba], axis=-1)
     carried = data.carried_basis()
