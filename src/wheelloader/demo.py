@@ -21,12 +21,17 @@ DEFAULT_CYCLES = 5
 
 
 def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner: bool = True,
-             progress: Any = None, mpc: bool = False) -> dict[str, Any]:
-    """Run the loop (ours and the fixed baseline), write figures and ``summary.json`` into ``out``."""
+             progress: Any = None, mpc: bool = False, window: int | None = None) -> dict[str, Any]:
+    """Run the loop (ours and the fixed baseline), write figures and ``summary.json`` into ``out``.
+
+    ``window``: ours calibrates on the last ``window`` cycles together (default
+    :data:`wheelloader.adaptation.DEFAULT_WINDOW`).
+    """
     import gymnasium as gym
 
     import wheelloader.envs  # noqa: F401  (registers the env ids)
     from wheelloader.adaptation import (
+        DEFAULT_WINDOW,
         LOOP_ENV_KWARGS,
         NOMINAL_SOIL,
         Calibrating,
@@ -45,12 +50,14 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
         say("building the planner's CasADi NLPs (once, ~10 s) ...")
     planner = default_planner(mpc=mpc) if use_planner else None
     results = {}
-    for strategy in (Calibrating(preset(NOMINAL_SOIL), planner=planner), FixedBezier(preset(NOMINAL_SOIL))):
+    for strategy in (Calibrating(preset(NOMINAL_SOIL), planner=planner, window=window),
+                     FixedBezier(preset(NOMINAL_SOIL))):
         say(f"running {cycles} cycles, strategy '{strategy.name}' ...")
         env = gym.make("wheelloader/BucketLoading-v0", soil=hidden, **LOOP_ENV_KWARGS)
         records, logs = run_loop(env, strategy, cycles=cycles, seed=seed, progress=say)
         results[strategy.name] = (records, logs)
         env.close()
+    results_window = DEFAULT_WINDOW if window is None else window
     files = write_figures(out, results)
     (out / "table.md").write_text(markdown_table(results["ours"][0], results["fixed"][0]) + "\n", encoding="utf-8")
     ours = results["ours"][0]
@@ -58,6 +65,7 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     summary = {
         "plant": {"soil": hidden.to_dict(), "sensor_noise_N": 150.0, "pile": "trapezoid 30 deg, 1 m high"},
         "nominal_soil": NOMINAL_SOIL,
+        "calibration_window": results_window,
         "planner": ("none (Bezier path every cycle)" if planner is None
                     else "CasADi plan + MPC" if mpc else "CasADi plan, tracked"),
         "cycles": {name: [r.to_dict() for r in recs] for name, (recs, _) in results.items()},
