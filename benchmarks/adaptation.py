@@ -48,12 +48,15 @@ TRUTH = {"compaction": 0.5, "rate_resistance": 1.0e4, "stone_rate": 0.5, "stone_
 
 def _strategies(args: argparse.Namespace, planner: Any) -> dict[str, Any]:
     from wheelloader.adaptation import NOMINAL_SOIL, Calibrating, FixedBezier, Oracle, PolicyStrategy
-    from wheelloader.estimator import preset
+    from wheelloader.estimator import ModelOptions, preset
 
     out = {
         "fixed": lambda: FixedBezier(preset(NOMINAL_SOIL)),
         "ours": lambda: Calibrating(preset(NOMINAL_SOIL), "default", planner, window=args.window,
-                                    forgetting=args.forgetting, keep_untrustworthy=args.keep_untrustworthy),
+                                    forgetting=args.forgetting, keep_untrustworthy=args.keep_untrustworthy,
+                                    options=ModelOptions(carried_load=args.carried_load,
+                                                         slip_friction=args.slip_friction),
+                                    fill=args.fill),
         "oracle": lambda: Oracle(planner),
         "paper": lambda: Calibrating(preset(NOMINAL_SOIL), "multi-stage", planner, name="paper"),
     }
@@ -99,6 +102,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--keep-untrustworthy", action="store_true",
                         help="ours: adopt fits whose verdict is 'not trustworthy' (default: keep the previous fit)")
     parser.add_argument("--strategies", nargs="+", help="run only these strategies (default: all)")
+    parser.add_argument("--fill", choices=("log", "model"), default="log",
+                        help="ours: bucket-load source of calibration and prediction (default: %(default)s)")
+    parser.add_argument("--carried-load", action="store_true", help="ours: the opt-in carried-load term")
+    parser.add_argument("--slip-friction", action="store_true", help="ours: the opt-in slip-mobilised friction")
     args = parser.parse_args(argv)
 
     import gymnasium as gym
@@ -141,7 +148,8 @@ def main(argv: list[str] | None = None) -> int:
                               else "CasADi plan + MPC" if args.mpc else "CasADi plan, tracked"),
                   "sensor_noise_N": 150.0,
                   "ours": {"window": window_used(args), "forgetting": args.forgetting,
-                           "keep_untrustworthy": args.keep_untrustworthy}},
+                           "keep_untrustworthy": args.keep_untrustworthy, "fill": args.fill,
+                           "carried_load": args.carried_load, "slip_friction": args.slip_friction}},
         "summary": summary,
         "rows": rows,
         "wall_time_s": time.perf_counter() - start,
