@@ -73,6 +73,12 @@ def _ours_options(args: argparse.Namespace) -> dict[str, Any]:
         out["forgetting"] = args.forgetting
     if args.keep_untrustworthy:
         out["keep_untrustworthy"] = True
+    if args.carried_load or args.slip_friction:
+        from wheelloader.estimator import ModelOptions
+
+        out["options"] = ModelOptions(carried_load=args.carried_load, slip_friction=args.slip_friction)
+    if args.fill != "log":
+        out["fill"] = args.fill
     return out
 
 
@@ -114,6 +120,10 @@ def main(argv: list[str] | None = None) -> int:
                         help="ours: adopt fits whose verdict is 'not trustworthy' (default: keep the previous fit)")
     parser.add_argument("--strategies", nargs="+", help="run only these strategies (default: all)")
     add_ray_arguments(parser)
+    parser.add_argument("--fill", choices=("log", "model"), default="log",
+                        help="ours: bucket-load source of calibration and prediction (default: %(default)s)")
+    parser.add_argument("--carried-load", action="store_true", help="ours: the opt-in carried-load term")
+    parser.add_argument("--slip-friction", action="store_true", help="ours: the opt-in slip-mobilised friction")
     args = parser.parse_args(argv)
 
     from wheelloader.adaptation import strategy_loop
@@ -151,7 +161,8 @@ def main(argv: list[str] | None = None) -> int:
                               else "CasADi plan + MPC" if planner == "mpc" else "CasADi plan, tracked"),
                   "sensor_noise_N": 150.0,
                   "ours": {"window": window_used(args), "forgetting": args.forgetting,
-                           "keep_untrustworthy": args.keep_untrustworthy}},
+                           "keep_untrustworthy": args.keep_untrustworthy, "fill": args.fill,
+                           "carried_load": args.carried_load, "slip_friction": args.slip_friction}},
         "summary": summary,
         "rows": rows,
         "wall_time_s": time.perf_counter() - start,

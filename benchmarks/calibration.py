@@ -212,6 +212,41 @@ def run_long_logs(rows: list[int], out: Path, seed: int) -> list[dict]:
     return found
 
 
+def several_cycles_timing(args) -> dict:
+    """Calibration time (varpro) from one cycle and from five cycles together, ``--repeats`` x each soil (issue #20).
+
+    Cycles: noisy synthetic cycles of each soil on random Bezier paths (the adaptation loop's kind of
+    cycle); the five-cycle calibration fits all five together, each on its own pile. Reports the
+    calibration's own ``time_s`` (the optimisation) and the wall time of the call (with kinematics and
+    the report), medians over every soil and repeat, and the load average before and after.
+    """
+    import statistics
+
+    import numpy as np
+
+    from wheelloader.estimator.calibration import calibrate
+    from wheelloader.estimator.synthetic import random_bezier_path, synthetic_cycle
+
+    calibrate(synthetic_cycle("dirt", noise=0.0))  # warm-up: imports, caches
+    load_before = os.getloadavg()
+    runs: dict = {"1": {"time_s": [], "wall_s": []}, "5": {"time_s": [], "wall_s": []}}
+    for i, name in enumerate(args.soils):
+        rng = np.random.default_rng(args.seed + i)
+        cycles = [synthetic_cycle(name, random_bezier_path(rng), noise=args.noise, vibration=args.vibration,
+                                  seed=args.seed + 100 * i + k) for k in range(5)]
+        for rep in range(args.repeats):
+            for count, target in (("1", cycles[rep % 5]), ("5", cycles)):
+                t0 = time.perf_counter()
+                cal = calibrate(target)
+                runs[count]["wall_s"].append(time.perf_counter() - t0)
+                runs[count]["time_s"].append(cal.time_s)
+    summary = {f"{k} cycle(s)": {"median_time_s": statistics.median(v["time_s"]),
+                                 "median_wall_s": statistics.median(v["wall_s"]), "calibrations": len(v["time_s"])}
+               for k, v in runs.items()}
+    return {"benchmark": "calibration-several-cycles", "machine": machine_info(), "settings": vars(args),
+            "loadavg_before": load_before, "loadavg_after": os.getloadavg(), "summary": summary, "runs": runs}
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark and write ``results.json`` and plots into ``--out``."""
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
@@ -226,7 +261,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--robustness", type=int, default=50, help="random cycles for the robustness part (0: skip)")
     parser.add_argument("--long-log", type=int, nargs="+", metavar="ROWS",
                         help="only measure 'wheelloader calibrate' on long logs of these row counts")
+    parser.add_argument("--several-cycles", action="store_true",
+                        help="only measure calibration from 1 and from 5 cycles together (several_cycles.json)")
     args = parser.parse_args(argv)
+    if args.several_cycles:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        found = several_cycles_timing(args)
+        (out / "several_cycles.json").write_text(json.dumps(found, indent=1))
+        print(json.dumps(found["summary"], indent=1))
+        return 0
     if args.long_log:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)

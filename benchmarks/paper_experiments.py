@@ -162,6 +162,8 @@ def run(args) -> dict:
     if spread:
         results["seed_spread"] = spread
     results["acceptance"] = acceptance(results)
+    if not args.no_estimator_study:  # issue #20 section (estimator_study below)
+        results["estimator_study"] = estimator_study(load, names, args)
     results["_cals"] = cals
     return results
 
@@ -476,6 +478,154 @@ def summary_table(results: dict, args) -> str:
     return "\n".join(lines)
 
 
+# ==================================================================================================================
+# Issue #20: the estimator on unseen paths -- calibration from several cycles, opt-in model terms, prediction bands.
+# Separate from the paper's tables above: estimator_study() runs, estimator_report() writes estimator.md.
+# ==================================================================================================================
+
+#: Model variants of the study: calibrate() keyword arguments. "logged fill" is the paper protocol above (the bucket
+#: load of every log, the predicted one included, is its logged fill); "model fill" takes the load from the model's
+#: own bookkeeping (carving the pile along the path), which is what a prediction of a path not yet dug has.
+STUDY_VARIANTS = {
+    "paper model, logged fill (tables above)": {"fill": "log"},
+    "paper model, model fill": {"fill": "model"},
+    "+ carried load, model fill": {"fill": "model", "carried_load": True},
+    "paper model, model fill, granular prior": {"fill": "model", "prior": "granular"},
+    "+ slip-mobilised friction, model fill": {"fill": "model", "slip_friction": True},
+}
+#: Level of the prediction bands whose coverage the study measures.
+BAND_LEVEL = 0.9
+#: Training sets of the study: calibrate on these paths of a soil, predict the others.
+STUDY_TRAIN = {"path 1": (1,), "paths 1+2": (1, 2)}
+
+
+def seed_averaged_logs(load, names, seeds) -> dict:
+    """Gravel paths 1-4 averaged over the depositions ``seeds`` (and seed 1): ``{k: (raw, filtered)}``."""
+    import numpy as np
+
+    avg = {}
+    for k in range(1, 5):
+        logs = [load(f"gravel_path{k}")] + [load(f"gravel_path{k}_seed{s}") for s in seeds]
+        raw0, filt0 = logs[0]
+        meta = dict(filt0.metadata, seed_average=[1, *seeds])
+
+        def mean_log(base, items, meta=meta):
+            return replace(base, tangential=np.mean([lg.tangential for lg in items], axis=0),
+                           normal=np.mean([lg.normal for lg in items], axis=0),
+                           fill_volume=np.mean([lg.fill_volume for lg in items], axis=0), metadata=meta)
+
+        avg[k] = (mean_log(raw0, [r for r, _ in logs]), mean_log(filt0, [f for _, f in logs]))
+    return avg
+
+
+def study_sets(load, names) -> dict:
+    """``{label: {k: (raw, filtered)}}``: every soil with paths 1-4, and the seed-averaged gravel when present."""
+    sets = {}
+    for soil in SOILS:
+        if all(f"{soil}_path{k}" in names for k in range(1, 5)):
+            sets[soil] = {k: load(f"{soil}_path{k}") for k in range(1, 5)}
+    seeds = [s for s in (2, 3) if all(f"gravel_path{k}_seed{s}" in names for k in range(1, 5))]
+    if seeds:
+        sets["gravel (seed-averaged)"] = seed_averaged_logs(load, names, seeds)
+    return sets
+
+
+def estimator_study(load, names, args) -> dict:
+    """Unseen-path F_R RMSE of our method per model variant and training set, on every soil (issue #20).
+
+    Every variant calibrates (varpro) on the filtered training paths, all together (one soil), and
+    predicts the filtered other paths; figures are F_R RMSE in % of the mean observed |F_R| over the
+    in-soil samples, against the filtered and the unfiltered record. Also the calibration times.
+    """
+    import statistics
+
+    from wheelloader.estimator import ModelOptions
+    from wheelloader.estimator.calibration import calibrate, predict
+
+    sets = study_sets(load, names)
+    out: dict = {"variants": {}, "train_sets": {k: list(v) for k, v in STUDY_TRAIN.items()}, "times_s": {}}
+    times: dict = {}
+    for label, spec in STUDY_VARIANTS.items():
+        options = ModelOptions(carried_load=bool(spec.get("carried_load", False)),
+                               slip_friction=bool(spec.get("slip_friction", False)))
+        per: dict = {}
+        for set_name, logs in sets.items():
+            per[set_name] = {}
+            for train_name, train in STUDY_TRAIN.items():
+                cal = calibrate([logs[k][1] for k in train], options=options, fill=spec["fill"],
+                                prior=spec.get("prior"))
+                times.setdefault(len(train), []).append(cal.time_s)
+                unseen = {}
+                for k in sorted(set(logs) - set(train)):
+                    pf = predict(cal, logs[k][1], band=BAND_LEVEL)
+                    qr = predict(cal, logs[k][0]).quality
+                    mask = pf.state.depth > 0.0
+                    unseen[f"path{k}"] = {"filtered": pf.quality.percent_r, "unfiltered": qr.percent_r,
+                                          "band_coverage": pf.band.coverage(logs[k][1].resultant, mask)}
+                per[set_name][train_name] = {"train_F_R": cal.quality.percent_r, "unseen": unseen,
+                                             "params": cal.params.to_dict(), "K": cal.sinkage_modulus,
+                                             "time_s": cal.time_s, "trustworthy": cal.trustworthy}
+                print(f"study {label:40s} {set_name:24s} train {train_name:9s}: unseen "
+                      + " ".join(f"{k} {v['filtered']:.1f}" for k, v in unseen.items()) + " %", flush=True)
+        out["variants"][label] = per
+        # the next cycle: calibrate on path k alone, predict path k + 1 (error and band coverage)
+        nxt: dict = {}
+        for set_name, logs in sets.items():
+            nxt[set_name] = {}
+            for k in range(1, 4):
+                cal = calibrate(logs[k][1], options=options, fill=spec["fill"], prior=spec.get("prior"))
+                pf = predict(cal, logs[k + 1][1], band=BAND_LEVEL)
+                nxt[set_name][f"path{k}->path{k + 1}"] = {
+                    "filtered": pf.quality.percent_r,
+                    "band_coverage": pf.band.coverage(logs[k + 1][1].resultant, pf.state.depth > 0.0)}
+        out.setdefault("next_path", {})[label] = nxt
+    out["times_s"] = {f"{n} cycle(s)": {"median": statistics.median(v), "max": max(v), "count": len(v)}
+                      for n, v in sorted(times.items())}
+    return out
+
+
+def estimator_report(results: dict, args) -> str:
+    """Markdown of :func:`estimator_study` (estimator.md)."""
+    study = results.get("estimator_study")
+    if not study:
+        return ""
+    lines = ["# The estimator on unseen paths (issue #20)", "",
+             f"`python benchmarks/paper_experiments.py --data {args.data}` at commit "
+             f"{commit_label(results['machine'])}. Our method (varpro) calibrates on the filtered training path(s), "
+             "all together with one soil, and predicts the other paths; F_R RMSE in % of the mean observed |F_R| "
+             "over the in-soil samples, against the filtered / unfiltered record. 'logged fill': the bucket load of "
+             "every log (the predicted one included) is its logged fill, as in the paper's tables; 'model fill': "
+             "the model's own bookkeeping (carving the pile along the path), which a prediction of a new path has.",
+             ""]
+    for label, per in study["variants"].items():
+        lines += [f"## {label}", "", "| soil | trained on | training F_R | unseen paths (filtered / unfiltered) | "
+                  f"{BAND_LEVEL:.0%} band coverage (filtered) |", "|---|---|---|---|---|"]
+        for set_name, by_train in per.items():
+            for train_name, r in by_train.items():
+                cells = ", ".join(f"{k[4:]}: {v['filtered']:.1f} / {v['unfiltered']:.1f} %"
+                                  for k, v in r["unseen"].items())
+                cover = ", ".join(f"{k[4:]}: {v['band_coverage']:.0%}" for k, v in r["unseen"].items())
+                lines.append(f"| {set_name} | {train_name} | {r['train_F_R']:.1f} % | {cells} | {cover} |")
+        nxt = study.get("next_path", {}).get(label, {})
+        if nxt:
+            lines += ["", f"Next path (calibrate on path k alone, predict path k + 1): F_R RMSE filtered, "
+                      f"{BAND_LEVEL:.0%} band coverage.", "", "| soil | " + " | ".join(next(iter(nxt.values())))
+                      + " |", "|---|" + "---|" * len(next(iter(nxt.values())))]
+            for set_name, r in nxt.items():
+                lines.append(f"| {set_name} | " + " | ".join(f"{v['filtered']:.1f} %, covers {v['band_coverage']:.0%}"
+                                                             for v in r.values()) + " |")
+        lines.append("")
+    lines += ["## Calibration time (varpro, all variants and soils)", "", "| cycles | median | max | fits |",
+              "|---|---|---|---|"]
+    for n, t in study["times_s"].items():
+        lines.append(f"| {n} | {t['median']:.3f} s | {t['max']:.3f} s | {t['count']} |")
+    lines.append("")
+    return "\n".join(lines)
+
+
+# ==================================================================================================================
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", default="data/reference", help="reference directory with manifest.json")
@@ -484,6 +634,8 @@ def main(argv=None) -> int:
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
     parser.add_argument("--seed", type=int, default=0, help="numpy seed (the methods are deterministic)")
     add_ray_arguments(parser)
+    parser.add_argument("--no-estimator-study", action="store_true",
+                        help="skip the issue-20 estimator study (several cycles, opt-in terms, bands; estimator.md)")
     args = parser.parse_args(argv)
     if not (Path(args.data) / "manifest.json").exists():
         print(f"no reference data in {args.data}: run wheelloader dem reference (DEM) or python -m "
@@ -498,6 +650,8 @@ def main(argv=None) -> int:
                                                  if hasattr(o, "tolist") else str(o)))
     (out / "report.md").write_text(report(results, args))
     (out / "summary.md").write_text(summary_table(results, args) + "\n")
+    if results.get("estimator_study"):
+        (out / "estimator.md").write_text(estimator_report(results, args))
     print(report(results, args))
     return 0
 

@@ -123,10 +123,22 @@ class CycleLog:
         """Measured F_R = sqrt(F_T^2 + F_N^2) [N]."""
         return np.hypot(self.tangential, self.normal)
 
-    def contact_state(self, slope_window: float = DEFAULT_SLOPE_WINDOW) -> ContactState:
-        """Contact geometry of this cycle, using the logged fill or load when present."""
+    def contact_state(self, slope_window: float = DEFAULT_SLOPE_WINDOW, fill: str = "log") -> ContactState:
+        """Contact geometry of this cycle (with the tip's acceleration from the path).
+
+        ``fill="log"`` (default) uses the logged fill or load when present; ``fill="model"`` the
+        model's own bookkeeping (carving the pile along the path, as for a path never dug), the
+        quantity a prediction of a new path has.
+        """
+        if fill not in ("log", "model"):
+            raise ParameterError(f'fill must be "log" or "model", got {fill!r}')
+        ax, az = self.path.acceleration()
+        vx, vz, _ = self.path.velocity()
+        logged = fill == "log"
         return contact_state(self.path.x, self.path.z, self.path.blade_angle, self.pile, self.bucket,
-                             slope_window=slope_window, fill_volume=self.fill_volume, measured_load=self.measured_load)
+                             slope_window=slope_window, fill_volume=self.fill_volume if logged else None,
+                             measured_load=self.measured_load if logged else None,
+                             acceleration=np.column_stack([ax, az]), velocity=np.column_stack([vx, vz]))
 
     # ----------------------------------------------------------------- io
     def save(self, csv_path: str | Path, overwrite: bool = False) -> Path:

@@ -24,12 +24,39 @@ The angle clamps and flags are in :mod:`~wheelloader.estimator.validity`
 
 Every clamp is continuous, so forces are finite, non-negative and continuous
 along smooth paths everywhere.
+
+Opt-in term beyond the paper: the carried load
+------------------------------------------------
+With ``ModelOptions(carried_load=True)`` the soil already in the bucket (mass
+``m = W_load / g``) adds the force it exerts on the bucket, ``m (g_vec - a)``
+(weight, and inertia when the tip acceleration ``a`` is known), resolved in
+the blade frame of eqs 16-17 (:func:`carried_load_factors`): with the blade
+angle theta above +x,
+
+    F_T += W_load (a_x cos theta + (g + a_z) sin theta) / g,
+    F_N += W_load ((g + a_z) cos theta - a_x sin theta) / g,
+
+in and out of soil (after the tip leaves the soil the bucket still carries
+its load). A tip pointing down (theta < 0) makes the weight's share of F_T
+negative, so F_T can be negative with this term. ``W_load`` is the same
+load as the surcharge's (``gamma g V_fill`` or the logged load), so the
+forces stay linear in gamma.
+
+Opt-in term beyond the paper: slip-mobilised blade friction
+-----------------------------------------------------------
+With ``ModelOptions(slip_friction=True)`` the blade friction and adhesion
+(``F sin(delta) + C_a w L_t`` in eq 16) are scaled by :func:`slip_factor`
+``m = (max(v_a, 0) + v_0) / (|v| + v_0)``, the share of the tip's motion that
+slides the soil along the blade: friction acts against slip, and a blade moving
+along its own normal (lifting its load out of the cut) slides little soil along
+itself. ``m = 1`` at standstill and when advancing along the blade (the paper's
+model). The forces stay linear in gamma, C, C_a and K.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -52,8 +79,8 @@ from .validity import (
 __all__ = [
     "DEFAULT_OPTIONS", "FLAG_ALPHA_CLAMPED", "FLAG_NAMES", "FLAG_OUT_OF_SOIL", "FLAG_RHO_HIGH", "FLAG_RHO_LOW",
     "FLAG_TENSION", "GRAVITY", "ModelOptions", "SoilForces", "bearing_factors", "bearing_factors_cotangent",
-    "beta_bounds", "clamp_angles", "log_ngamma_slope", "optimal_beta", "optimal_beta_scalar", "soil_forces",
-    "soil_forces_single",
+    "beta_bounds", "carried_load_factors", "clamp_angles", "log_ngamma_slope", "optimal_beta", "optimal_beta_scalar",
+    "slip_factor", "soil_forces", "soil_forces_single",
 ]
 
 #: Standard gravity [m/s^2].
@@ -90,6 +117,50 @@ def bearing_factors_cotangent(alpha, rho, beta, phi, delta):
     n_a = (1.0 - cot(rho) * cot(beta + phi)) / den
     n_q = (np.cos(alpha) + np.sin(alpha) * cot(beta + phi)) / den
     return n_gamma, n_c, n_a, n_q
+
+
+def carried_load_factors(blade_angle, acceleration=None) -> tuple[np.ndarray, np.ndarray]:
+    """Blade-frame force of a carried load per newton of its weight: ``(c_T, c_N)`` (module docstring).
+
+    Parameters
+    ----------
+    blade_angle : array_like
+        Blade direction above +x [rad].
+    acceleration : array_like, optional
+        Tip acceleration ``(a_x, a_z)``, shape ``(n, 2)`` [m/s^2]; None: weight only.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``c_T = (a_x cos theta + (g + a_z) sin theta) / g``, ``c_N = ((g + a_z) cos theta - a_x sin theta) / g``.
+    """
+    th = np.asarray(blade_angle, dtype=float)
+    c, s = np.cos(th), np.sin(th)
+    if acceleration is None:
+        return s, c
+    acc = np.asarray(acceleration, dtype=float)
+    ax, gz = acc[:, 0] / GRAVITY, 1.0 + acc[:, 1] / GRAVITY
+    return ax * c + gz * s, gz * c - ax * s
+
+
+def slip_factor(blade_angle, velocity=None, slip_speed: float = 0.05) -> np.ndarray:
+    """Share of the blade friction mobilised by slip along the blade (module docstring), in [0, 1].
+
+    Parameters
+    ----------
+    blade_angle : array_like
+        Blade direction above +x [rad].
+    velocity : array_like, optional
+        Tip velocity ``(v_x, v_z)``, shape ``(n, 2)`` [m/s]; None: standing still (factor 1).
+    slip_speed : float
+        ``v_0`` [m/s].
+    """
+    th = np.asarray(blade_angle, dtype=float)
+    if velocity is None:
+        return np.ones_like(th)
+    vel = np.asarray(velocity, dtype=float)
+    along = vel[:, 0] * np.cos(th) + vel[:, 1] * np.sin(th)
+    return (np.maximum(along, 0.0) + slip_speed) / (np.hypot(vel[:, 0], vel[:, 1]) + slip_speed)
 
 
 # ----------------------------------------------------------------- forces
@@ -173,9 +244,15 @@ def soil_forces(soil: SoilParams, state: ContactState, bucket: Bucket,
     flags = flags | np.where(tension & ~out, FLAG_TENSION, 0)
     fee = np.maximum(fee, 0.0)
     pressure = soil.sinkage_modulus(bucket.edge_thickness) * np.power(d, soil.n)  # eq 15
-    tangential = (w * bucket.edge_thickness * pressure + fee * math.sin(delta)
-                  + soil.adhesion * w * state.blade_length)  # eq 16
+    friction = fee * math.sin(delta) + soil.adhesion * w * state.blade_length
+    if options.slip_friction:  # opt-in: friction mobilised by slip along the blade (module docstring)
+        friction = friction * slip_factor(state.blade_angle, state.velocity, options.slip_speed)
+    tangential = w * bucket.edge_thickness * pressure + friction  # eq 16
     normal = fee * math.cos(delta)  # eq 17
+    if options.carried_load:  # opt-in: the carried load's weight and inertia (module docstring)
+        c_t, c_n = carried_load_factors(state.blade_angle, state.acceleration)
+        tangential = tangential + w_load * c_t
+        normal = normal + w_load * c_n
     flags = np.where(out, FLAG_OUT_OF_SOIL, flags)  # out of soil: other flags are moot
     return SoilForces(tangential, normal, np.hypot(tangential, normal), fee, pressure, beta,
                       n_gamma, n_c, n_a, n_q, flags)
@@ -183,16 +260,31 @@ def soil_forces(soil: SoilParams, state: ContactState, bucket: Bucket,
 
 def soil_forces_single(soil: SoilParams, depth: float, rho: float, alpha: float, blade_length: float,
                        load_weight: float, bucket: Bucket, options: ModelOptions = DEFAULT_OPTIONS,
-                       beta_guess: float | None = None) -> tuple[float, float, float, int]:
+                       beta_guess: float | None = None,
+                       acceleration: tuple[float, float] = (0.0, 0.0),
+                       velocity: tuple[float, float] = (0.0, 0.0)) -> tuple[float, float, float, int]:
     """Fast scalar path for one sample (environment steps).
+
+    ``acceleration`` (tip ``(a_x, a_z)`` [m/s^2]) is used only by the opt-in carried-load term,
+    ``velocity`` (tip ``(v_x, v_z)`` [m/s]) only by the opt-in slip-friction term.
 
     Returns
     -------
     tuple
         ``(F_T, F_N, beta, flags)``; same equations and clamps as :func:`soil_forces`.
     """
+    if options.carried_load:
+        theta = alpha - rho
+        ax, gz = acceleration[0] / GRAVITY, 1.0 + acceleration[1] / GRAVITY
+        c_t = ax * math.cos(theta) + gz * math.sin(theta)
+        c_n = gz * math.cos(theta) - ax * math.sin(theta)
+        f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, blade_length, load_weight, bucket,
+                                                   replace(options, carried_load=False), beta_guess,
+                                                   velocity=velocity)
+        return f_t + load_weight * c_t, f_n + load_weight * c_n, beta, flags
     if depth <= 0.0:
         return 0.0, 0.0, options.eps1, FLAG_OUT_OF_SOIL
+    alpha_in, rho_in = alpha, rho
     phi, delta = soil.phi, soil.delta
     flags = 0
     rho_hi = math.pi - options.eps1 - options.eps2 - delta - phi
@@ -225,5 +317,11 @@ def soil_forces_single(soil: SoilParams, depth: float, rho: float, alpha: float,
         fee, flags = 0.0, flags | FLAG_TENSION
     b = bucket.edge_thickness
     pressure = (soil.k_c / b + soil.k_phi) * depth ** soil.n
-    f_t = w * b * pressure + fee * math.sin(delta) + soil.adhesion * w * blade_length
+    friction = fee * math.sin(delta) + soil.adhesion * w * blade_length
+    if options.slip_friction:
+        theta = alpha_in - rho_in
+        along = velocity[0] * math.cos(theta) + velocity[1] * math.sin(theta)
+        friction *= (max(along, 0.0) + options.slip_speed) / (math.hypot(velocity[0], velocity[1])
+                                                               + options.slip_speed)
+    f_t = w * b * pressure + friction
     return f_t, fee * math.cos(delta), beta, flags

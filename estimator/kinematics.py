@@ -57,6 +57,12 @@ class ContactState:
         otherwise the load is ``gamma * g * fill_volume``.
     carve : CarveResult or None
         The carving that produced ``fill_volume``, when it was computed.
+    acceleration : numpy.ndarray or None
+        Tip acceleration ``(a_x, a_z)`` per sample, shape ``(n, 2)`` [m/s^2], when known: the
+        inertia of the carried soil (``ModelOptions.carried_load``); None counts as 0.
+    velocity : numpy.ndarray or None
+        Tip velocity ``(v_x, v_z)`` per sample, shape ``(n, 2)`` [m/s], when known (the opt-in
+        ``ModelOptions.slip_friction``); None counts as standing still.
     """
 
     depth: np.ndarray
@@ -66,6 +72,8 @@ class ContactState:
     fill_volume: np.ndarray
     measured_load: np.ndarray | None = None
     carve: CarveResult | None = field(default=None, repr=False)
+    acceleration: np.ndarray | None = field(default=None, repr=False)
+    velocity: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return int(self.depth.size)
@@ -84,8 +92,15 @@ class ContactState:
     def subset(self, mask: np.ndarray) -> ContactState:
         """The samples where ``mask`` is true."""
         ml = None if self.measured_load is None else self.measured_load[mask]
+        acc = None if self.acceleration is None else self.acceleration[mask]
+        vel = None if self.velocity is None else self.velocity[mask]
         return ContactState(self.depth[mask], self.rho[mask], self.alpha[mask], self.blade_length[mask],
-                            self.fill_volume[mask], ml, None)
+                            self.fill_volume[mask], ml, None, acc, vel)
+
+    @property
+    def blade_angle(self) -> np.ndarray:
+        """Blade direction above +x per sample [rad] (``alpha - rho``)."""
+        return self.alpha - self.rho
 
 
 def blade_length_in_soil(depth, rho, floor_length: float):
@@ -105,6 +120,8 @@ def contact_state(
     initial_fill: float = 0.0,
     fill_volume: object | None = None,
     measured_load: object | None = None,
+    acceleration: object | None = None,
+    velocity: object | None = None,
 ) -> ContactState:
     """Contact geometry along a tip path on a pile (vectorised).
 
@@ -125,6 +142,12 @@ def contact_state(
         carving ``pile`` along the path.
     measured_load : array_like, optional
         Logged soil weight in the bucket per sample [N].
+    acceleration : array_like, optional
+        Tip acceleration per sample, shape ``(n, 2)`` [m/s^2] (e.g. from
+        :meth:`~wheelloader.estimator.paths.BucketPath.acceleration`); used only by the
+        opt-in carried-load term.
+    velocity : array_like, optional
+        Tip velocity per sample, shape ``(n, 2)`` [m/s]; used only by the opt-in slip-friction term.
 
     Returns
     -------
@@ -154,7 +177,18 @@ def contact_state(
     else:
         fill = _optional_series("fill_volume", fill_volume, xs.size)
     load = None if measured_load is None else _optional_series("measured_load", measured_load, xs.size)
-    return ContactState(depth, rho, alpha, blade_length, fill, load, carve)
+    acc, vel = (_optional_pairs(name, value, xs.size) for name, value in (("acceleration", acceleration),
+                                                                          ("velocity", velocity)))
+    return ContactState(depth, rho, alpha, blade_length, fill, load, carve, acc, vel)
+
+
+def _optional_pairs(name: str, values: object | None, size: int) -> np.ndarray | None:
+    if values is None:
+        return None
+    arr = np.asarray(values, dtype=float)
+    if arr.shape != (size, 2) or not np.all(np.isfinite(arr)):
+        raise ParameterError(f"{name} must be finite with shape ({size}, 2), got {arr.shape}")
+    return arr
 
 
 def contact_single(pile: Pile, x: float, z: float, blade_angle: float, floor_length: float,

@@ -74,6 +74,14 @@ class BucketPath:
         """Finite-difference (x, z, blade-angle) rates per sample [m/s, m/s, rad/s]."""
         return (np.gradient(self.x, self.t), np.gradient(self.z, self.t), np.gradient(self.blade_angle, self.t))
 
+    def acceleration(self) -> tuple[np.ndarray, np.ndarray]:
+        """Finite-difference tip acceleration ``(a_x, a_z)`` per sample [m/s^2] (gradient of :meth:`velocity`)."""
+        if self.t.size < 3:
+            zero = np.zeros_like(self.x)
+            return zero, zero.copy()
+        vx, vz, _ = self.velocity()
+        return np.gradient(vx, self.t), np.gradient(vz, self.t)
+
     def resample(self, rate: float) -> BucketPath:
         """Linear resampling at ``rate`` [Hz] over the same time span."""
         if not rate > 0.0:

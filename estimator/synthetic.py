@@ -129,7 +129,10 @@ def synthetic_cycle(
             raise ParameterError(f"{name} must be a finite fraction >= 0, got {value!r}")
     bias_t, bias_n = _pair("bias", bias)
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
-    state = contact_state(path.x, path.z, path.blade_angle, pile, bucket)
+    acceleration = np.column_stack(path.acceleration()) if options.carried_load else None
+    velocity = np.column_stack(path.velocity()[:2]) if options.slip_friction else None
+    state = contact_state(path.x, path.z, path.blade_angle, pile, bucket, acceleration=acceleration,
+                          velocity=velocity)
     forces = soil_forces(soil, state, bucket, options)
     peak = float(np.max(forces.resultant))
     if force_scale is None:

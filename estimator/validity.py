@@ -78,6 +78,24 @@ class ModelOptions:
         (module docstring).
     contact_depth : float
         Depth over which the surcharge ``W_load N_q`` ramps in [m]; default 0.02 m.
+    carried_load : bool
+        Opt-in term beyond the paper (default False, the paper's model): the soil already in the
+        bucket pushes on it with its weight and, when the tip's acceleration is known, its inertia,
+        ``m (g - a)`` with ``m = W_load / g``, resolved in the blade frame and added to F_T and F_N
+        in and out of soil (:func:`~wheelloader.estimator.force_model.carried_load_factors`). The
+        env's plant (the FEE world) and the planner's CasADi model do not implement it: the env
+        always uses the paper's model, and a planner given these options must refuse them
+        (:attr:`extra_terms` names the opt-in terms that are on).
+    slip_friction : bool
+        Opt-in term beyond the paper (default False): the blade friction and adhesion (the F_T
+        share ``F sin(delta) + C_a w L_t`` of eq 16) are mobilised by the soil slipping along the
+        blade, so they are scaled by ``m = (max(v_a, 0) + v_0) / (|v| + v_0)``, the share of the
+        tip's motion along the blade (``v_a`` its component along the blade direction, ``v_0 =
+        slip_speed``): 1 when the blade advances along itself or stands still (the paper's
+        model), towards 0 when it moves along its normal (lifting the load)
+        (:func:`~wheelloader.estimator.force_model.slip_factor`). Not in the env or the planner either.
+    slip_speed : float
+        ``v_0`` of ``slip_friction`` [m/s]; default 0.05 m/s.
     """
 
     eps1: float = math.radians(5.0)
@@ -86,9 +104,20 @@ class ModelOptions:
     alpha_max: float = math.radians(60.0)
     contact_depth: float = 0.02
     slope_margin: float = math.radians(5.0)
+    carried_load: bool = False
+    slip_friction: bool = False
+    slip_speed: float = 0.05
+
+    @property
+    def extra_terms(self) -> tuple[str, ...]:
+        """Names of the opt-in terms beyond the paper's model that are on (empty: the paper's model)."""
+        return tuple(name for name in ("carried_load", "slip_friction") if getattr(self, name))
 
     def __post_init__(self) -> None:
-        for name in ("eps1", "eps2", "rho_min", "alpha_max", "contact_depth", "slope_margin"):
+        for name in ("carried_load", "slip_friction"):
+            if not isinstance(getattr(self, name), bool):
+                raise ParameterError(f"ModelOptions.{name} must be True or False, got {getattr(self, name)!r}")
+        for name in ("eps1", "eps2", "rho_min", "alpha_max", "contact_depth", "slope_margin", "slip_speed"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
                 raise ParameterError(f"ModelOptions.{name} must be a finite number > 0, got {value!r}")

@@ -19,6 +19,7 @@ Fit quality: :mod:`wheelloader.estimator.calibration.result`; fit verdict:
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -33,10 +34,12 @@ from ..kinematics import DEFAULT_SLOPE_WINDOW, ContactState
 from ..soil import PARAMETER_NAMES, SoilParams, as_soil, validate_bounds
 from ..soil_vector import SOIL_VECTOR_NAMES as FIT_NAMES
 from ..soil_vector import soil_from_vector, soil_vector, vector_bounds
+from .bands import BandModel, residual_noise_model
 from .fitmodel import MIN_SAMPLES, FitData
 from .paper_methods import fit_multi_stage, fit_single_stage
+from .priors import class_prior
 from .result import Calibration, FitQuality, StageResult
-from .uncertainty import analyse
+from .uncertainty import analyse, integrated_autocorrelation_time
 from .varpro import fit_varpro
 from .verdict import assess
 
@@ -136,6 +139,8 @@ def calibrate(
     regularize: bool = False,
     forgetting: float | None = None,
     cycle_weights: list[float] | None = None,
+    fill: str = "log",
+    prior: str | dict | None = None,
 ) -> Calibration:
     """Calibrate the eight soil parameters from one cycle or from several.
 
@@ -187,6 +192,15 @@ def calibrate(
         ``f ** (N - 1 - k)`` in the cost (the newest 1). Default: every cycle weighs 1.
     cycle_weights : list of float, optional
         Several cycles: explicit weight of each cycle's squared residuals (instead of ``forgetting``).
+    fill : str
+        Where the bucket load ``W_load`` comes from: ``"log"`` (default) the logged fill or load
+        when the log has one, ``"model"`` the model's own bookkeeping (carving the pile along the
+        path), the quantity a prediction of a new path has (:meth:`CycleLog.contact_state`).
+    prior : str or dict, optional
+        Varpro method: the MAP estimate under a literature prior of the soil class being dug,
+        ``"granular"`` or ``"cohesive"`` (paper Tables A1, A2;
+        :mod:`wheelloader.estimator.calibration.priors`), or ``{name: (low, high)}`` ranges of
+        your own over the fit vector; it replaces the weak prior of ``regularize``.
 
     Returns
     -------
@@ -209,6 +223,11 @@ def calibrate(
         raise CalibrationError(f"calibration from several cycles ({len(logs)} given) is implemented for the varpro "
                                f"method only, not {method!r}")
     cycle = logs[0]
+    if fill not in ("log", "model"):
+        raise CalibrationError(f'fill must be "log" or "model", got {fill!r}')
+    if options.extra_terms and method != "varpro":
+        raise CalibrationError(f"the paper's methods fit the paper's model only; the opt-in term(s) "
+                               f"{list(options.extra_terms)} need the varpro method")
     try:
         bnds = validate_bounds({} if bounds is None else bounds)
     except ParameterError as exc:
@@ -228,14 +247,18 @@ def calibrate(
         raise CalibrationError(f"min_samples must be a positive integer, got {min_samples!r}")
     if not isinstance(regularize, bool):
         raise CalibrationError(f"regularize must be True or False, got {regularize!r}")
+    literature = prior
+    prior_moments = None if literature is None else class_prior(literature)
+    if literature is not None and canonical_method(method) != "varpro":
+        raise CalibrationError("a literature prior needs the varpro method")
     if method == "multi-stage" and sigma > len(cycle):  # (one cycle: the paper's methods take no list)
         # gaussian_filter1d's kernel spans 8 sigma: a sigma of 1e9 samples asked for 60 GiB
         raise CalibrationError(f"sigma = {sigma:g} samples is wider than the cycle ({len(cycle)} samples); "
                                "the stage-2 filter needs sigma <= the number of samples")
-    prior = _coerce_initial(initial)
+    start = _coerce_initial(initial)
     bucket = cycle.bucket
     b = bucket.edge_thickness
-    states = [log.contact_state(slope_window) for log in logs]
+    states = [log.contact_state(slope_window, fill) for log in logs]
     parts = []
     for k, (log, st) in enumerate(zip(logs, states, strict=True)):
         try:
@@ -246,6 +269,9 @@ def calibrate(
     state = states[0]
     lo, hi = vector_bounds(bnds, b)
     settings: dict[str, Any] = {"lambda": lam}
+    if options != DEFAULT_OPTIONS or fill != "log":  # recorded so that predict() uses the same model
+        settings["model_options"] = dataclasses.asdict(options)
+        settings["fill"] = fill
     stride = -(-len(data) // MAX_FIT_SAMPLES)
     if stride > 1:
         _log.warning("calibrate: %d in-soil samples exceed MAX_FIT_SAMPLES = %d; fitting every %d-th sample",
@@ -258,10 +284,14 @@ def calibrate(
     stages: list[StageResult] = []
     njev = 0
     if method == "varpro":
-        settings.update(grid=list(grid), n_starts=n_starts, max_nfev=max_iter or 100, regularize=regularize)
-        x0 = None if prior is None else soil_vector(prior, b)
+        settings.update(grid=list(grid), n_starts=n_starts, max_nfev=max_iter or 100,
+                        regularize=regularize or prior_moments is not None)
+        if literature is not None:
+            settings["literature_prior"] = (literature if isinstance(literature, str)
+                                            else {k: list(v) for k, v in literature.items()})
+        x0 = None if start is None else soil_vector(start, b)
         fit = fit_varpro(data, lo, hi, lam, x0, tuple(int(g) for g in grid), n_starts, max_iter or 100,
-                          regularize=regularize)
+                         regularize=regularize or prior_moments is not None, prior_moments=prior_moments)
         if fit.prior is not None:
             settings["prior"] = {"mean": fit.prior.mean, "scale": fit.prior.scale, "nu": fit.prior.nu,
                                  "autocorrelation_time": fit.tau, "exact_fit": fit.exact,
@@ -279,10 +309,10 @@ def calibrate(
     else:
         maxiter = max_iter or 1000
         if method == "single-stage":
-            pf = fit_single_stage(data, bnds, prior, maxiter)
+            pf = fit_single_stage(data, bnds, start, maxiter)
         else:
             settings["sigma"] = sigma
-            pf = fit_multi_stage(data, bnds, prior, sigma, cycle.normal, maxiter)
+            pf = fit_multi_stage(data, bnds, start, sigma, cycle.normal, maxiter)
         theta = pf.theta
         x = soil_vector(theta, b)
         nfev = sum(s.nfev for s in pf.stages)
@@ -292,7 +322,7 @@ def calibrate(
         message = "; ".join(f"{s.name}: {s.message}" for s in pf.stages)
         if failed:
             message = "did not converge: " + message
-        settings.update(maxiter=maxiter, initial_guess="given" if prior is not None else "mid-range of bounds")
+        settings.update(maxiter=maxiter, initial_guess="given" if start is not None else "mid-range of bounds")
         for s in pf.stages:
             stages.append(_paper_stage(s, data, b))
     time_s = time.perf_counter() - t0
@@ -300,7 +330,7 @@ def calibrate(
 
     # Soil parameters: the paper's methods estimate k_c, k_phi directly; varpro splits K.
     if method == "varpro":
-        soil = soil_from_vector(x, b, bnds, prior)
+        soil = soil_from_vector(x, b, bnds, start)
     else:
         soil = SoilParams.from_array(np.clip(pf.theta, [bnds[k][0] for k in PARAMETER_NAMES],
                                              [bnds[k][1] for k in PARAMETER_NAMES]))
@@ -336,6 +366,10 @@ def calibrate(
                      + 0.5 * np.sum(data.weight * (f_n - data.y_n) ** 2))
     force_scale = float(np.mean(np.hypot(data.y_t, data.y_n)))
     unc = analyse(jac, resid, x, lo, hi, force_scale)
+    obs_r, fit_r = np.hypot(data.y_t, data.y_n), np.hypot(at_t, at_n)
+    sigma_0, relative = residual_noise_model(obs_r, fit_r)
+    settings["band_model"] = BandModel(unc.covariance, integrated_autocorrelation_time(obs_r - fit_r), sigma_0,
+                                       relative).to_dict()
     if len(logs) > 1:
         settings["cycles"] = _cycles_report(logs, data, weights_per_cycle, at_t, at_n, jac, resid, x, lo, hi,
                                             force_scale)
@@ -344,7 +378,7 @@ def calibrate(
                       pred_n=at_n, percent_r=quality.percent_r, names=FIT_NAMES, values=x,
                       lower=lo, upper=hi)
     return Calibration(soil, method, float(x[5]), cost, bool(success), int(status), message, int(nfev), int(njev),
-                       time_s, quality, stages, unc, prior, bnds, pred_t, pred_n, in_soil, tension, settings, warnings)
+                       time_s, quality, stages, unc, start, bnds, pred_t, pred_n, in_soil, tension, settings, warnings)
 
 
 def _cycles_report(logs: list[CycleLog], data: FitData, weights: list[float] | None, at_t: np.ndarray,
@@ -386,8 +420,10 @@ def _forces_along(soil: SoilParams, state: ContactState, bucket, options: ModelO
     for s in range(0, n, FORCE_CHUNK):
         sl = slice(s, min(s + FORCE_CHUNK, n))
         load = None if state.measured_load is None else np.asarray(state.measured_load)[sl]
+        acc = None if state.acceleration is None else state.acceleration[sl]
+        vel = None if state.velocity is None else state.velocity[sl]
         part = ContactState(state.depth[sl], state.rho[sl], state.alpha[sl], state.blade_length[sl],
-                            state.fill_volume[sl], load)
+                            state.fill_volume[sl], load, None, acc, vel)
         f = soil_forces(soil, part, bucket, options)
         f_t[sl], f_n[sl], flags[sl] = f.tangential, f.normal, f.flags
     return f_t, f_n, flags

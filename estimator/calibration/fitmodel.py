@@ -33,7 +33,7 @@ import numpy as np
 
 from ..errors import CalibrationError
 from ..failure_angle import BETA_AT_RHO_LIMIT, BETA_AT_SLOPE_LIMIT, BETA_INTERIOR, optimal_beta
-from ..force_model import DEFAULT_OPTIONS, GRAVITY, ModelOptions
+from ..force_model import DEFAULT_OPTIONS, GRAVITY, ModelOptions, carried_load_factors, slip_factor
 from ..kinematics import ContactState
 from ..machine import Bucket
 from ..soil_vector import (
@@ -198,6 +198,12 @@ class FitData:
     cycle : numpy.ndarray or None
         Which cycle (0, 1, ...) each sample comes from, when the data join several cycles
         (:meth:`concat`); None for one cycle.
+    carried : tuple of numpy.ndarray or None
+        ``(c_T, c_N)`` of :func:`~wheelloader.estimator.force_model.carried_load_factors` per sample
+        when ``options.carried_load`` is on (the opt-in carried-load term), else None.
+    slip : numpy.ndarray or None
+        :func:`~wheelloader.estimator.force_model.slip_factor` per sample when ``options.slip_friction``
+        is on (it scales the blade friction and adhesion in F_T), else None.
     """
 
     index: np.ndarray
@@ -214,6 +220,8 @@ class FitData:
     options: ModelOptions = DEFAULT_OPTIONS
     weight: np.ndarray | None = None
     cycle: np.ndarray | None = None
+    carried: tuple[np.ndarray, np.ndarray] | None = None
+    slip: np.ndarray | None = None
 
     @classmethod
     def concat(cls, parts: list[FitData], cycle_weights: list[float] | None = None) -> FitData:
@@ -252,8 +260,13 @@ class FitData:
                 raise CalibrationError(f"cycle weights must be {len(parts)} finite numbers > 0, got {cycle_weights!r}")
             if not np.all(w == 1.0):
                 weight = w[cycle]
+        carried = None
+        if first.carried is not None:
+            carried = (np.concatenate([p.carried[0] for p in parts]), np.concatenate([p.carried[1] for p in parts]))
+        slip = None if first.slip is None else cat("slip")
         return cls(cat("index"), cat("depth"), cat("alpha"), cat("rho"), cat("blade_length"), cat("fill_volume"), ml,
-                   cat("y_t"), cat("y_n"), first.width, first.edge_thickness, first.options, weight, cycle)
+                   cat("y_t"), cat("y_n"), first.width, first.edge_thickness, first.options, weight, cycle, carried,
+                   slip)
 
     @property
     def root_weight(self) -> np.ndarray | float:
@@ -284,8 +297,17 @@ class FitData:
             raise CalibrationError(f"too few in-soil samples: {idx.size} of {n} have depth > 0, a calibration "
                                    f"needs at least {min_samples}")
         ml = None if state.measured_load is None else np.asarray(state.measured_load, float)[idx]
+        carried = None
+        if options.carried_load:
+            acc = None if state.acceleration is None else state.acceleration[idx]
+            carried = carried_load_factors(state.blade_angle[idx], acc)
+        slip = None
+        if options.slip_friction:
+            vel = None if state.velocity is None else state.velocity[idx]
+            slip = slip_factor(state.blade_angle[idx], vel, options.slip_speed)
         return cls(idx, state.depth[idx], state.alpha[idx], state.rho[idx], state.blade_length[idx],
-                   state.fill_volume[idx], ml, f_t[idx], f_n[idx], bucket.width, bucket.edge_thickness, options)
+                   state.fill_volume[idx], ml, f_t[idx], f_n[idx], bucket.width, bucket.edge_thickness, options,
+                   carried=carried, slip=slip)
 
     def __len__(self) -> int:
         return int(self.index.size)
@@ -299,7 +321,9 @@ class FitData:
         return FitData(self.index[sl], self.depth[sl], self.alpha[sl], self.rho[sl], self.blade_length[sl],
                        self.fill_volume[sl], ml, self.y_t[sl], self.y_n[sl], self.width, self.edge_thickness,
                        self.options, None if self.weight is None else self.weight[sl],
-                       None if self.cycle is None else self.cycle[sl])
+                       None if self.cycle is None else self.cycle[sl],
+                       None if self.carried is None else (self.carried[0][sl], self.carried[1][sl]),
+                       None if self.slip is None else self.slip[sl])
 
     @property
     def ramp(self) -> np.ndarray:
@@ -327,6 +351,22 @@ class FitData:
                     np.zeros_like(dnq))
         return d * d * w * GRAVITY * dng, w * d * dnc, w * d * dna, r * self.measured_load * dnq
 
+    def carried_basis(self):
+        """The carried-load term as ``(b_T, b_N, o_T, o_N)``: F_T += gamma b_T + o_T, F_N += gamma b_N + o_N.
+
+        ``W_load = gamma g V_fill`` gives the gamma columns, a logged ``W_load`` the offsets; None when the
+        term is off (``options.carried_load`` False).
+        """
+        if self.carried is None:
+            return None
+        c_t, c_n = self.carried
+        if self.measured_load is None:
+            load = GRAVITY * self.fill_volume
+            zero = np.zeros_like(load)
+            return load * c_t, load * c_n, zero, zero
+        zero = np.zeros_like(c_t)
+        return zero, zero, self.measured_load * c_t, self.measured_load * c_n
+
     def sinkage_basis(self, n):
         """``w b d^n`` for scalar or array ``n`` (array n: shape (len(n), samples))."""
         n = np.asarray(n, dtype=float)
@@ -345,8 +385,15 @@ class FitData:
         tension = fee < 0.0
         fee = np.maximum(fee, 0.0)
         sink = self.sinkage_basis(n)
-        f_t = k * sink + fee * math.sin(delta) + ca * self.width * self.blade_length  # eqs 15-16
+        friction = fee * math.sin(delta) + ca * self.width * self.blade_length
+        if self.slip is not None:  # opt-in slip-mobilised friction (force_model)
+            friction = friction * self.slip
+        f_t = k * sink + friction  # eqs 15-16
         f_n = fee * math.cos(delta)  # eq 17
+        carried = self.carried_basis()
+        if carried is not None:  # opt-in carried load (force_model)
+            f_t = f_t + (gamma * carried[0] + carried[2])
+            f_n = f_n + (gamma * carried[1] + carried[3])
         return f_t, f_n, tension
 
     def forces_and_jacobian(self, p: np.ndarray):
@@ -364,6 +411,9 @@ class FitData:
         sd, cd = math.sin(delta), math.cos(delta)
         sink = self.sinkage_basis(n)
         wl = self.width * self.blade_length
+        if self.slip is not None:  # opt-in slip-mobilised friction: F_T's friction share scaled per sample
+            sd = sd * self.slip
+            wl = wl * self.slip
         f_t = k * sink + fee * sd + ca * wl
         f_n = fee * cd
         m = len(self)
@@ -374,7 +424,14 @@ class FitData:
         jt[:, 1], jn[:, 1] = sd * bc_on, cd * bc_on
         jt[:, 2], jn[:, 2] = sd * ba_on + wl, cd * ba_on
         jt[:, 3], jn[:, 3] = sd * dfee_phi, cd * dfee_phi
-        jt[:, 4], jn[:, 4] = cd * fee + sd * dfee_delta, -sd * fee + cd * dfee_delta
+        cd_t = cd if self.slip is None else cd * self.slip  # d(sin delta)/d delta in the F_T row
+        jt[:, 4], jn[:, 4] = cd_t * fee + sd * dfee_delta, -math.sin(delta) * fee + cd * dfee_delta
         jt[:, 5] = sink
         jt[:, 6] = k * sink * np.log(self.depth)
+        carried = self.carried_basis()
+        if carried is not None:  # opt-in carried load (force_model)
+            f_t = f_t + (gamma * carried[0] + carried[2])
+            f_n = f_n + (gamma * carried[1] + carried[3])
+            jt[:, 0] += carried[0]
+            jn[:, 0] += carried[1]
         return f_t, f_n, jt, jn

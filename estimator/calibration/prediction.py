@@ -16,6 +16,7 @@ from ..machine import Bucket
 from ..paths import BucketPath
 from ..pile import Pile
 from ..soil import SoilParams
+from .bands import BandModel, PredictionBand, prediction_band
 from .result import Calibration, FitQuality, load_params
 
 
@@ -37,6 +38,8 @@ class Prediction:
         Measured forces when a cycle log was given.
     quality : FitQuality or None
         RMSE against the measured forces (in-soil samples), when available.
+    band : PredictionBand or None
+        Prediction band (``predict(..., band=level)``), else None.
     """
 
     path: BucketPath
@@ -46,6 +49,7 @@ class Prediction:
     observed_tangential: np.ndarray | None = field(default=None, repr=False)
     observed_normal: np.ndarray | None = field(default=None, repr=False)
     quality: FitQuality | None = None
+    band: PredictionBand | None = None
 
     @property
     def tangential(self) -> np.ndarray:
@@ -69,6 +73,8 @@ class Prediction:
             raise FileExistsError(f"{csv_path} exists; pass overwrite=True to replace it")
         cols = {"t": self.path.t, "x": self.path.x, "z": self.path.z, "blade_angle": self.path.blade_angle,
                 "depth": self.state.depth, "F_T": self.tangential, "F_N": self.normal, "F_R": self.resultant}
+        if self.band is not None:
+            cols["F_R_lower"], cols["F_R_upper"] = self.band.lower_r, self.band.upper_r
         if self.observed_tangential is not None:
             cols["F_T_obs"] = self.observed_tangential
             cols["F_N_obs"] = self.observed_normal
@@ -87,9 +93,12 @@ def predict(
     pile: Pile | None = None,
     bucket: Bucket | None = None,
     *,
-    options: ModelOptions = DEFAULT_OPTIONS,
+    options: ModelOptions | None = None,
     slope_window: float = DEFAULT_SLOPE_WINDOW,
     initial_fill: float = 0.0,
+    fill: str | None = None,
+    band: float | None = None,
+    band_model: BandModel | None = None,
 ) -> Prediction:
     """Forces of the calibrated model along a path.
 
@@ -108,46 +117,79 @@ def predict(
         correction). Default: the cycle's pile, else ``Pile.trapezoid()``.
     bucket : Bucket, optional
         Default: the cycle's bucket, else ``Bucket()``.
-    options : ModelOptions
-        Force-model options.
+    options : ModelOptions, optional
+        Force-model options; default: those the calibration fitted when ``params`` is a
+        :class:`Calibration` (:attr:`Calibration.model_options`), else the paper's model.
     slope_window : float
         Half-width of the local slope chord [m].
     initial_fill : float
         Soil already in the bucket [m^3] (new paths only).
+    fill : str, optional
+        For a cycle log: ``"log"`` uses its logged fill or load (what the paper's experiments
+        do), ``"model"`` the model's own bookkeeping (carving the pile along the path), which is
+        what a prediction of a path not yet dug has. Default: the calibration's
+        (:attr:`Calibration.fill_source`), else ``"log"``.
+    band : float, optional
+        Level of a prediction band (e.g. 0.9): mean +- the spread from the calibration's
+        parameter covariance and residual noise model (:mod:`~.bands`); needs ``params`` to be
+        a :class:`Calibration` (or ``band_model``).
+    band_model : BandModel, optional
+        The band's inputs when ``params`` is not a :class:`Calibration` (e.g. read from a
+        params.json: ``BandModel.from_dict(data["calibration"]["settings"]["band_model"])``).
 
     Returns
     -------
     Prediction
     """
     soil = load_params(params)
+    if options is None:
+        options = params.model_options if isinstance(params, Calibration) else DEFAULT_OPTIONS
+    if fill is None:
+        fill = params.fill_source if isinstance(params, Calibration) else "log"
+    if fill not in ("log", "model"):
+        raise ParameterError(f'fill must be "log" or "model", got {fill!r}')
     observed_t = observed_n = None
+    acceleration = None
     if isinstance(path_or_cycle, CycleLog):
         cycle = path_or_cycle
         path = cycle.path
         same_surface = pile is None
         pile = cycle.pile if pile is None else pile
         bucket = cycle.bucket if bucket is None else bucket
-        fill = cycle.fill_volume if same_surface else None
-        load = cycle.measured_load
+        logged = same_surface and fill == "log"
+        fill_volume = cycle.fill_volume if logged else None
+        load = cycle.measured_load if fill == "log" else None
         observed_t, observed_n = cycle.tangential, cycle.normal
     elif isinstance(path_or_cycle, BucketPath):
         path = path_or_cycle
         pile = Pile.trapezoid() if pile is None else pile
         bucket = Bucket() if bucket is None else bucket
-        fill = load = None
+        fill_volume = load = None
     else:
         raise ParameterError(f"path_or_cycle must be a BucketPath or a CycleLog, got {type(path_or_cycle).__name__}")
     if not isinstance(pile, Pile):
         raise ParameterError(f"pile must be a Pile, got {type(pile).__name__}")
     if not isinstance(bucket, Bucket):
         raise ParameterError(f"bucket must be a Bucket, got {type(bucket).__name__}")
+    if options.carried_load:
+        acceleration = np.column_stack(path.acceleration())
+    velocity = np.column_stack(path.velocity()[:2]) if options.slip_friction else None
     state = contact_state(path.x, path.z, path.blade_angle, pile, bucket, slope_window=slope_window,
-                          initial_fill=initial_fill, fill_volume=fill, measured_load=load)
+                          initial_fill=initial_fill, fill_volume=fill_volume, measured_load=load,
+                          acceleration=acceleration, velocity=velocity)
     forces = soil_forces(soil, state, bucket, options)
+    pband = None
+    if band is not None:
+        if band_model is None:
+            if not isinstance(params, Calibration):
+                raise ParameterError("a prediction band needs a Calibration (its covariance and residual noise "
+                                     "model) or band_model")
+            band_model = params.band_model
+        pband = prediction_band(band_model, soil, state, bucket, options, forces.tangential, forces.normal, band)
     quality = None
     if observed_t is not None:
         mask = state.depth > 0.0
         if np.any(mask):
             quality = FitQuality.from_forces(observed_t[mask], observed_n[mask], forces.tangential[mask],
                                              forces.normal[mask])
-    return Prediction(path, forces, state, soil, observed_t, observed_n, quality)
+    return Prediction(path, forces, state, soil, observed_t, observed_n, quality, pband)

@@ -206,6 +206,27 @@ class Calibration:
         return self.uncertainty.to_dict()
 
     @property
+    def model_options(self):
+        """The :class:`~wheelloader.estimator.ModelOptions` this calibration fitted (the defaults unless set)."""
+        from ..validity import DEFAULT_OPTIONS, ModelOptions
+
+        stored = self.settings.get("model_options")
+        return DEFAULT_OPTIONS if stored is None else ModelOptions(**stored)
+
+    @property
+    def fill_source(self) -> str:
+        """``"log"`` or ``"model"``: where the calibration took the bucket load from (:func:`calibrate`'s ``fill``)."""
+        return str(self.settings.get("fill", "log"))
+
+    @property
+    def band_model(self):
+        """What :func:`predict` needs for a prediction band (:class:`~.bands.BandModel`): covariance,
+        residual autocorrelation time and residual noise model of this calibration."""
+        from .bands import BandModel
+
+        return BandModel.from_dict(self.settings["band_model"])
+
+    @property
     def cycle_count(self) -> int:
         """Number of cycles this calibration fitted (1 unless a list of logs was given)."""
         return int(self.settings.get("cycles", {}).get("count", 1))
@@ -293,6 +314,37 @@ class Calibration:
         if self.tension_samples:
             lines.append(f"  note: the FEE force is clamped at 0 on {self.tension_samples} samples")
         return "\n".join(lines)
+
+
+@dataclass(frozen=True)
+class SavedModel:
+    """What a params.json says beyond the soil: the calibration's model options, fill source and band model.
+
+    Attributes are None when the file does not hold them (a bare 8-parameter JSON, a preset, an older file).
+    """
+
+    options: Any = None
+    fill: str | None = None
+    band_model: Any = None
+
+
+def load_saved_model(path: str | Path) -> SavedModel:
+    """Read :class:`SavedModel` from a params.json of ``wheelloader calibrate`` (:meth:`Calibration.save_json`)."""
+    from ..validity import ModelOptions
+    from .bands import BandModel
+
+    try:
+        data = json.loads(Path(path).read_text(encoding="utf-8-sig"))
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError):
+        return SavedModel()
+    settings = (data.get("calibration") or {}).get("settings") or {} if isinstance(data, dict) else {}
+    options = settings.get("model_options")
+    band = settings.get("band_model")
+    try:
+        return SavedModel(None if options is None else ModelOptions(**options), settings.get("fill"),
+                          None if band is None else BandModel.from_dict(band))
+    except (TypeError, ParameterError) as exc:
+        raise ParameterError(f"{path}: calibration settings: {exc}") from None
 
 
 def load_params(source: str | Path | dict | Calibration | SoilParams) -> SoilParams:

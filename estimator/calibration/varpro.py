@@ -105,6 +105,10 @@ DEFAULT_GRID = (9, 9, 8)
 #: start points, so this bounds its time on long logs without changing where the refinement converges
 #: for cycles of ordinary length.
 GRID_MAX_SAMPLES = 20_000
+#: Largest number of in-soil samples the grid search uses when several cycles are fitted together (every k-th
+#: sample of all of them; about two cycles' worth): it keeps a five-cycle calibration's grid at the cost of a
+#: two-cycle one. The refinement always runs on every sample.
+GRID_MAX_SAMPLES_CYCLES = 600
 #: Largest number of (phi, delta) pair x sample elements the grid evaluates at once: the grid's memory is
 #: about 250 bytes per element, whatever the length of the cycle.
 GRID_CHUNK_ELEMENTS = 400_000
@@ -132,8 +136,16 @@ def _linear_columns(data: FitData, phis: np.ndarray, deltas: np.ndarray):
     sd = np.sin(deltas)[:, None]
     cd = np.cos(deltas)[:, None]
     wl = data.width * data.blade_length[None, :]
+    if data.slip is not None:  # opt-in slip-mobilised friction: F_T's friction share scaled per sample
+        sd = sd * data.slip[None, :]
+        wl = wl * data.slip[None, :]
     at = np.stack([sd * bg, sd * bc, sd * ba + wl], axis=-1)
     an = np.stack([cd * bg, cd * bc, cd * ba], axis=-1)
+    carried = data.carried_basis()
+    if carried is not None:  # opt-in carried load: linear in gamma (or an offset with a logged load)
+        at[..., 0] += carried[0][None, :]
+        an[..., 0] += carried[1][None, :]
+        return at, an, sd * q0 + carried[2][None, :], cd * q0 + carried[3][None, :]
     return at, an, sd * q0, cd * q0
 
 
@@ -343,7 +355,8 @@ def _starts_from_grid(cost, theta, axes, count):
 
 def fit_varpro(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5, initial: np.ndarray | None = None,
                grid: tuple[int, int, int] = DEFAULT_GRID, n_starts: int = 3, max_nfev: int = 100,
-               zoom: int = 7, regularize: bool = False) -> SolverResult:
+               zoom: int = 7, regularize: bool = False,
+               prior_moments: tuple[np.ndarray, np.ndarray] | None = None) -> SolverResult:
     """Variable-projection grid search, analytic refinement, then a zoomed grid (module docstring).
 
     The zoom step re-grids ``(phi, delta)`` with ``zoom x zoom`` points over
@@ -373,6 +386,8 @@ def fit_varpro(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5, 
     nl = (3, 4, 6)
     axes = [np.linspace(lo[i], hi[i], m) if hi[i] > lo[i] else np.array([lo[i]]) for i, m in zip(nl, grid, strict=True)]
     stride = -(-len(data) // GRID_MAX_SAMPLES)
+    if data.cycle is not None:  # several cycles: the grid only picks start points, a subsample of them does
+        stride = max(stride, -(-len(data) // GRID_MAX_SAMPLES_CYCLES))
     grid_data = data.every(stride)
     if stride > 1:
         _log.info("varpro: grid search on every %d-th of %d in-soil samples (GRID_MAX_SAMPLES %d)", stride,
@@ -420,8 +435,17 @@ def fit_varpro(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5, 
         nu, tau = noise_per_effective_sample([rw * wt * (f_t - data.y_t), rw * wn * (f_n - data.y_n)],
                                              int(np.sum(hi > lo)))
         if nu > 0.0:
-            prior = weak_prior(lo, hi, nu, initial)
-            r = refine(data, best.x, lo, hi, lam, counter, max_nfev=max_nfev, prior=prior)
+            if prior_moments is None:
+                prior = weak_prior(lo, hi, nu, initial)
+                r = refine(data, best.x, lo, hi, lam, counter, max_nfev=max_nfev, prior=prior)
+            else:  # a literature prior (priors.py): also start from its mean, the exact fit may sit in another basin
+                mean, scale = (np.asarray(v, float) for v in prior_moments)
+                prior = Prior(np.where(scale > 0, np.clip(mean, lo, hi), best.x), scale, float(nu))
+                from_mean = best.x.copy()
+                from_mean[scale > 0] = np.clip(mean, lo, hi)[scale > 0]
+                runs = [refine(data, x0, lo, hi, lam, counter, max_nfev=max_nfev, prior=prior)
+                        for x0 in (best.x, from_mean)]
+                r = min(runs, key=lambda v: v.objective)
             results.append(r)
             best = SolverResult(r.x, r.cost, r.success, r.status,
                                 f"{r.message} (MAP under the weak prior, nu {nu:.4g} N^2, tau {tau:.3g})",

@@ -33,9 +33,11 @@ from typing import Any
 import numpy as np
 
 from wheelloader.estimator import (
+    DEFAULT_OPTIONS,
     FLAG_OUT_OF_SOIL,
     BucketPath,
     CycleLog,
+    ModelOptions,
     Pile,
     SoilParams,
     WheelloaderError,
@@ -106,6 +108,9 @@ class Strategy:
     """
 
     name = "strategy"
+    #: Force-model options and bucket-load source the strategy predicts with (the paper's model by default).
+    model_options: ModelOptions = DEFAULT_OPTIONS
+    fill: str = "log"
 
     def __init__(self, nominal: SoilParams, rate: float = 60.0) -> None:
         self.params = nominal
@@ -151,11 +156,18 @@ class Calibrating(Strategy):
     keep_untrustworthy : bool
         Adopt a fit whose verdict is "not trustworthy" (:attr:`Calibration.trustworthy`) even when an
         earlier trustworthy fit exists. Default False: keep the earlier fit and say so.
+    options : ModelOptions, optional
+        Force-model options of the calibration and of the strategy's predictions (opt-in terms; the
+        planner plans with the paper's model whatever they are).
+    fill : str
+        Bucket-load source of the calibration and predictions (``"log"`` or ``"model"``, see
+        :func:`~wheelloader.estimator.calibrate`).
     """
 
     def __init__(self, nominal: SoilParams, method: str = "default", planner: Any = None, rate: float = 60.0,
                  name: str | None = None, *, window: int | None = None, forgetting: float | None = None,
-                 keep_untrustworthy: bool = False) -> None:
+                 keep_untrustworthy: bool = False, options: ModelOptions | None = None,
+                 fill: str = "log") -> None:
         super().__init__(nominal, rate)
         self.method = method
         self.planner = planner
@@ -171,6 +183,8 @@ class Calibrating(Strategy):
         self.window = window
         self.forgetting = forgetting
         self.keep_untrustworthy = keep_untrustworthy
+        self.model_options = DEFAULT_OPTIONS if options is None else options
+        self.fill = fill
         self.recent: list[CycleLog] = []
 
     def update(self, log: CycleLog, true_soil: SoilParams) -> tuple[float, bool, str]:
@@ -179,7 +193,8 @@ class Calibrating(Strategy):
         cycles = self.recent if len(self.recent) > 1 else log
         try:
             result = calibrate(cycles, method=self.method, initial=self.previous,
-                               forgetting=self.forgetting if len(self.recent) > 1 else None)
+                               forgetting=self.forgetting if len(self.recent) > 1 else None,
+                               options=self.model_options, fill=self.fill)
         except WheelloaderError as exc:
             return time.perf_counter() - start, False, f"calibration failed, previous parameters kept: {exc}"
         seconds = time.perf_counter() - start
@@ -278,7 +293,7 @@ def run_loop(env: Any, strategy: Strategy, cycles: int = 5, seed: int = 0,
                 violations += 1
         log = base.last_cycle_log() if terminated else _finish(env)
         logs.append(log)
-        quality = predict(params_used, log).quality
+        quality = predict(params_used, log, options=strategy.model_options, fill=strategy.fill).quality
         fill = float(info["fill_volume"])
         energy = float(info["energy_soil"] + info["energy_payload"])
         records.append(CycleRecord(

@@ -26,12 +26,14 @@ DEMO_PLANTS = ("fee-env", "mpm")
 
 def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner: bool = True,
              progress: Any = None, mpc: bool = False, plant: str = "fee-env",
-             resolution: float = 0.02) -> dict[str, Any]:
+             resolution: float = 0.02, window: int | None = None) -> dict[str, Any]:
     """Run the loop (ours and the fixed baseline), write figures and ``summary.json`` into ``out``.
 
     ``plant="mpm"`` digs every cycle in the plane-strain MPM continuum (grid ``resolution`` [m]; about 3
     minutes per cycle at 2 cm) with the same hidden soil, through :func:`wheelloader.plant_loop.run_plant_loop`
     (each cycle saved under ``out/cycles/`` as it finishes; a second run into the same folder resumes).
+    ``window``: ours calibrates on the last ``window`` cycles together (default
+    :data:`wheelloader.adaptation.DEFAULT_WINDOW`).
     """
     if plant not in DEMO_PLANTS:
         from wheelloader.estimator import ParameterError
@@ -45,6 +47,7 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
 
     import wheelloader.envs  # noqa: F401  (registers the env ids)
     from wheelloader.adaptation import (
+        DEFAULT_WINDOW,
         LOOP_ENV_KWARGS,
         NOMINAL_SOIL,
         Calibrating,
@@ -63,7 +66,8 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
         say("building the planner's CasADi NLPs (once, ~10 s) ...")
     planner = default_planner(mpc=mpc) if use_planner else None
     results = {}
-    for strategy in (Calibrating(preset(NOMINAL_SOIL), planner=planner), FixedBezier(preset(NOMINAL_SOIL))):
+    for strategy in (Calibrating(preset(NOMINAL_SOIL), planner=planner, window=window),
+                     FixedBezier(preset(NOMINAL_SOIL))):
         say(f"running {cycles} cycles, strategy '{strategy.name}', plant {plant} ...")
         if plant == "fee-env":
             env = gym.make("wheelloader/BucketLoading-v0", soil=hidden, **LOOP_ENV_KWARGS)
@@ -78,6 +82,7 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
                                            cycles=cycles, seed=seed, cache=out / "cycles" / strategy.name,
                                            progress=say)
         results[strategy.name] = (records, logs)
+    results_window = DEFAULT_WINDOW if window is None else window
     files = write_figures(out, results)
     (out / "table.md").write_text(markdown_table(results["ours"][0], results["fixed"][0]) + "\n", encoding="utf-8")
     ours = results["ours"][0]
@@ -88,6 +93,7 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
                   {"kind": "mpm", "soil": hidden.to_dict(), "resolution_m": resolution,
                    "pile": "trapezoid 30 deg, 1 m high", "metrics": "energy and fill measured by the plant"}),
         "nominal_soil": NOMINAL_SOIL,
+        "calibration_window": results_window,
         "planner": ("none (Bezier path every cycle)" if planner is None
                     else "CasADi plan + MPC" if mpc else "CasADi plan, tracked"),
         "cycles": {name: [r.to_dict() for r in recs] for name, (recs, _) in results.items()},

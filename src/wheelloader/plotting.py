@@ -162,6 +162,9 @@ def plot_prediction(prediction: Prediction, pile=None, out: str | Path | None = 
     if prediction.observed_tangential is not None:
         ax.plot(t, np.hypot(prediction.observed_tangential, prediction.observed_normal), color="0.5", lw=1,
                 label="observed F_R")
+    if prediction.band is not None:
+        ax.fill_between(t, prediction.band.lower_r, prediction.band.upper_r, color="C0", alpha=0.2, lw=0,
+                        label=f"{prediction.band.level:.0%} band of F_R")
     ax.plot(t, prediction.resultant, lw=1.8, label="predicted F_R")
     ax.plot(t, prediction.tangential, lw=1, ls="--", label="predicted F_T")
     ax.plot(t, prediction.normal, lw=1, ls=":", label="predicted F_N")

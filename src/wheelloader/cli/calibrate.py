@@ -57,7 +57,11 @@ def register(subparsers: Any) -> None:
     q.add_argument("-o", "--output", default="forces.csv", help="output CSV (default: %(default)s)")
     q.add_argument("--pile", help="pile: JSON file with {\"x\": [...], \"z\": [...]} (or a cycle-log sidecar), "
                                   f"or a preset: {', '.join(PILE_PRESETS)} (default: the log's pile, else trapezoid)")
-    q.add_argument("--plot", help="write a figure of the predicted (and observed) forces (PNG)")
+    q.add_argument("--plot", help="write a figure of the predicted (and observed) forces (PNG), with the "
+                                  "prediction band when the params file has one")
+    q.add_argument("--band", type=float, default=0.9,
+                   help="level of the prediction band (from the calibration's parameter covariance and residual "
+                        "noise model; params.json from 'wheelloader calibrate' only) (default: %(default)s; 0: none)")
     add_strict_flag(q, "refuse parameters outside the physical domain (exit status 2) instead of warning")
     add_force_flag(q)
     q.set_defaults(func=run_predict)
@@ -125,12 +129,19 @@ def run_calibrate(args: argparse.Namespace) -> int:
 
 def run_predict(args: argparse.Namespace) -> int:
     """Handler of ``wheelloader predict``."""
-    from wheelloader.estimator import CycleLog, load_path_csv, predict
+    import numpy as np
+
+    from wheelloader.estimator import CycleLog, ParameterError, load_path_csv, predict
 
     path_file = Path(args.path)
     inputs = [args.params, path_file, sidecar_of(path_file), args.pile]
     check_outputs([("-o/--output", args.output), ("--plot", args.plot)], inputs, args.force)
+    from wheelloader.estimator.calibration.result import SavedModel, load_saved_model
+
+    if not (0.0 <= args.band < 1.0):
+        raise ParameterError(f"--band must be a level in [0, 1) (0: no band), got {args.band!r}")
     soil = check_physical(load_soil(args.params), args.params, args.strict)
+    saved = load_saved_model(args.params) if Path(args.params).is_file() else SavedModel()
     pile = None if args.pile is None else load_pile(args.pile)
     start = time.perf_counter()
     if is_cycle_log(path_file):
@@ -140,7 +151,9 @@ def run_predict(args: argparse.Namespace) -> int:
         target = load_path_csv(path_file)
         pile = load_pile(None) if pile is None else pile
         pile_used = pile
-    pred = predict(soil, target, pile=pile)
+    band = args.band if args.band > 0.0 and saved.band_model is not None else None
+    pred = predict(soil, target, pile=pile, options=saved.options, fill=saved.fill, band=band,
+                   band_model=saved.band_model)
     elapsed = time.perf_counter() - start
     with atomic_output(args.output) as tmp:
         pred.save_csv(tmp, overwrite=True)
@@ -153,6 +166,18 @@ def run_predict(args: argparse.Namespace) -> int:
         print("samples outside the model's validity domain: " + ", ".join(f"{k}: {v}" for k, v in flagged.items()))
     if pred.quality is not None:
         print(pred.quality.describe())
+    if pred.band is not None:
+        mask = pred.state.depth > 0.0
+        line = f"{pred.band.level:.0%} prediction band computed"
+        if np.any(mask):
+            half = float(np.mean(pred.band.upper_r[mask] - pred.resultant[mask]))
+            line = f"{pred.band.level:.0%} prediction band: mean half-width {half:.0f} N in soil"
+        if pred.observed_tangential is not None and np.any(mask):
+            obs = np.hypot(pred.observed_tangential, pred.observed_normal)
+            line += f"; covers {pred.band.coverage(obs, mask):.0%} of the measured in-soil F_R"
+        print(line)
+    elif args.band > 0.0:
+        print("no prediction band: the params file holds no band model (write it with 'wheelloader calibrate')")
     print(f"forces written to {args.output}")
     if args.plot:
         from wheelloader.plotting import plot_prediction

@@ -21,6 +21,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--seed", type=int, default=0, help="random seed of the plant (default: %(default)s)")
     p.add_argument("--no-planner", action="store_true",
                    help="dig the Bezier path every cycle (calibration and prediction only)")
+    p.add_argument("--window", type=int, default=None,
+                   help="calibrate on the last WINDOW cycles together (default: "
+                        "wheelloader.adaptation.DEFAULT_WINDOW)")
     p.add_argument("--mpc", action="store_true",
                    help="execute each plan with the receding-horizon MPC instead of tracking it (slower)")
     p.add_argument("--plant", choices=("fee-env", "mpm"), default="fee-env",
@@ -41,10 +44,12 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(f"--cycles must be between 1 and 50, got {args.cycles}")
     if not 0.005 <= args.resolution <= 0.1:
         raise ParameterError(f"--resolution must be between 0.005 and 0.1 m, got {args.resolution}")
+    if args.window is not None and args.window < 1:
+        raise ParameterError(f"--window must be a positive number of cycles, got {args.window}")
     out = fresh_directory(args.out, args.force)
     summary = run_demo(out, cycles=args.cycles, seed=args.seed, use_planner=not args.no_planner,
                        progress=lambda line: print(line, flush=True), mpc=args.mpc, plant=args.plant,
-                       resolution=args.resolution)
+                       resolution=args.resolution, window=args.window)
     print()
     print(summary["table"])
     print()
