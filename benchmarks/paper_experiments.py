@@ -88,7 +88,7 @@ def run(args) -> dict:
     cals, walls = calibrate_all(train_logs, args.methods, args.ray, args.ray_cpus)
 
     results: dict = {"benchmark": "paper_experiments", "plant": results_plant, "machine": machine_info(),
-                     "settings": vars(args),
+                     "settings": {k: v for k, v in vars(args).items() if k not in ("ray", "ray_cpus")},
                      "filter": {"kind": "gaussian", "sigma_s": args.sigma, "mode": "nearest"},
                      "rmse_definition": "F_R RMSE over in-soil samples; % of mean observed |F_R| (same samples)"}
     # ---- Table 3 and Fig. 8: gravel, train path 1, test paths 2-4

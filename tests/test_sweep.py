@@ -163,3 +163,41 @@ def test_mpm_generator_reports_a_failed_case_and_keeps_the_others(tmp_path, monk
     log = (tmp_path / "progress.log").read_text()
     assert "FAILED unit 0 (dirt_path1) failed 2x: RuntimeError: solver diverged" in log
     assert (tmp_path / "sand_path1.csv").exists() and not (tmp_path / "dirt_path1.csv").exists()
+
+
+def _fake_reference_run(case, cache_dir=None, work_dir=None, progress=None):
+    """Stands in for a Yade run of ``case``: one tiny cycle log per path, its raw record and manifest entry."""
+    from wheelloader.estimator import Pile, paper_paths
+    from wheelloader.references.dem import ReferenceRun
+
+    if case.config.soil == "dirt":
+        raise RuntimeError("yade crashed")
+    logs, raws, entries = [], [], []
+    for i, stem in enumerate(case.file_stems()):
+        path = paper_paths()[0]
+        n = len(path)
+        logs.append(CycleLog(path, np.full(n, 10.0), np.full(n, 5.0), Pile.trapezoid(),
+                             fill_volume=np.zeros(n), metadata={"name": stem}))
+        raws.append("t,Fx,Fz,contacts\n0,0,0,0\n")
+        entries.append({"name": stem, "case": case.name, "csv": f"{stem}.csv", "raw_csv": f"raw/{stem}.csv",
+                        "cycle": i + 1})
+    return ReferenceRun(case, tuple(logs), tuple(raws), tuple(entries))
+
+
+def test_dem_reference_command_runs_cases_through_the_sweep(tmp_path, monkeypatch, capsys):
+    import wheelloader.references.dem as dem
+    from wheelloader.cli import main
+
+    monkeypatch.setattr(dem, "run_reference", _fake_reference_run)
+    argv = ["dem", "reference", "--out", str(tmp_path), "--ray", "off", "--only"]
+    assert main([*argv, "gravel_path1", "gravel_dual"]) == 0
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    assert [e["name"] for e in manifest["cycles"]] == ["gravel_path1", "gravel_dual_cycle1", "gravel_dual_cycle2"]
+    assert (tmp_path / "raw" / "gravel_dual_cycle2.csv").read_text().startswith("t,Fx,Fz")
+    assert CycleLog.load(tmp_path / "gravel_path1.csv").metadata["name"] == "gravel_path1"
+    assert "[2/2] gravel_dual" in capsys.readouterr().out
+    # a failing case is retried once, reported, and does not stop the others; exit status 1
+    assert main([*argv, "dirt_path1", "gravel_path2"]) == 1
+    err = capsys.readouterr().err
+    assert "dirt_path1" in err and "RuntimeError: yade crashed" in err and "1 of 2 cases failed" in err
+    assert (tmp_path / "gravel_path2.csv").exists() and not (tmp_path / "dirt_path1.csv").exists()

@@ -139,8 +139,8 @@ def format_duration(seconds: float) -> str:
 
 
 class _Progress:
-    """Units done / total with the elapsed time and an ETA (mean time per finished unit x units left,
-    divided by the workers)."""
+    """Units done / total with the elapsed time and an ETA (elapsed wall time per finished unit x units
+    left: with parallel workers the rate already includes the parallelism)."""
 
     def __init__(self, total: int, sink: Callable[[str], None] | None) -> None:
         self.total, self.done, self.sink = total, 0, sink
@@ -227,6 +227,9 @@ def run_sweep(units: Sequence[Unit], ray: str = OFF, *, ray_cpus: int | None = N
         raise ParameterError(str(exc)) from None
     if ray_cpus is not None and (isinstance(ray_cpus, bool) or not isinstance(ray_cpus, int) or ray_cpus < 1):
         raise ParameterError(f"ray_cpus must be an int >= 1, got {ray_cpus!r}")
+    if ray_cpus is not None and mode not in (OFF, LOCAL):
+        raise ParameterError(f"ray_cpus (--ray-cpus) applies to --ray local only; a cluster ({mode}) has its own "
+                             "CPUs: set them with 'ray start --num-cpus'")
     if mode == OFF:
         return _run_serial(units, retries, on_result, describe, progress)
     return _run_ray(units, mode, ray_cpus, retries, on_result, describe, progress)
