@@ -231,7 +231,7 @@ def run_plan(args: argparse.Namespace) -> int:
             plot_plan(path, {"t": path.t, "F_T": forces.tangential, "F_N": forces.normal}, pile, opt.loader,
                       tmp, baseline=baseline, pareto=points or None, chosen_weight=lam,
                       baseline_point=(base_check.fill, base_check.energy), plan_point=(check.fill, check.energy),
-                      title=f"plan for {Path(str(args.params)).name}, lambda = {lam:g}/kJ")
+                      title=f"plan for {Path(str(args.params)).name}, λ = {lam:g}/kJ")
         print(f"figure written to {args.plot}")
     if not ok:
         print("the plan was written but is NOT usable: it fails the NumPy check (see above and the summary)")
