@@ -4,24 +4,12 @@ Everything the estimator, the environments and the planner share lives here:
 soil parameters, bucket and loader, pile geometry, bucket paths, contact
 kinematics, the validity domain and failure angle, the force model and cycle
 logs. Calibration and prediction are the subpackage
-:mod:`wheelloader.estimator.calibration`, re-exported here.
+:mod:`wheelloader.estimator.calibration`, re-exported here and imported on
+first use (it needs SciPy's optimisers, which the envs and the planner do not).
 """
 
-from .calibration import (
-    DEFAULT_METHOD,
-    METHOD_ALIASES,
-    METHODS,
-    Calibration,
-    FitQuality,
-    FitWarning,
-    Prediction,
-    StageResult,
-    Uncertainty,
-    calibrate,
-    canonical_method,
-    load_params,
-    predict,
-)
+from typing import TYPE_CHECKING
+
 from .cyclelog import CycleLog, load_path_csv, save_path_csv
 from .errors import CalibrationError, CycleLogError, ParameterError, PlanningError, WheelloaderError
 from .force_model import (
@@ -43,6 +31,44 @@ from .soil import PAPER_BOUNDS, PARAMETER_NAMES, PRESET_NAMES, SoilParams, as_so
 from .soil_vector import SOIL_VECTOR_NAMES, soil_from_vector, soil_vector
 from .synthetic import random_bezier_path, random_soil, synthetic_cycle
 from .validity import FLAG_OUT_OF_SOIL
+
+if TYPE_CHECKING:
+    from .calibration import (
+        DEFAULT_METHOD,
+        METHOD_ALIASES,
+        METHODS,
+        Calibration,
+        FitQuality,
+        FitWarning,
+        Prediction,
+        StageResult,
+        Uncertainty,
+        calibrate,
+        canonical_method,
+        load_params,
+        predict,
+    )
+
+#: Names re-exported from :mod:`.calibration`, imported on first access (PEP 562).
+_CALIBRATION_NAMES = frozenset({
+    "DEFAULT_METHOD", "METHOD_ALIASES", "METHODS", "Calibration", "FitQuality", "FitWarning", "Prediction",
+    "StageResult", "Uncertainty", "calibrate", "canonical_method", "load_params", "predict",
+})
+
+
+def __getattr__(name: str):
+    if name in _CALIBRATION_NAMES:
+        from . import calibration
+
+        value = getattr(calibration, name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | _CALIBRATION_NAMES)
+
 
 __all__ = [
     "Bucket", "BucketPath", "Calibration", "CalibrationError", "CarveResult", "ContactState", "CycleLog",

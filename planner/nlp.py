@@ -30,8 +30,9 @@ acceleration ramps).
   ``z_N >= z_s(x_N) + end_clearance``, while past the face every earlier node
   stays at most ``stay_clearance`` above the surface (no hop out and back in).
 
-The NLP is built once per (intervals, bucket, loader, options) and cached;
-each call only passes new parameters, bounds and the initial guess.
+The NLP is built once per (intervals, bucket, loader, options) and cached, in
+memory and on disk (:mod:`.nlp_cache`: once per machine); each call only
+passes new parameters, bounds and the initial guess.
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ from wheelloader.envs.bookkeeping import step_work
 from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, Loader
 
 from .casadi_model import casadi_forces, smooth_pos
+from .nlp_cache import load_or_build
 from .options import PlannerOptions
 
 __all__ = ["VALIDITY_RELAX", "build"]
@@ -61,10 +63,11 @@ def _smooth_work(v):
 
 
 def build(bucket: Bucket, loader: Loader, options: PlannerOptions):
-    """The solver, its functions (``forces``, ``outputs``) and the constraint layout, built once per key."""
+    """The solver, its functions (``forces``, ``outputs``) and the constraint layout, built once per key
+    (in memory for this process, on disk for the machine: :mod:`.nlp_cache`)."""
     key = (bucket, loader, options)
     if key not in _CACHE:
-        _CACHE[key] = _build_nlp(bucket, loader, options)
+        _CACHE[key] = load_or_build(bucket, loader, options, _build_nlp)
     return _CACHE[key]
 
 

@@ -149,3 +149,18 @@ def test_help_imports_no_optimiser_or_plotting():
             "heavy = [m for m in ('scipy', 'matplotlib', 'casadi', 'wheelloader.estimator') if m in sys.modules]\n"
             "assert not heavy, heavy\n")
     subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)
+
+
+def test_envs_and_planner_import_no_optimiser():
+    """``import wheelloader.envs`` (and the planner) leave calibration and SciPy's optimisers unimported until a
+    calibration name is used; then ``wheelloader.estimator`` re-exports it as before."""
+    import subprocess
+    import sys
+
+    code = ("import sys\nimport wheelloader.envs, wheelloader.planner\n"
+            "heavy = [m for m in ('scipy.optimize', 'scipy.ndimage', 'wheelloader.estimator.calibration')"
+            " if m in sys.modules]\nassert not heavy, heavy\n"
+            "from wheelloader.estimator import calibrate, Calibration\n"
+            "import wheelloader.estimator.calibration as c\nassert calibrate is c.calibrate\n"
+            "assert 'load_params' in dir(sys.modules['wheelloader.estimator'])\n")
+    subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)

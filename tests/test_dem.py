@@ -202,3 +202,18 @@ def test_reference_physical_sanity():
     seed = report["seed (gravel_path1_seed2 / gravel_path1)"]
     assert seed["carried_mass_ratio"] == pytest.approx(1.0, abs=0.1)
     assert seed["mean_resultant_ratio"] == pytest.approx(1.0, abs=0.3)
+
+
+def test_sanity_command_prints_a_summary_and_writes_the_report(tmp_path, capsys):
+    """``wheelloader dem sanity``: a few summary lines on stdout, every cycle's figures in the JSON file."""
+    from wheelloader.cli import main
+
+    _manifest()
+    out = tmp_path / "sanity.json"
+    assert main(["dem", "sanity", "--data", str(REFERENCE), "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert len(text.splitlines()) <= 12 and "{" not in text
+    assert "mean F_R grows with mean depth" in text and f"full report written to {out}" in text
+    report = json.loads(out.read_text())
+    assert set(report["cycles"]) >= {"gravel_path1", "gravel_path2"}
+    assert main(["dem", "sanity", "--data", str(REFERENCE), "--json", str(out)]) == 2  # no --force: kept

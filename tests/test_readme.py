@@ -5,6 +5,8 @@ from __future__ import annotations
 import importlib.util
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -49,3 +51,196 @@ def test_every_import_in_the_docs_works():
             # a line of the optional extras' docs works once the extra is installed (its own tests check that)
             if exc.name not in optional:
                 raise
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Every code block of the README runs as written.
+#
+# Shell blocks run command by command, in README order, in one temporary directory that holds a copy of data/
+# and links to benchmarks/ and dem/ (the README's commands run from a clone's root), with this interpreter's
+# environment first on PATH (the installed package). Python blocks run as they stand, each in a fresh
+# interpreter in the same directory. A command listed below is not run as written, for the reason given;
+# the tables are checked against the README, so they cannot go stale.
+# ---------------------------------------------------------------------------------------------------------------
+
+#: Commands that set up the environment the suite runs in, or are the suite itself.
+NOT_RUN = {
+    'python3 -m venv .venv && . .venv/bin/activate && pip install -e ".[dev]" && pytest -q -n 2':
+        "the development set-up and the test suite itself (.ci/run runs exactly this)",
+    'pip install -e ".[dev]"': "installs the package under test (done before the suite runs)",
+    "pytest -q -n 2": "the test suite itself",
+    "pytest -q -m slow": "the slow tests (pytest -m slow runs them)",
+    'pip install -e ".[mpm]"': "installs the optional mpm extra (.ci/run does in CI)",
+    "bash dem/install_yade.sh": "installs Yade with apt (.ci/run does in CI)",
+}
+#: Commands run only in the slow test (``pytest -m slow``), as written.
+SLOW = {
+    "python3 -m venv .venv && . .venv/bin/activate && pip install . && wheelloader demo":
+        "a fresh virtual environment and a non-editable install (test_readme_install_and_demo)",
+    "python benchmarks/mpm_verification.py": "MPM simulations of minutes each",
+    "wheelloader dem reference --only gravel_path1": "a Yade run of 1-4 minutes",
+}
+#: Commands that need an optional extra: (module or executable, how to install it).
+NEEDS = {
+    "python benchmarks/mpm_verification.py": ("taichi", 'pip install -e ".[mpm]"'),
+    "wheelloader dem reference": ("yade", "bash dem/install_yade.sh"),
+}
+#: Read-only commands about the checkout itself: run in the repository root.
+IN_REPO_ROOT = {"ruff check .": "lints the checkout"}
+#: Long benchmarks: the default suite runs them with these arguments added (the slow test as written).
+FAST_VARIANT = {
+    "python benchmarks/paper_experiments.py": " --methods default",
+}
+
+
+def _blocks() -> list[tuple[int, str, str]]:
+    """(line, language, text) of every fenced code block of the README."""
+    import re
+
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    return [(text[: m.start()].count("\n") + 1, m.group(1), m.group(2))
+            for m in re.finditer(r"^```(\w*)\n(.*?)^```", text, re.S | re.M)]
+
+
+def _commands(block: str) -> list[str]:
+    return [ln.strip() for ln in block.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+
+
+def _match(command: str, table: dict) -> str | None:
+    return next((key for key in table if command.startswith(key)), None)
+
+
+def _available(requirement: str) -> bool:
+    import importlib.util
+    import shutil
+
+    return shutil.which(requirement) is not None or importlib.util.find_spec(requirement) is not None
+
+
+def _workspace(path: Path) -> dict[str, str]:
+    """A directory like a clone's root (data/ copied, benchmarks/ and dem/ linked) and the environment."""
+    import os
+    import shutil
+    import sys
+
+    shutil.copytree(ROOT / "data", path / "data")
+    for name in ("benchmarks", "dem"):
+        (path / name).symlink_to(ROOT / name, target_is_directory=True)
+    env = dict(os.environ)
+    env["PATH"] = str(Path(sys.executable).parent) + os.pathsep + env.get("PATH", "")
+    env["WHEELLOADER_NLP_CACHE"] = str(path / ".nlp-cache")
+    env["MPLBACKEND"] = "Agg"
+    return env
+
+
+def _run(command: str, cwd: Path, env: dict[str, str], what: str) -> None:
+    import subprocess
+
+    proc = subprocess.run(["bash", "-c", command], cwd=cwd, env=env, capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, (f"{what} failed (exit status {proc.returncode}): {command}\n"
+                                  f"--- stdout ---\n{proc.stdout[-3000:]}\n--- stderr ---\n{proc.stderr[-3000:]}")
+
+
+def _python(block: str, cwd: Path, env: dict[str, str], what: str) -> None:
+    import sys
+
+    script = cwd.parent / f"readme_block_{what.split()[-1]}.py"  # beside the workspace, not in it
+    script.write_text(block, encoding="utf-8")
+    _run(f"{sys.executable} {script}", cwd, env, what)
+
+
+def test_readme_blocks_are_known():
+    """Every block is bash, python or text (a diagram), and every table entry above matches a README line."""
+    blocks = _blocks()
+    assert blocks and {lang for _, lang, _ in blocks} <= {"bash", "python", "text"}, \
+        [(line, lang) for line, lang, _ in blocks if lang not in ("bash", "python", "text")]
+    commands = [c for _, lang, block in blocks if lang == "bash" for c in _commands(block)]
+    for table in (NOT_RUN, SLOW, NEEDS, IN_REPO_ROOT, FAST_VARIANT):
+        for key in table:
+            assert any(c.startswith(key) for c in commands), f"no README command starts with {key!r}"
+
+
+def _run_readme(path: Path, slow: bool) -> int:
+    """Run the README's blocks in ``path``; ``slow``: also the slow commands, and benchmarks as written."""
+    env = _workspace(path)
+    ran = 0
+    for line, lang, block in _blocks():
+        what = f"README block at line {line}"
+        if lang == "python":
+            _python(block, path, env, what)
+            ran += 1
+        elif lang == "bash":
+            for command in _commands(block):
+                if _match(command, NOT_RUN) or command.startswith("python3 -m venv"):
+                    continue  # the venv line: test_readme_install_and_demo
+                if _match(command, SLOW) and not slow:
+                    continue
+                need = _match(command, NEEDS)
+                if need and not _available(NEEDS[need][0]):
+                    continue
+                if _match(command, IN_REPO_ROOT):
+                    _run(command, ROOT, env, what)
+                    ran += 1
+                    continue
+                fast = _match(command, FAST_VARIANT)
+                extra = FAST_VARIANT[fast] if fast and not slow else ""
+                _run(command.split("#")[0].rstrip() + extra, path, env, what)
+                ran += 1
+    for expected in ("params.json", "ms.json", "forces.png", "plan.png", "slope.csv", "pareto.png", "cycle.csv",
+                     "cycle.json", "sanity.json"):
+        assert (path / expected).is_file(), expected
+    return ran
+
+
+def test_every_readme_block_runs(tmp_path):
+    """The README's shell commands and Python blocks, in order, as a new user runs them after installing."""
+    (tmp_path / "clone").mkdir()
+    assert _run_readme(tmp_path / "clone", slow=False) >= 13
+
+
+@pytest.mark.slow
+def test_every_readme_block_runs_as_written(tmp_path):
+    """The same with the long commands too, and the benchmarks without their fast variant."""
+    (tmp_path / "clone").mkdir()
+    assert _run_readme(tmp_path / "clone", slow=True) >= 13
+
+
+@pytest.mark.slow
+def test_readme_install_and_demo(tmp_path):
+    """The README's first command, verbatim, in a copy of the checkout's files: a fresh venv, ``pip install .``
+    (a non-editable install) and ``wheelloader demo``."""
+    import os
+    import shutil
+    import subprocess
+
+    files = subprocess.run(["git", "ls-files", "-co", "--exclude-standard"], cwd=ROOT, capture_output=True,
+                           text=True, check=True).stdout.split("\n")
+    clone = tmp_path / "clone"
+    for name in filter(None, files):
+        if (ROOT / name).is_file():
+            (clone / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(ROOT / name, clone / name)
+    line, _, block = _blocks()[0]
+    command = next(c for c in _commands(block) if c.startswith("python3 -m venv") and "pip install . " in c)
+    env = {k: v for k, v in os.environ.items() if k != "VIRTUAL_ENV"}
+    env["WHEELLOADER_NLP_CACHE"] = str(tmp_path / ".nlp-cache")
+    _run(command, clone, env, f"README block at line {line}")
+    assert any((clone / "wheelloader-demo").glob("*.png"))
+
+
+def test_readme_commands_not_run_in_the_default_suite():
+    """Lists, as one skip with the reasons, the README commands the default suite does not run as written."""
+    reasons = []
+    for _, lang, block in _blocks():
+        for command in _commands(block) if lang == "bash" else []:
+            shown = command.split("#")[0].rstrip()
+            if key := _match(command, NOT_RUN):
+                reasons.append(f"{shown}: {NOT_RUN[key]}")
+            elif key := _match(command, SLOW):
+                reasons.append(f"{shown}: slow, {SLOW[key]} (pytest -m slow)")
+            elif (key := _match(command, NEEDS)) and not _available(NEEDS[key][0]):
+                reasons.append(f"{shown}: needs {NEEDS[key][0]} ({NEEDS[key][1]})")
+            elif key := _match(command, FAST_VARIANT):
+                reasons.append(f"{shown}: run with{FAST_VARIANT[key]} (as written: pytest -m slow)")
+    assert reasons
+    pytest.skip("README commands not run as written here: " + "; ".join(reasons))

@@ -17,12 +17,41 @@ in :mod:`wheelloader.estimator`; this subpackage fits it:
 Everything public is re-exported from :mod:`wheelloader.estimator`.
 """
 
+from importlib import import_module
+from typing import TYPE_CHECKING
+
 from ..errors import CalibrationError
-from .api import DEFAULT_METHOD, METHOD_ALIASES, METHODS, calibrate, canonical_method
-from .prediction import Prediction, predict
-from .result import Calibration, FitQuality, SolverResult, StageResult, load_params
-from .uncertainty import Uncertainty
-from .verdict import FitWarning
+
+if TYPE_CHECKING:
+    from .api import DEFAULT_METHOD, METHOD_ALIASES, METHODS, calibrate, canonical_method
+    from .prediction import Prediction, predict
+    from .result import Calibration, FitQuality, SolverResult, StageResult, load_params
+    from .uncertainty import Uncertainty
+    from .verdict import FitWarning
+
+#: Where each public name lives; a submodule is imported on first access (PEP 562), so reading a
+#: params.json (:func:`load_params`) does not import the fitting methods and SciPy's filters.
+_HOMES = {
+    **dict.fromkeys(("DEFAULT_METHOD", "METHOD_ALIASES", "METHODS", "calibrate", "canonical_method"), ".api"),
+    **dict.fromkeys(("Prediction", "predict"), ".prediction"),
+    **dict.fromkeys(("Calibration", "FitQuality", "SolverResult", "StageResult", "load_params"), ".result"),
+    "Uncertainty": ".uncertainty",
+    "FitWarning": ".verdict",
+}
+
+
+def __getattr__(name: str):
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(home, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_HOMES))
+
 
 __all__ = ["DEFAULT_METHOD", "METHODS", "METHOD_ALIASES", "Calibration", "CalibrationError", "FitQuality", "FitWarning",
            "Prediction", "SolverResult", "StageResult", "Uncertainty", "calibrate", "canonical_method",

@@ -271,7 +271,11 @@ def plot_plan(path: BucketPath, forces: dict[str, np.ndarray], pile: Pile, loade
     ax.axhline(loader.max_lift_force / 1e3, color="tab:orange", ls=":", lw=1, label="lift limit")
     ax.set_xlabel("t [s]")
     ax.set_ylabel("force [kN]")
-    ax.legend(loc="upper left", fontsize=8)
+    # head room above the highest limit or force for the legend, so it hides neither a limit nor a curve
+    peak = max(loader.max_push_force, loader.max_lift_force, float(np.max(forces["F_T"])),
+               float(np.max(forces["F_N"]))) / 1e3
+    ax.set_ylim(min(0.0, ax.get_ylim()[0]), 1.4 * peak)
+    ax.legend(loc="upper left", fontsize=8, ncol=2)
     ax.set_title("predicted forces along the plan")
 
     if pareto:
@@ -290,22 +294,46 @@ def plot_plan(path: BucketPath, forces: dict[str, np.ndarray], pile: Pile, loade
         if front:
             ax.plot([p.energy / 1e3 for p in front], [p.fill for p in front], "-", color="tab:blue", lw=1,
                     label="Pareto front")
-        for p in pareto:
-            ax.annotate(f"{p.energy_weight:g}", (p.energy / 1e3, p.fill), fontsize=7,
-                        textcoords="offset points", xytext=(3, 3))
+        _label_weights(ax, pareto)
         if bad:
             ax.plot([p.energy / 1e3 for p in bad], [p.fill for p in bad], "x", color="tab:red", ms=8,
                     label="failed the NumPy check")
         if plan_point is not None:
-            label = "this plan" if chosen_weight is None else f"this plan (lambda = {chosen_weight:g}/kJ)"
+            label = "this plan" if chosen_weight is None else f"this plan (λ = {chosen_weight:g}/kJ)"
             ax.plot(plan_point[1] / 1e3, plan_point[0], "s", mfc="none", mec="k", ms=11, label=label)
         if baseline_point is not None:
             ax.plot(baseline_point[1] / 1e3, baseline_point[0], "D", color="tab:gray", label="Bezier baseline")
         ax.set_xlabel("energy [kJ] (NumPy re-simulation)")
-        ax.set_ylabel("fill [m^3]")
+        ax.set_ylabel("fill [m³]")
+        ax.margins(x=0.12, y=0.15)  # the weight labels stay inside the axes
         ax.legend(loc="lower right", fontsize=8)
-        ax.set_title("Pareto sweep over lambda [1/kJ]")
+        ax.set_title("Pareto sweep: fill against energy, labelled by λ [1/kJ]", fontsize=10)
     return finish_figure(fig, out, title, dpi=110)
+
+
+def _label_weights(ax: Any, points: Sequence[ParetoPoint], near: float = 0.04) -> None:
+    """Label each sweep point with its energy weight; points closer than ``near`` (a fraction of the data
+    range) share one label ("λ = 0.01, 0.05") instead of printing over each other."""
+    xy = np.array([[p.energy / 1e3, p.fill] for p in points], dtype=float)
+    finite = np.all(np.isfinite(xy), axis=1)
+    if not finite.any():
+        return
+    span = np.ptp(xy[finite], axis=0)
+    span[span <= 0.0] = 1.0
+    groups: list[list[int]] = []
+    for i in np.flatnonzero(finite):
+        for group in groups:
+            if np.all(np.abs((xy[i] - xy[group[0]]) / span) < near):
+                group.append(int(i))
+                break
+        else:
+            groups.append([int(i)])
+    for group in groups:
+        text = "λ = " + ", ".join(f"{points[i].energy_weight:g}" for i in sorted(group,
+                                                                             key=lambda i: points[i].energy_weight))
+        x, y = xy[group].mean(axis=0)
+        ax.annotate(text, (x, y), fontsize=7, textcoords="offset points", xytext=(0, -13), ha="center",
+                    bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8})
 
 
 def new_figure(rows: int = 1, cols: int = 2, size: tuple[float, float] = (11, 4)) -> tuple[Any, Any]:

@@ -7,7 +7,6 @@ figures of a reference directory).
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -109,10 +108,39 @@ def _cmd_sanity(args: Any) -> int:
                              "reference directory)")
     check_outputs([("--json", args.json)], [data / "manifest.json"], args.force)
     report = sanity_report(data)
-    if args.json:
-        write_json(args.json, report)
-    print(json.dumps(report, indent=1))
+    write_json(args.json, report)
+    for line in sanity_summary(report, data):
+        print(line)
+    print(f"full report written to {args.json}")
     return 0
+
+
+def sanity_summary(report: dict[str, Any], data: Path | str) -> list[str]:
+    """A few lines of the sanity report (:func:`~wheelloader.references.dem.sanity_report`) for a person."""
+    cycles = report.get("cycles", {})
+    f = report.get("filter", {})
+    lines = [f"DEM reference {data}: {len(cycles)} cycles (filter {f.get('kind', '?')}, "
+             f"sigma {f.get('sigma_s', float('nan')):g} s)"]
+    zero = {n: c["no_contact_zero_fraction"] for n, c in cycles.items() if "no_contact_zero_fraction" in c}
+    if zero:
+        worst = min(zero, key=zero.get)
+        exceptions = len(report.get("zero force out of contact", {}))
+        lines.append(f"force exactly zero out of contact: in {min(zero.values()):.0%}-{max(zero.values()):.0%} of "
+                     f"the contact-free windows per cycle ({len(zero) - exceptions} of {len(zero)} cycles: all; "
+                     f"lowest {worst})")
+    depth = report.get("depth", {})
+    if depth:
+        lines.append("mean F_R grows with mean depth over paths 1-4: "
+                     + ", ".join(f"{soil} {'yes' if d['monotone'] else 'NO'}" for soil, d in depth.items()))
+    mass = report.get("mass")
+    if mass:
+        lines.append(f"carried mass / (carved volume x bulk density): {mass['min_ratio']:.2f}-{mass['max_ratio']:.2f} "
+                     f"({'within' if mass['within_tolerance'] else 'OUTSIDE'} +-{mass['tolerance']:.0%})")
+    for label, ratios in report.items():
+        if isinstance(ratios, dict) and "mean_resultant_ratio" in ratios:
+            lines.append(f"{label}: mean F_R x{ratios['mean_resultant_ratio']:.2f}, "
+                         f"carried mass x{ratios['carried_mass_ratio']:.2f}")
+    return lines
 
 
 def register(subparsers: Any) -> None:
@@ -146,9 +174,11 @@ def register(subparsers: Any) -> None:
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--cache-dir", default=None)
     p.set_defaults(func=_cmd_cycle)
-    p = sub.add_parser("sanity", help="physical sanity figures of a reference directory")
+    p = sub.add_parser("sanity", help="physical sanity checks of a reference directory (summary; full report "
+                                      "as JSON)")
     p.add_argument("--data", default=str(REFERENCE_DIR),
                    help="reference directory (default: %(default)s, relative to the working directory)")
-    p.add_argument("--json", default=None, help="also write the report here")
+    p.add_argument("--json", default="sanity.json",
+                   help="where the full report (every cycle's figures) goes (default: %(default)s)")
     p.add_argument("--force", "--overwrite", dest="force", action="store_true", help="replace an existing --json")
     p.set_defaults(func=_cmd_sanity)

@@ -41,9 +41,13 @@ def load_pile(spec: str | None) -> Pile:
 def load_soil(spec: str) -> SoilParams:
     """Soil parameters from a params.json (as ``wheelloader calibrate`` writes it, or a bare 8-parameter
     JSON) or a soil preset name."""
-    from wheelloader.estimator import PRESET_NAMES, ParameterError, load_params
+    from wheelloader.estimator import PRESET_NAMES, ParameterError, preset
 
     path = Path(spec)
+    if spec in PRESET_NAMES and not path.exists():
+        return preset(spec)
+    from wheelloader.estimator import load_params
+
     if path.exists() or path.suffix.lower() == ".json":
         if not path.exists():
             raise ParameterError(f"params file {spec} not found")

@@ -116,6 +116,7 @@ def run_plan(args: argparse.Namespace) -> int:
         verify_plan,
     )
     from wheelloader.planner.mpc import ACCEPTED_STATUSES
+    from wheelloader.planner.nlp_cache import origin
 
     _validate(args)
     weights = _parse_weights(args.weights) if args.pareto else ()
@@ -133,6 +134,7 @@ def run_plan(args: argparse.Namespace) -> int:
     tic = time.perf_counter()
     opt = optimizer_for(options=options)
     timing["build_s"] = time.perf_counter() - tic
+    nlp_origin = origin(opt.bucket, opt.loader, opt.options) or "built earlier in this process"
     lam = opt.options.energy_weight if args.energy_weight is None else float(args.energy_weight)
     start = default_start(pile)
     duration = cycle_duration(pile, start)
@@ -179,6 +181,7 @@ def run_plan(args: argparse.Namespace) -> int:
                      "check": base_check.to_dict()},
         "pareto": [pt.to_dict() for pt in points],
         "timing_s": timing,
+        "nlp": nlp_origin,
         "files": {"csv": str(output), "plot": args.plot},
         "energy_definition": "NumPy re-simulation at the CSV rate: sum of max(0, F_T ds_t + F_N ds_n) + "
                              "max(0, W_load dz) per step (the env's bookkeeping)",
@@ -192,7 +195,8 @@ def run_plan(args: argparse.Namespace) -> int:
 
     print(f"{args.params}: planned with lambda = {lam:g}/kJ on the {args.pile or 'trapezoid'} pile, "
           f"{duration:.2f} s cycle, {opt.intervals} intervals")
-    print(f"timing: NLP build {timing['build_s'] * 1e3:.0f} ms (cached per settings), planning "
+    how = "loaded from the on-disk cache" if nlp_origin.startswith("loaded") else nlp_origin.split(" in ")[0]
+    print(f"timing: NLP {timing['build_s'] * 1e3:.0f} ms ({how}), planning "
           f"{timing['plan_s'] * 1e3:.0f} ms (IPOPT {plan.iterations} it., {plan.status}, and the NumPy check)")
     print(f"plan (NumPy re-simulation): {_describe(check.fill, cap, check.energy)}; "
           f"peak F_T {check.max_tangential / 1e3:.1f} kN, peak F_N {check.max_normal / 1e3:.1f} kN")
@@ -227,7 +231,7 @@ def run_plan(args: argparse.Namespace) -> int:
             plot_plan(path, {"t": path.t, "F_T": forces.tangential, "F_N": forces.normal}, pile, opt.loader,
                       tmp, baseline=baseline, pareto=points or None, chosen_weight=lam,
                       baseline_point=(base_check.fill, base_check.energy), plan_point=(check.fill, check.energy),
-                      title=f"plan for {Path(str(args.params)).name}, lambda = {lam:g}/kJ")
+                      title=f"plan for {Path(str(args.params)).name}, λ = {lam:g}/kJ")
         print(f"figure written to {args.plot}")
     if not ok:
         print("the plan was written but is NOT usable: it fails the NumPy check (see above and the summary)")

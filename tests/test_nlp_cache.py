@@ -1,0 +1,125 @@
+"""The planner's on-disk NLP cache: same plans with and without it, safe against bad entries."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from wheelloader.estimator import Bucket, Loader, Pile
+from wheelloader.planner import PlannerOptions, TrajectoryOptimizer, cycle_duration, default_start, nlp, nlp_cache
+
+#: A small NLP (10 intervals) keeps the builds of these tests short.
+OPTIONS = PlannerOptions(intervals=10)
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    """A fresh cache directory and no NLP of this process's memory cache."""
+    monkeypatch.setenv(nlp_cache.ENV_VAR, str(tmp_path / "nlp"))
+    monkeypatch.setattr(nlp, "_CACHE", {})
+    return tmp_path / "nlp"
+
+
+def _plan(options=OPTIONS):
+    pile = Pile.trapezoid()
+    start = default_start(pile)
+    return TrajectoryOptimizer(options=options).solve("gravel", pile, start, cycle_duration(pile, start))
+
+
+def _entries(directory):
+    return sorted(directory.glob("nlp-*.casadi"))
+
+
+def _same(a, b):
+    for name in ("t", "x", "z", "blade_angle", "fill", "vx", "vz", "omega", "tangential", "normal"):
+        if hasattr(a, name):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert a.energy == b.energy and a.objective == b.objective and a.iterations == b.iterations
+    assert a.status == b.status
+
+
+def test_plans_are_bit_identical_built_loaded_and_without_cache(cache, monkeypatch):
+    built = _plan()
+    assert "built and cached" in nlp_cache.origin(Bucket(), Loader(), OPTIONS)
+    assert len(_entries(cache)) == 1
+    monkeypatch.setattr(nlp, "_CACHE", {})
+    loaded = _plan()
+    assert nlp_cache.origin(Bucket(), Loader(), OPTIONS).startswith("loaded from")
+    monkeypatch.setenv(nlp_cache.ENV_VAR, "off")
+    monkeypatch.setattr(nlp, "_CACHE", {})
+    uncached = _plan()
+    assert nlp_cache.origin(Bucket(), Loader(), OPTIONS) == "built (cache off)"
+    _same(built, loaded)
+    _same(built, uncached)
+    assert np.isfinite(built.x).all() and built.final_fill > 0.0
+
+
+@pytest.mark.parametrize("damage", ["truncate", "garbage", "other_key"])
+def test_a_bad_entry_is_rebuilt_not_a_crash(cache, monkeypatch, damage, caplog):
+    reference = _plan()
+    (entry,) = _entries(cache)
+    data = entry.read_bytes()
+    if damage == "truncate":
+        entry.write_bytes(data[: len(data) // 2])
+    elif damage == "garbage":
+        entry.write_bytes(b"x" * 1000 + data[-nlp_cache._TRAILER:])
+    else:  # a complete entry whose header names other settings
+        monkeypatch.setattr(nlp_cache, "cache_key", lambda *a: "0" * 64)
+        monkeypatch.setattr(nlp, "_CACHE", {})
+        _plan(PlannerOptions(intervals=10, energy_weight=0.03))  # writes nlp-000... with that key
+        monkeypatch.undo()
+        monkeypatch.setenv(nlp_cache.ENV_VAR, str(cache))
+        other = cache / ("nlp-" + "0" * 40 + ".casadi")
+        other.replace(entry)
+    monkeypatch.setattr(nlp, "_CACHE", {})
+    with caplog.at_level("WARNING"):
+        again = _plan()
+    assert "unreadable" in caplog.text
+    assert "built and cached" in nlp_cache.origin(Bucket(), Loader(), OPTIONS)
+    _same(reference, again)
+    monkeypatch.setattr(nlp, "_CACHE", {})
+    _plan()  # the rewritten entry loads
+    assert nlp_cache.origin(Bucket(), Loader(), OPTIONS).startswith("loaded from")
+
+
+def test_key_follows_the_settings_and_location_follows_the_environment(tmp_path, monkeypatch):
+    key = nlp_cache.cache_key(Bucket(), Loader(), OPTIONS)
+    assert key == nlp_cache.cache_key(Bucket(), Loader(), PlannerOptions(intervals=10))
+    assert key != nlp_cache.cache_key(Bucket(), Loader(), PlannerOptions(intervals=11))
+    assert key != nlp_cache.cache_key(Bucket(width=1.1), Loader(), OPTIONS)
+    assert key != nlp_cache.cache_key(Bucket(), Loader(), PlannerOptions(intervals=10, max_iter=99))
+    monkeypatch.delenv(nlp_cache.ENV_VAR)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert nlp_cache.cache_dir() == tmp_path / "wheelloader" / "nlp"
+    monkeypatch.setenv(nlp_cache.ENV_VAR, str(tmp_path / "elsewhere"))
+    assert nlp_cache.cache_dir() == tmp_path / "elsewhere"
+    for off in ("off", "0", "false", ""):
+        monkeypatch.setenv(nlp_cache.ENV_VAR, off)
+        assert nlp_cache.cache_dir() is None
+
+
+def test_an_unwritable_cache_only_costs_time(tmp_path, monkeypatch, caplog):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    monkeypatch.setenv(nlp_cache.ENV_VAR, str(blocker / "nlp"))
+    monkeypatch.setattr(nlp, "_CACHE", {})
+    with caplog.at_level("WARNING"):
+        plan = _plan()
+    assert "could not write the NLP cache" in caplog.text
+    assert nlp_cache.origin(Bucket(), Loader(), OPTIONS) == "built"
+    assert np.isfinite(plan.x).all()
+
+
+def test_old_entries_are_pruned(cache, monkeypatch):
+    cache.mkdir(parents=True)
+    for i in range(nlp_cache.MAX_ENTRIES + 3):
+        old = cache / f"nlp-{i:040d}.casadi"
+        old.write_bytes(b"old")
+
+        os.utime(old, (1000.0 + i, 1000.0 + i))
+    _plan()
+    names = [p.name for p in _entries(cache)]
+    assert len(names) == nlp_cache.MAX_ENTRIES
+    assert f"nlp-{0:040d}.casadi" not in names  # the least recently used went first
