@@ -120,9 +120,19 @@ def markdown(result: dict[str, Any]) -> str:
              "(median, cycles ≥ 2 / ≥ 3) | plans passing the check | between cycles (median) |",
              "|---|---|---|---|---|---|---|"]
     for name, m in summary.items():
+        passing = "– (Bézier)" if name == "fixed" else f"{m['plans_passing']}/{m['cycles']}"
         lines.append(f"| {name} | {m['cycles']} | {m['energy_per_m3_kJ']:.1f} kJ/m³ | {m['mean_fill_fraction']:.0%} | "
                      f"{m['next_cycle_rmse_percent']:.1f} / {m['next_cycle_rmse_percent_from_cycle3']:.1f} % | "
-                     f"{m['plans_passing']}/{m['cycles']} | {m['median_between_cycles_s']:.2f} s |")
+                     f"{passing} | {m['median_between_cycles_s']:.2f} s |")
+    lines += ["", "| per cycle: kJ/m³ (fill) | " + " | ".join(f"cycle {k}" for k in range(1, s["cycles"] + 1)) + " |",
+              "|---|" + "---|" * s["cycles"]]
+    for name in summary:
+        cells = []
+        for k in range(1, s["cycles"] + 1):
+            sel = [r for r in result["rows"] if r["strategy"] == name and r["cycle"] == k]
+            energy, fill = sum(r["energy_J"] for r in sel), sum(r["fill_m3"] for r in sel)
+            cells.append(f"{energy / fill / 1e3:.0f} ({fill / len(sel) / 0.2:.0%})" if sel and fill > 0 else "–")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
     load = result["machine"].get("loadavg_1_5_15min")
     lines += ["", f"*`python benchmarks/adaptation.py --plant {result['plant']}` ({', '.join(s['soils'])}; "
               f"{s['seeds']} seed(s); {s['cycles']} cycles; MPM dx {s['resolution']} m) at "
@@ -142,6 +152,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--resolution", type=float, default=0.02, help="MPM grid spacing [m] (verified: 0.02)")
     parser.add_argument("--threads", type=int, default=1, help="Taichi CPU threads")
     parser.add_argument("--no-planner", action="store_true", help="dig Bezier paths only")
+    parser.add_argument("--report", action="store_true",
+                        help="only rewrite the Markdown and the figure from OUT/plant_adaptation.json")
     parser.add_argument("--quick", action="store_true",
                         help="smoke run: gravel, 1 seed, 1 cycle, fixed and ours, MPM dx 6 cm")
     args = parser.parse_args(argv)
@@ -151,13 +163,51 @@ def main(argv: list[str] | None = None) -> int:
     if args.seeds < 1 or args.cycles < 1:
         parser.error("--seeds and --cycles must be >= 1")
     out = Path(args.out)
+    if args.report:
+        result = json.loads((out / "plant_adaptation.json").read_text())
+        (out / "plant_adaptation.md").write_text(markdown(result))
+        plot(result, out / "plant_adaptation.png")
+        print(markdown(result))
+        return 0
     out.mkdir(parents=True, exist_ok=True)
     result = run(args)
     result["summary"] = summarise(result["rows"])
     (out / "plant_adaptation.json").write_text(json.dumps(result, indent=1, default=str))
     (out / "plant_adaptation.md").write_text(markdown(result))
+    plot(result, out / "plant_adaptation.png")
     print(markdown(result))
     return 0
+
+
+def plot(result: dict[str, Any], target: Path) -> None:
+    """Energy per m³ and fill per cycle and strategy (the plant's own measurements)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = result["rows"]
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
+    for name in dict.fromkeys(r["strategy"] for r in rows):
+        cycles = sorted({r["cycle"] for r in rows if r["strategy"] == name})
+        sel = {k: [r for r in rows if r["strategy"] == name and r["cycle"] == k] for k in cycles}
+        energy = [sum(r["energy_J"] for r in v) / sum(r["fill_m3"] for r in v) / 1e3 for v in sel.values()]
+        fill = [statistics.fmean(r["fill_fraction"] for r in v) * 100 for v in sel.values()]
+        err = [statistics.median(r["prediction_rmse_percent"] for r in v) for v in sel.values()]
+        axes[0].plot(cycles, energy, "o-", label=name)
+        axes[1].plot(cycles, fill, "o-", label=name)
+        axes[2].plot(cycles, err, "o-", label=name)
+    axes[0].set(xlabel="cycle", ylabel="energy per m³ [kJ/m³]", title="energy per m³ (plant-measured)")
+    axes[1].set(xlabel="cycle", ylabel="fill [% of 0.2 m³]", title="fill (plant-measured)")
+    axes[2].set(xlabel="cycle", ylabel="F_R RMSE [%]", title="prediction of the cycle (params planned with)")
+    for ax in axes:
+        ax.set_xticks(sorted({r["cycle"] for r in rows}))
+    axes[0].legend(fontsize=8)
+    fig.suptitle(f"Adaptation loop in the {result['plant']} plant ({', '.join(result['settings']['soils'])})",
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(target, dpi=110)
+    plt.close(fig)
 
 
 if __name__ == "__main__":
