@@ -70,7 +70,8 @@ def time_vector(envs, actions: np.ndarray, seed: int, warmup: int = 5) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(description=__doc__.replace("``", ""),  # plain text, not reST
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="results/env_speed", help="output directory")
     parser.add_argument("--seed", type=int, default=0, help="seed of the env and the actions")
     parser.add_argument("--repeats", type=int, default=3, help="repetitions per measurement (best is reported)")

@@ -389,6 +389,8 @@ def main(argv: list[str] | None = None) -> int:
 
     t_start = time.perf_counter()
     load_start = _load()
+    from wheelloader.planner.nlp_cache import origin as nlp_origin
+
     tic = time.perf_counter()
     opt = TrajectoryOptimizer()
     build_full = time.perf_counter() - tic
@@ -415,6 +417,7 @@ def main(argv: list[str] | None = None) -> int:
         "blas_threads_env": {k: os.environ.get(k) for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
                                                               "MKL_NUM_THREADS")},
         "nlp_build_seconds": {"full_cycle": build_full, "mpc": build_mpc},
+        "nlp_origin_full_cycle": nlp_origin(opt.bucket, opt.loader, opt.options),  # built, or loaded from the cache
         "load_average": {"start": load_start, "end": _load()},
         "wall_seconds": time.perf_counter() - t_start, "code": code_state(), "soils": soils,
     })

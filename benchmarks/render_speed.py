@@ -1,4 +1,4 @@
-"""Rendering speed of the bucket-loading env: ``rgb_array`` frames per second at 640 x 360.
+"""Rendering speed of the bucket-loading env: rgb_array frames per second at 640 x 360.
 
 Runs one cycle of ``wheelloader/BucketLoading-v0`` (the paper's Bezier path tracked by
 :class:`~wheelloader.envs.scripted.PathTracker`), renders after every step and times ``env.render()``

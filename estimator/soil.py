@@ -237,8 +237,20 @@ class SoilParams:
             if name in ("phi", "delta"):
                 lines.append(f"{name:>9} = {value:.4f} rad ({math.degrees(value):.2f} deg)")
             else:
-                lines.append(f"{name:>9} = {value:.6g} {PARAMETER_UNITS[name]}")
+                lines.append(f"{name:>9} = {format_value(value)} {PARAMETER_UNITS[name]}")
         return "\n".join(lines)
+
+
+#: Magnitudes below this print as 0 (a bounded solver's 1e-18 Pa cohesion is its lower bound, zero).
+PRINT_ZERO_BELOW = 1e-9
+
+
+def format_value(value: float, digits: int = 6) -> str:
+    """``value`` for people: ``digits`` significant digits, and ``0`` for magnitudes below
+    :data:`PRINT_ZERO_BELOW` (numerical dust from the solvers, e.g. ``3.7e-18 Pa``)."""
+    if math.isfinite(value) and abs(value) < PRINT_ZERO_BELOW:
+        return "0"
+    return f"{value:.{digits}g}"
 
 
 def validate_bounds(bounds: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:

@@ -164,3 +164,30 @@ def test_envs_and_planner_import_no_optimiser():
             "import wheelloader.estimator.calibration as c\nassert calibrate is c.calibrate\n"
             "assert 'load_params' in dir(sys.modules['wheelloader.estimator'])\n")
     subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)
+
+
+def test_help_texts_are_plain_text_and_name_every_pile_kind():
+    """Every ``--help`` of the command line reads as plain text (no reST roles or literals), and ``--pile``
+    lists every pile preset the commands accept."""
+    import argparse
+    import re
+
+    from wheelloader.cli import build_parser
+    from wheelloader.cli.inputs import PILE_PRESETS
+
+    def parsers(parser):
+        yield parser
+        for action in parser._actions:  # noqa: SLF001 - argparse has no public list of subparsers
+            if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+                for sub in action.choices.values():
+                    yield from parsers(sub)
+
+    seen = 0
+    for parser in parsers(build_parser()):
+        text = parser.format_help()
+        assert not re.search(r"``|:(func|class|mod|meth|attr|data):`", text), text
+        if "--pile" in text:
+            pile_help = next(a.help for a in parser._actions if "--pile" in a.option_strings)  # noqa: SLF001
+            assert all(kind in pile_help for kind in PILE_PRESETS), pile_help
+            seen += 1
+    assert seen >= 2  # predict and plan

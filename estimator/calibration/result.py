@@ -289,7 +289,8 @@ class Calibration:
                  "  " + self.quality.describe(), self.params.describe(),
                  f"  K = k_c/b + k_phi = {self.sinkage_modulus:.6g} N/m^(n+2)"]
         for s in self.stages:
-            lines.append(f"  stage {s.name}: {s.time_s * 1e3:.1f} ms, {s.nfev} evals, "
+            label = s.name if s.name.startswith("stage") else f"stage {s.name}"
+            lines.append(f"  {label}: {s.time_s * 1e3:.1f} ms, {s.nfev} evals, "
                          + ", ".join(f"{k} {v[0]:.1f} N ({v[1]:.2f} %)" for k, v in s.rmse.items()))
         cycles = self.settings.get("cycles")
         if cycles:

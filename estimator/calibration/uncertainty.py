@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from ..soil import format_value
 from .fitmodel import FIT_NAMES
 
 #: Relative standard error limits for "determined" and "weakly determined".
@@ -111,7 +112,7 @@ class Uncertainty:
         for i, n in enumerate(self.names):
             se = self.std_errors[i]
             se_txt = "   n/a    " if not np.isfinite(se) else f"{se:10.4g}"
-            lines.append(f"  {n:>9} = {self.values[i]:12.6g}  +- {se_txt}  {self.status[n]}")
+            lines.append(f"  {n:>9} = {format_value(self.values[i]):>12}  +- {se_txt}  {self.status[n]}")
         for c in self.weak_combinations:
             terms = " ".join(f"{v:+.2f}*{k}" for k, v in c["combination"].items())
             rel = c["relative_std"]
