@@ -72,7 +72,17 @@ NOT_RUN = {
     "pytest -q -m slow": "the slow tests (pytest -m slow runs them)",
     'pip install -e ".[mpm]"': "installs the optional mpm extra (.ci/run does in CI)",
     "bash dem/install_yade.sh": "installs Yade with apt (.ci/run does in CI)",
+    'pip install -e ".[scale]"': "installs the optional scale extra (.ci/run does in CI)",
+    "pip install torch==2.13.0 && pip install -e \".[rllib]\"": "installs the optional rllib extra (.ci/run does)",
+    "ray start": "starts a node of a Ray cluster (several machines)",
+    "python benchmarks/adaptation.py --seeds 10 --ray auto": "a sweep on a Ray cluster (several machines)",
+    "python -m wheelloader.references.mpm.generate --out data/mpm --threads 2 --ray auto":
+        "a sweep on a Ray cluster (several machines)",
+    "python train/rllib_ppo.py --ray auto": "RLlib training on a Ray cluster (several machines)",
+    "python benchmarks/paper_experiments.py --ray ray://": "Ray Client to a cluster (several machines)",
 }
+#: Python blocks that need an optional module (a block importing it runs only when it is installed).
+PY_NEEDS = {"ray": 'pip install -e ".[scale]"'}
 #: Commands run only in the slow test (``pytest -m slow``), as written.
 SLOW = {
     "python3 -m venv .venv && . .venv/bin/activate && pip install . && wheelloader demo":
@@ -162,11 +172,16 @@ def test_readme_blocks_are_known():
 
 def _run_readme(path: Path, slow: bool) -> int:
     """Run the README's blocks in ``path``; ``slow``: also the slow commands, and benchmarks as written."""
+    import re
+
     env = _workspace(path)
     ran = 0
     for line, lang, block in _blocks():
         what = f"README block at line {line}"
         if lang == "python":
+            needs = [m for m in PY_NEEDS if re.search(rf"^\s*(import|from) {m}\b", block, re.M)]
+            if any(not _available(m) for m in needs):
+                continue
             _python(block, path, env, what)
             ran += 1
         elif lang == "bash":
