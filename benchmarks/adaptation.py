@@ -116,8 +116,11 @@ def main(argv: list[str] | None = None) -> int:
                              "wheelloader.adaptation.DEFAULT_WINDOW)")
     parser.add_argument("--forgetting", type=float, default=None,
                         help="ours: forgetting factor of the window's cycles (default: none, all weigh 1)")
-    parser.add_argument("--keep-untrustworthy", action="store_true",
-                        help="ours: adopt fits whose verdict is 'not trustworthy' (default: keep the previous fit)")
+    parser.add_argument("--reject-untrustworthy", action="store_false", dest="keep_untrustworthy",
+                        help="ours: keep the previous fit when the new one is not trustworthy (default: adopt every "
+                             "converged fit)")
+    parser.add_argument("--keep-untrustworthy", action="store_true", dest="keep_untrustworthy",
+                        help="ours: adopt every converged fit, trustworthy or not (the default)")
     parser.add_argument("--strategies", nargs="+", help="run only these strategies (default: all)")
     add_ray_arguments(parser)
     parser.add_argument("--fill", choices=("log", "model"), default="log",

@@ -498,6 +498,7 @@ STUDY_VARIANTS = {
     "+ carried load, model fill": {"fill": "model", "carried_load": True},
     "paper model, model fill, granular prior": {"fill": "model", "prior": "granular"},
     "+ slip-mobilised friction, model fill": {"fill": "model", "slip_friction": True},
+    "paper model, model fill, cross-cycle band noise": {"fill": "model", "band_noise": "cross-cycle"},
 }
 #: Level of the prediction bands whose coverage the study measures.
 BAND_LEVEL = 0.9
@@ -559,7 +560,7 @@ def estimator_study(load, names, args) -> dict:
             per[set_name] = {}
             for train_name, train in STUDY_TRAIN.items():
                 cal = calibrate([logs[k][1] for k in train], options=options, fill=spec["fill"],
-                                prior=spec.get("prior"))
+                                prior=spec.get("prior"), band_noise=spec.get("band_noise", "training"))
                 times.setdefault(len(train), []).append(cal.time_s)
                 unseen = {}
                 for k in sorted(set(logs) - set(train)):

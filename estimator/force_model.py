@@ -244,10 +244,13 @@ def soil_forces(soil: SoilParams, state: ContactState, bucket: Bucket,
     flags = flags | np.where(tension & ~out, FLAG_TENSION, 0)
     fee = np.maximum(fee, 0.0)
     pressure = soil.sinkage_modulus(bucket.edge_thickness) * np.power(d, soil.n)  # eq 15
-    friction = fee * math.sin(delta) + soil.adhesion * w * state.blade_length
     if options.slip_friction:  # opt-in: friction mobilised by slip along the blade (module docstring)
+        friction = fee * math.sin(delta) + soil.adhesion * w * state.blade_length
         friction = friction * slip_factor(state.blade_angle, state.velocity, options.slip_speed)
-    tangential = w * bucket.edge_thickness * pressure + friction  # eq 16
+        tangential = w * bucket.edge_thickness * pressure + friction
+    else:
+        tangential = (w * bucket.edge_thickness * pressure + fee * math.sin(delta)
+                      + soil.adhesion * w * state.blade_length)  # eq 16
     normal = fee * math.cos(delta)  # eq 17
     if options.carried_load:  # opt-in: the carried load's weight and inertia (module docstring)
         c_t, c_n = carried_load_factors(state.blade_angle, state.acceleration)
@@ -317,11 +320,13 @@ def soil_forces_single(soil: SoilParams, depth: float, rho: float, alpha: float,
         fee, flags = 0.0, flags | FLAG_TENSION
     b = bucket.edge_thickness
     pressure = (soil.k_c / b + soil.k_phi) * depth ** soil.n
-    friction = fee * math.sin(delta) + soil.adhesion * w * blade_length
     if options.slip_friction:
         theta = alpha_in - rho_in
         along = velocity[0] * math.cos(theta) + velocity[1] * math.sin(theta)
+        friction = fee * math.sin(delta) + soil.adhesion * w * blade_length
         friction *= (max(along, 0.0) + options.slip_speed) / (math.hypot(velocity[0], velocity[1])
                                                                + options.slip_speed)
-    f_t = w * b * pressure + friction
+        f_t = w * b * pressure + friction
+    else:
+        f_t = w * b * pressure + fee * math.sin(delta) + soil.adhesion * w * blade_length
     return f_t, fee * math.cos(delta), beta, flags

@@ -73,3 +73,19 @@ def test_cli_predict_draws_the_band(tmp_path, capsys):
     assert "F_R_upper" in out_csv.read_text().splitlines()[0] and fig.stat().st_size > 0
     assert main(["predict", "dirt", str(other), "-o", str(tmp_path / "g.csv")]) == 0
     assert "no prediction band" in capsys.readouterr().out
+
+
+def test_cross_cycle_band_noise_uses_held_out_residuals():
+    """Leave one cycle out: the noise model sees residuals of cycles the fit did not see (here: another soil)."""
+    rng = np.random.default_rng(8)
+    logs = [synthetic_cycle(name, random_bezier_path(rng), noise=0.03, seed=k, force_scale=2000.0)
+            for k, name in enumerate(("gravel", "gravel", "dirt"))]
+    train = calibrate(logs)
+    cross = calibrate(logs, band_noise="cross-cycle")
+    assert cross.settings["band_noise"] == "cross-cycle" and "band_noise" not in train.settings
+    np.testing.assert_array_equal(cross.params.to_array(), train.params.to_array())  # the fit is the same
+    f_r = np.hypot(train.predicted_tangential, train.predicted_normal)[train.in_soil]
+    mean_var = lambda m: float(np.mean(m.sigma_0 ** 2 + (m.relative * f_r) ** 2))  # noqa: E731
+    assert mean_var(cross.band_model) > mean_var(train.band_model)
+    with pytest.raises(Exception, match="band_noise"):
+        calibrate(logs, band_noise="loo")

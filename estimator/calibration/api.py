@@ -40,7 +40,7 @@ from .paper_methods import fit_multi_stage, fit_single_stage
 from .priors import class_prior
 from .result import Calibration, FitQuality, StageResult
 from .uncertainty import analyse, integrated_autocorrelation_time
-from .varpro import fit_varpro
+from .varpro import fit_varpro, refine
 from .verdict import assess
 
 #: Calibration methods, by what they are.
@@ -141,6 +141,7 @@ def calibrate(
     cycle_weights: list[float] | None = None,
     fill: str = "log",
     prior: str | dict | None = None,
+    band_noise: str = "training",
 ) -> Calibration:
     """Calibrate the eight soil parameters from one cycle or from several.
 
@@ -201,6 +202,11 @@ def calibrate(
         ``"granular"`` or ``"cohesive"`` (paper Tables A1, A2;
         :mod:`wheelloader.estimator.calibration.priors`), or ``{name: (low, high)}`` ranges of
         your own over the fit vector; it replaces the weak prior of ``regularize``.
+    band_noise : str
+        Residual noise model of the prediction band (:mod:`~.bands`): ``"training"`` (default) fits it to
+        the training residuals; ``"cross-cycle"`` (several cycles) to the residuals of each cycle
+        predicted by a fit on the others (leave one cycle out; one local refinement per cycle), the
+        residuals of a path the fit has not seen.
 
     Returns
     -------
@@ -247,6 +253,8 @@ def calibrate(
         raise CalibrationError(f"min_samples must be a positive integer, got {min_samples!r}")
     if not isinstance(regularize, bool):
         raise CalibrationError(f"regularize must be True or False, got {regularize!r}")
+    if band_noise not in ("training", "cross-cycle"):
+        raise CalibrationError(f'band_noise must be "training" or "cross-cycle", got {band_noise!r}')
     literature = prior
     prior_moments = None if literature is None else class_prior(literature)
     if literature is not None and canonical_method(method) != "varpro":
@@ -367,6 +375,9 @@ def calibrate(
     force_scale = float(np.mean(np.hypot(data.y_t, data.y_n)))
     unc = analyse(jac, resid, x, lo, hi, force_scale)
     obs_r, fit_r = np.hypot(data.y_t, data.y_n), np.hypot(at_t, at_n)
+    if band_noise == "cross-cycle" and len(logs) > 1:
+        obs_r, fit_r = _held_out_forces(parts, weights_per_cycle, x, lo, hi, lam, max_iter or 100)
+        settings["band_noise"] = "cross-cycle"
     sigma_0, relative = residual_noise_model(obs_r, fit_r)
     settings["band_model"] = BandModel(unc.covariance, integrated_autocorrelation_time(obs_r - fit_r), sigma_0,
                                        relative).to_dict()
@@ -379,6 +390,25 @@ def calibrate(
                       lower=lo, upper=hi)
     return Calibration(soil, method, float(x[5]), cost, bool(success), int(status), message, int(nfev), int(njev),
                        time_s, quality, stages, unc, start, bnds, pred_t, pred_n, in_soil, tension, settings, warnings)
+
+
+def _held_out_forces(parts: list[FitData], weights: list[float] | None, x: np.ndarray, lo: np.ndarray,
+                     hi: np.ndarray, lam: float, max_nfev: int) -> tuple[np.ndarray, np.ndarray]:
+    """Observed and predicted F_R of each cycle from a fit on the other cycles (leave one cycle out).
+
+    Each refit is a local refinement from the joint solution ``x`` (no grid search); the residuals are
+    those of cycles the fit did not see, the honest residuals of a prediction of a new path.
+    """
+    obs, pred = [], []
+    for j, held in enumerate(parts):
+        rest = [p for k, p in enumerate(parts) if k != j]
+        w = None if weights is None else [v for k, v in enumerate(weights) if k != j]
+        data = rest[0] if len(rest) == 1 and w is None else FitData.concat(rest, w)
+        xj = refine(data, x, lo, hi, lam, max_nfev=max_nfev).x
+        f_t, f_n, _ = held.forces(xj)
+        obs.append(np.hypot(held.y_t, held.y_n))
+        pred.append(np.hypot(f_t, f_n))
+    return np.concatenate(obs), np.concatenate(pred)
 
 
 def _cycles_report(logs: list[CycleLog], data: FitData, weights: list[float] | None, at_t: np.ndarray,

@@ -385,10 +385,10 @@ class FitData:
         tension = fee < 0.0
         fee = np.maximum(fee, 0.0)
         sink = self.sinkage_basis(n)
-        friction = fee * math.sin(delta) + ca * self.width * self.blade_length
         if self.slip is not None:  # opt-in slip-mobilised friction (force_model)
-            friction = friction * self.slip
-        f_t = k * sink + friction  # eqs 15-16
+            f_t = k * sink + (fee * math.sin(delta) + ca * self.width * self.blade_length) * self.slip
+        else:
+            f_t = k * sink + fee * math.sin(delta) + ca * self.width * self.blade_length  # eqs 15-16
         f_n = fee * math.cos(delta)  # eq 17
         carried = self.carried_basis()
         if carried is not None:  # opt-in carried load (force_model)
