@@ -71,8 +71,7 @@ def _ours_options(args: argparse.Namespace) -> dict[str, Any]:
         out["window"] = args.window
     if args.forgetting is not None:
         out["forgetting"] = args.forgetting
-    if args.keep_untrustworthy:
-        out["keep_untrustworthy"] = True
+    out["keep_untrustworthy"] = args.keep_untrustworthy  # default True: adopt every converged fit
     if args.carried_load or args.slip_friction:
         from wheelloader.estimator import ModelOptions
 
