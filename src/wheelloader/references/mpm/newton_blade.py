@@ -91,6 +91,8 @@ class NewtonBladeSettings:
         starts stress-free; the Taichi case starts geostatic and settles 0.2 s).
     floor_friction : float
         Coulomb coefficient of the floor under the bed (large: sticky).
+    youngs_modulus : float or None
+        Young's modulus [Pa] of the Newton soil; None: the :class:`ContinuumSoil`'s.
     device : str
         Warp device (``"cpu"``).
     """
@@ -100,8 +102,9 @@ class NewtonBladeSettings:
     dt: float = 1.0 / 240.0
     max_iterations: int = 250
     tolerance: float = 1.0e-4
-    settle: float = 0.3
+    settle: float = 0.15
     floor_friction: float = 10.0
+    youngs_modulus: float | None = None
     device: str = "cpu"
 
     def __post_init__(self) -> None:
@@ -189,7 +192,7 @@ def run_newton_blade(depth: float, soil: ContinuumSoil, dx: float, *, speed: flo
                               cfg=newton.ModelBuilder.ShapeConfig(mu=math.tan(soil.wall_friction_angle), density=0.0))
         model = builder.finalize()
         mpm = model.mpm
-        mpm.young_modulus.fill_(soil.youngs_modulus)
+        mpm.young_modulus.fill_(soil.youngs_modulus if settings.youngs_modulus is None else settings.youngs_modulus)
         mpm.poisson_ratio.fill_(soil.poisson_ratio)
         mpm.friction.fill_(drucker_prager_friction(soil.friction_angle))
         mpm.yield_pressure.fill_(1.0e12)
