@@ -142,6 +142,8 @@ def part_newton(args) -> dict:
         taichi_row = blade_summary(res_taichi, depth, soil)
         rows.append({"soil": name, "depth": depth, "dx": dx, "newton": newton_row, "taichi": taichi_row,
                      "newton_over_taichi": newton_row["horizontal"] / taichi_row["horizontal"]})
+        # each depth costs minutes: keep what is done if the part is stopped
+        (Path(args.out) / "part_newton.partial.json").write_text(json.dumps({"rows": rows}, indent=1))
         progress(args, f"newton {name} d={depth}: Newton {newton_row['horizontal']:.0f} N/m "
                        f"({newton_row['ratio_flat']:.3f} flat, {newton_row['ratio']:.3f} heap, "
                        f"{res_newton.wall_s:.0f} s), Taichi {taichi_row['horizontal']:.0f} N/m "

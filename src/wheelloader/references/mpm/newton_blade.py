@@ -262,7 +262,11 @@ def run_newton_blade(depth: float, soil: ContinuumSoil, dx: float, *, speed: flo
             counts, _ = np.histogram(p[above, 0] - float(position(t)), bins=heap_bins)
             heap.append(counts * particle_mass / width)
         steps = settle_steps + samples * steps_per_sample
-        finite = bool(np.all(np.isfinite(state.particle_q.numpy())))
+        final = state.particle_q.numpy().astype(float)
+        finite = bool(np.all(np.isfinite(final)))
+        # soil that got behind the blade above its lower edge (through or around the collider)
+        x_face = float(position(t))
+        leaked = int(np.sum((final[:, 0] < x_face - dx) & (final[:, 2] > below + dx)))
     wall = time.perf_counter() - wall0
     times = (np.arange(samples) + 0.5) / samples_per_s
     result = CaseResult(times, force, len(pts), steps, wall)
@@ -270,6 +274,7 @@ def run_newton_blade(depth: float, soil: ContinuumSoil, dx: float, *, speed: flo
     result.extra["heap_mass"] = np.array(heap)
     result.extra["heap_bin_edges"] = heap_bins
     result.extra.update(width=width, dt=settings.dt, settings=asdict(settings), finite=finite,
-                        floor_reaction_over_weight=floor_over_weight,
+                        floor_reaction_over_weight=floor_over_weight, final_positions=final,
+                        particles_behind_blade=leaked,
                         dp_friction=drucker_prager_friction(soil.friction_angle))
     return result
