@@ -9,6 +9,8 @@ Parts (each writes ``OUT/part_<name>.json``; ``--report`` assembles ``OUT/mpm_ve
               the true-2-D rod experiments of arXiv:1512.05180
     cycle     the default bucket cycle at three resolutions (finest two <= 7 % filtered F_R) and at
               three seeds of the default resolution (spread <= 5 %), with the mass balance
+    newton    the blade (phi 30, delta 20 deg) in Newton's implicit MPM (optional extra mpm-newton) beside
+              ours, same window, both against McKyes (a cross-check with an existing engine)
 
 Run e.g. ``python benchmarks/mpm_verification.py --out results/mpm --parts blade wall column`` and
 later ``--parts cycle``; ``--report`` only assembles. Taichi runs on ``--threads`` threads (default 1).
@@ -28,10 +30,11 @@ import numpy as np
 
 from wheelloader.provenance import machine_info
 
-PARTS = ("blade", "wall", "column", "cycle")
+PARTS = ("blade", "wall", "column", "cycle", "newton")
 SIGMA_S = 0.1
 BLADE_DEPTHS = (0.10, 0.15, 0.20)
 BLADE_CELLS = 10.0
+NEWTON_DEPTHS = (0.10, 0.15, 0.20)
 WALL_HEIGHT = 0.3
 WALL_DX = 0.015
 COLUMN_RATIOS = (0.5, 1.0, 3.0)
@@ -64,9 +67,38 @@ def blade_soils() -> dict:
 EXTRA_BLADE_SOILS = ("dirt",)
 
 
+def blade_summary(res, depth: float, soil) -> dict:
+    """One blade run (Taichi's or Newton's) against McKyes: means over 0.5-1.0 d of travel (and 0.25-0.5 d),
+    flat and with the run's own heap as surcharge, and the time series."""
+    from wheelloader.references.mpm.verification import mckyes_blade, mckyes_blade_with_heap
+
+    travel = res.extra["travel"]
+    window = (travel >= 0.5 * depth) & (travel <= 1.0 * depth)
+    horizontal = float(-np.mean(res.force[window, 0]))
+    vertical = float(np.mean(res.force[window, 1]))
+    ref = mckyes_blade(depth, soil)
+    # the heap on the wedge, averaged over the same window, as McKyes' surcharge q
+    heap = np.mean(res.extra["heap_mass"][window], axis=0)
+    edges = res.extra["heap_bin_edges"]
+    cumulative = np.concatenate([[0.0], np.cumsum(heap)])
+    heaped = mckyes_blade_with_heap(depth, soil, lambda length: float(np.interp(length, edges, cumulative)))
+    early = (travel >= 0.25 * depth) & (travel <= 0.5 * depth)
+    horizontal_early = float(-np.mean(res.force[early, 0]))
+    return {"horizontal": horizontal, "vertical": vertical, "horizontal_0.25_0.5d": horizontal_early,
+            "ratio_0.25_0.5d": horizontal_early / ref["horizontal"],
+            "mckyes_horizontal": ref["horizontal"], "ratio_flat": horizontal / ref["horizontal"],
+            "mckyes_heap_horizontal": heaped["horizontal"], "heap_surcharge": heaped["surcharge"],
+            "heap_wedge_length": heaped["wedge_length"], "heap_mass": float(heap.sum()),
+            "ratio": horizontal / heaped["horizontal"],
+            "vertical_over_horizontal": vertical / horizontal,
+            "tan_delta": math.tan(soil.wall_friction_angle), "particles": res.particles,
+            "steps": res.steps, "wall_s": res.wall_s,
+            "travel": travel.tolist(), "fx": res.force[:, 0].tolist(), "fz": res.force[:, 1].tolist()}
+
+
 def part_blade(args) -> dict:
     from wheelloader.references.mpm import ContinuumSoil
-    from wheelloader.references.mpm.verification import mckyes_blade, mckyes_blade_with_heap, run_blade
+    from wheelloader.references.mpm.verification import run_blade
 
     rows = []
     soils = [(name, soil, True) for name, soil in blade_soils().items()]
@@ -75,41 +107,55 @@ def part_blade(args) -> dict:
         for depth in BLADE_DEPTHS:
             dx = depth / BLADE_CELLS
             res = run_blade(depth, soil, dx, threads=args.threads)
-            travel = res.extra["travel"]
-            window = (travel >= 0.5 * depth) & (travel <= 1.0 * depth)
-            horizontal = float(-np.mean(res.force[window, 0]))
-            vertical = float(np.mean(res.force[window, 1]))
-            ref = mckyes_blade(depth, soil)
-            # the heap on the wedge, averaged over the same window, as McKyes' surcharge q
-            heap = np.mean(res.extra["heap_mass"][window], axis=0)
-            edges = res.extra["heap_bin_edges"]
-            cumulative = np.concatenate([[0.0], np.cumsum(heap)])
-            heaped = mckyes_blade_with_heap(
-                depth, soil, lambda length, e=edges, c=cumulative: float(np.interp(length, e, c)))
-            early = (travel >= 0.25 * depth) & (travel <= 0.5 * depth)
-            horizontal_early = float(-np.mean(res.force[early, 0]))
-            rows.append({"soil": name, "criterion": criterion, "depth": depth, "dx": dx, "horizontal": horizontal,
-                         "vertical": vertical, "horizontal_0.25_0.5d": horizontal_early,
-                         "ratio_0.25_0.5d": horizontal_early / ref["horizontal"],
-                         "mckyes_horizontal": ref["horizontal"], "ratio_flat": horizontal / ref["horizontal"],
-                         "mckyes_heap_horizontal": heaped["horizontal"], "heap_surcharge": heaped["surcharge"],
-                         "heap_wedge_length": heaped["wedge_length"], "heap_mass": float(heap.sum()),
-                         "ratio": horizontal / heaped["horizontal"],
-                         "vertical_over_horizontal": vertical / horizontal,
-                         "tan_delta": math.tan(soil.wall_friction_angle), "particles": res.particles,
-                         "guard_impulse_share": res.extra["guard_impulse_share"],
-                         "steps": res.steps, "wall_s": res.wall_s,
-                         "travel": travel.tolist(), "fx": res.force[:, 0].tolist(), "fz": res.force[:, 1].tolist()})
-            progress(args, f"blade {name} d={depth}: {horizontal:.0f} N/m vs McKyes {ref['horizontal']:.0f} flat "
-                           f"({horizontal / ref['horizontal']:.3f}), {heaped['horizontal']:.0f} with the measured heap "
-                           f"q={heaped['surcharge']:.0f} Pa ({horizontal / heaped['horizontal']:.3f}), "
-                           f"{res.wall_s:.0f} s")
+            row = blade_summary(res, depth, soil)
+            rows.append({"soil": name, "criterion": criterion, "depth": depth, "dx": dx, **row,
+                         "guard_impulse_share": res.extra["guard_impulse_share"]})
+            progress(args, f"blade {name} d={depth}: {row['horizontal']:.0f} N/m vs McKyes "
+                           f"{row['mckyes_horizontal']:.0f} flat ({row['ratio_flat']:.3f}), "
+                           f"{row['mckyes_heap_horizontal']:.0f} with the measured heap q={row['heap_surcharge']:.0f} "
+                           f"Pa ({row['ratio']:.3f}), {res.wall_s:.0f} s")
     return {"rows": rows, "window": "mean over 0.5-1.0 depth of travel (ratio, ratio_flat); 0.25-0.5 depth "
                                     "(ratio_0.25_0.5d, flat surface)",
             "reference": "ratio: McKyes with the surcharge q of the soil heaped on the wedge, measured in the run "
                          "over the same window (mckyes_blade_with_heap); ratio_flat: McKyes on a flat surface (q = 0)",
             "cells_over_cut": BLADE_CELLS,
             "speed": 0.2}
+
+
+def part_newton(args) -> dict:
+    """The first blade soil (phi 30, delta 20 deg) in Newton's implicit MPM and in ours, same window."""
+    from importlib.metadata import version
+
+    from wheelloader.references.mpm.newton_blade import NEWTON_INSTALL_HINT, NewtonBladeSettings, run_newton_blade
+    from wheelloader.references.mpm.verification import run_blade
+
+    name, soil = next(iter(blade_soils().items()))
+    settings = NewtonBladeSettings()
+    rows = []
+    for depth in args.newton_depths:
+        dx = depth / BLADE_CELLS
+        res_newton = run_newton_blade(depth, soil, dx, settings=settings)
+        res_taichi = run_blade(depth, soil, dx, threads=args.threads)
+        newton_row = blade_summary(res_newton, depth, soil)
+        newton_row.update(floor_reaction_over_weight=res_newton.extra["floor_reaction_over_weight"],
+                          finite=res_newton.extra["finite"], slab_width=res_newton.extra["width"])
+        taichi_row = blade_summary(res_taichi, depth, soil)
+        rows.append({"soil": name, "depth": depth, "dx": dx, "newton": newton_row, "taichi": taichi_row,
+                     "newton_over_taichi": newton_row["horizontal"] / taichi_row["horizontal"]})
+        # each depth costs minutes: keep what is done if the part is stopped
+        (Path(args.out) / "part_newton.partial.json").write_text(json.dumps({"rows": rows}, indent=1))
+        progress(args, f"newton {name} d={depth}: Newton {newton_row['horizontal']:.0f} N/m "
+                       f"({newton_row['ratio_flat']:.3f} flat, {newton_row['ratio']:.3f} heap, "
+                       f"{res_newton.wall_s:.0f} s), Taichi {taichi_row['horizontal']:.0f} N/m "
+                       f"({taichi_row['ratio_flat']:.3f} flat, {taichi_row['ratio']:.3f} heap, "
+                       f"{res_taichi.wall_s:.0f} s)")
+    return {"rows": rows, "window": "mean over 0.5-1.0 depth of travel", "cells_over_cut": BLADE_CELLS,
+            "speed": 0.2, "newton_settings": dict(vars(settings)),
+            "versions": {"newton": version("newton"), "warp-lang": version("warp-lang")},
+            "install": NEWTON_INSTALL_HINT,
+            "model": "Newton SolverImplicitMPM, Warp CPU device: a slab settings.cells_across voxels wide between "
+                     "frictionless walls; Drucker-Prager mu = sin(phi), no dilatancy; blade collider Coulomb "
+                     "friction tan(delta); forces per metre of slab width"}
 
 
 def part_wall(args) -> dict:
@@ -265,6 +311,15 @@ def report(out_dir: Path) -> dict:
         res["wall"] = [{k: v for k, v in r.items() if k not in ("displacement", "fx")} for r in rows]
         res["wall_within_15_percent"] = all(abs(r["at_rest_over_reference"] - 1) <= 0.15
                                             and abs(r["passive_over_rankine"] - 1) <= 0.15 for r in rows)
+    if "newton" in parts:
+        keys = ("horizontal", "vertical_over_horizontal", "mckyes_horizontal", "ratio_flat", "mckyes_heap_horizontal",
+                "heap_surcharge", "ratio", "particles", "steps", "wall_s")
+        res["newton_blade"] = [{"soil": r["soil"], "depth": r["depth"], "dx": r["dx"],
+                                "newton_over_taichi": r["newton_over_taichi"],
+                                "newton": {k: r["newton"].get(k) for k in
+                                           (*keys, "floor_reaction_over_weight", "slab_width")},
+                                "taichi": {k: r["taichi"].get(k) for k in keys}}
+                               for r in parts["newton"]["result"]["rows"]]
     if "column" in parts:
         res["column_collapse"] = parts["column"]["result"]["rows"]
     if "cycle" in parts:
@@ -311,6 +366,12 @@ def figure(parts: dict, target: Path) -> None:
             ax.axhline(r["mckyes_horizontal"], color=line.get_color(), ls=":", lw=0.8)
             if "mckyes_heap_horizontal" in r:
                 ax.plot([0.5, 1.0], [r["mckyes_heap_horizontal"]] * 2, color=line.get_color(), ls="--", lw=1.5)
+    if "newton" in parts:
+        for r in parts["newton"]["result"]["rows"]:
+            n = r["newton"]
+            ax.plot(np.array(n["travel"]) / r["depth"], -np.array(n["fx"]), lw=0.8, ls="-.",
+                    label=f"Newton {r['soil']} d={r['depth']:g} m ({n['ratio']:.2f}x; flat {n['ratio_flat']:.2f}x)")
+    if "blade" in parts or "newton" in parts:
         ax.axvspan(0.5, 1.0, color="0.9")
         ax.set(xlabel="travel / depth", ylabel="horizontal force [N/m]",
                title="Vertical blade vs McKyes: flat surface (:), with the measured heap as q (--)")
@@ -357,13 +418,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--report", action="store_true", help="assemble the JSON and PNG from the parts present")
     parser.add_argument("--threads", type=int, default=1, help="Taichi CPU threads")
     parser.add_argument("--soil", default="gravel", help="soil preset of the cycle part")
+    parser.add_argument("--newton-depths", type=float, nargs="+", default=list(NEWTON_DEPTHS),
+                        help="blade depths [m] of the newton part")
     parser.add_argument("--progress", default=None, help="append progress lines to this file")
     parser.add_argument("--reuse", default=None,
                         help="reference-set directory whose SOIL_path1 stands for the default-resolution seed-0 cycle")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    funcs = {"blade": part_blade, "wall": part_wall, "column": part_column, "cycle": part_cycle}
+    funcs = {"blade": part_blade, "wall": part_wall, "column": part_column, "cycle": part_cycle,
+             "newton": part_newton}
     for name in args.parts:
         t0 = time.perf_counter()
         info = {"machine_start": machine_info(), "git_commit": git_commit(), "command": " ".join(sys.argv)}

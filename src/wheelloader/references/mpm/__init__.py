@@ -5,6 +5,8 @@ returns a :class:`~wheelloader.estimator.CycleLog` with F_T, F_N, fill and the c
 (:mod:`.solver`) is a 2-D MLS-MPM with Hencky elasticity and Mohr-Coulomb plasticity with cohesion;
 the bucket is a rigid kinematic tool of plates with Coulomb friction and adhesion. Importing this
 package does not import Taichi; the first solver does (``pip install "wheelloader[mpm]"``).
+:mod:`.newton_blade` runs the blade verification case in Newton's implicit MPM as a cross-check
+(optional extra ``mpm-newton``).
 """
 
 from ._backend import INSTALL_HINT, MPMUnavailableError, taichi_available

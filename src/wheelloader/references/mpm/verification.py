@@ -176,6 +176,22 @@ def _run(solver: MPMSolver, trajectory: Trajectory | None, settle: float, durati
     return 0.5 * (times[1:] + times[:-1]), force
 
 
+BLADE_RAMP_S = 0.1
+
+
+def blade_motion(depth: float, speed: float = 0.2, travel: float | None = None
+                 ) -> tuple[float, float, Callable[[np.ndarray | float], np.ndarray]]:
+    """The blade motion of the verification case: ``(travel, duration, position)``.
+
+    ``travel`` defaults to 1.2 ``depth``; the blade reaches ``speed`` over :data:`BLADE_RAMP_S` with a
+    smoothstep acceleration, ``duration = ramp / 2 + travel / speed``; ``position(t)`` is the
+    displacement [m] at ``t`` [s] (0 before the start).
+    """
+    travel = 1.2 * depth if travel is None else travel
+    duration = BLADE_RAMP_S / 2 + travel / speed
+    return travel, duration, lambda t: _ramp(np.clip(np.asarray(t, dtype=float), 0.0, None), speed, BLADE_RAMP_S)
+
+
 def run_blade(depth: float, soil: ContinuumSoil, dx: float, *, speed: float = 0.2, travel: float | None = None,
               contact_band: float = 1.0, seed: int = 0, threads: int = 1, samples_per_s: float = 60.0
               ) -> CaseResult:
@@ -187,9 +203,8 @@ def run_blade(depth: float, soil: ContinuumSoil, dx: float, *, speed: float = 0.
     """
     import time
 
-    travel = 1.2 * depth if travel is None else travel
-    ramp = 0.1
-    duration = ramp / 2 + travel / speed
+    travel, duration, _ = blade_motion(depth, speed, travel)
+    ramp = BLADE_RAMP_S
     below = max(0.1, depth)
     surface = depth + below
     x_blade = 0.0
