@@ -133,11 +133,14 @@ def markdown(result: dict[str, Any]) -> str:
             energy, fill = sum(r["energy_J"] for r in sel), sum(r["fill_m3"] for r in sel)
             cells.append(f"{energy / fill / 1e3:.0f} ({fill / len(sel) / 0.2:.0%})" if sel and fill > 0 else "–")
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    load = result["machine"].get("loadavg_1_5_15min")
+    load = "/".join(f"{v:.1f}" for v in result["machine"].get("loadavg_1_5_15min") or [])
     lines += ["", f"*`python benchmarks/adaptation.py --plant {result['plant']}` ({', '.join(s['soils'])}; "
               f"{s['seeds']} seed(s); {s['cycles']} cycles; MPM dx {s['resolution']} m) at "
-              f"{commit_label(result['machine'])}, {result['wall_s'] / 60:.0f} min, load {load}. Energy = plant-"
-              "measured work / plant-measured fill over all cycles; fixed plans are Bezier paths (no check).*"]
+              f"{commit_label(result['machine'])}; the last invocation took {result['wall_s'] / 60:.0f} min (cycles "
+              f"saved by earlier ones are read, not dug again), load average at its end {load}. Energy = plant-"
+              "measured work / plant-measured fill over all cycles; fill in % of the nominal 0.2 m³; fixed paths "
+              "are Bézier paths (not checked); a plan that fails the check falls back to the Bézier path placed "
+              "by the model.*"]
     return "\n".join(lines) + "\n"
 
 
