@@ -113,7 +113,8 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
 
     try:
         guess = initial_guess(pile) if callable(initial_guess) else initial_guess
-        plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=guess)
+        plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=guess,
+                         exit_min_fill=exit_min_fill)
         spent += plan.iterations
         check = checked(plan, opt)
         for level in (1, 2):
@@ -123,7 +124,8 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
             # the plan's nodes can graze a crest: re-plan with wider margins, from the plan that failed
             first_failures = first_failures or list(check.failures)
             opt = optimizer_for(opt.bucket, opt.loader, cautious_options(options or PlannerOptions(), level))
-            plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=plan)
+            plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=plan,
+                             exit_min_fill=exit_min_fill)
             spent += plan.iterations
             check = checked(plan, opt)
             retried = f" (re-planned {level}x with wider margins after: {'; '.join(first_failures)})"

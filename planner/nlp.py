@@ -42,8 +42,9 @@ import casadi as ca
 
 from wheelloader.envs.bookkeeping import step_work
 from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, Loader
+from wheelloader.estimator.validity import alpha_lower_limit
 
-from .casadi_model import casadi_forces, smooth_pos
+from .casadi_model import casadi_forces, smooth_min, smooth_pos
 from .options import PlannerOptions
 
 __all__ = ["VALIDITY_RELAX", "build"]
@@ -81,7 +82,8 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     p_ref = ca.SX.sym("ref", 2, n + 1)
     p_wref = ca.SX.sym("wref")
     p_face = ca.SX.sym("face")
-    p = ca.vertcat(p_start, p_vel0, p_h, p_lam, p_soil, ca.vec(p_surf), ca.vec(p_ref), p_wref, p_face)
+    p_free = ca.SX.sym("free", 2)  # [on (0/1), fill below which the tip may leave the soil [m^3]]
+    p = ca.vertcat(p_start, p_vel0, p_h, p_lam, p_soil, ca.vec(p_surf), ca.vec(p_ref), p_wref, p_face, p_free)
     # single-node force function (also used by predict)
     xs, zs, ths, vs = ca.SX.sym("x"), ca.SX.sym("z"), ca.SX.sym("th"), ca.SX.sym("V")
     p_win = ca.SX.sym("window", grid.window_size)
@@ -108,6 +110,8 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     rho_lo = DEFAULT_OPTIONS.rho_min + options.rho_margin
     rho_hi = math.pi - DEFAULT_OPTIONS.eps1 - DEFAULT_OPTIONS.eps2 - delta - phi - options.rho_margin
     alpha_hi = DEFAULT_OPTIONS.alpha_max - options.rho_margin
+    # the down-slope limit follows phi (validity.alpha_lower_limit): -min(phi - slope_margin, alpha_max)
+    alpha_lo = alpha_lower_limit(phi, DEFAULT_OPTIONS, minimum=lambda a, b: smooth_min(a, b, 1e-3)) + options.rho_margin
     f_push = options.force_margin * loader.max_push_force
     f_lift = options.force_margin * loader.max_lift_force
     acc = loader.max_acceleration
@@ -136,15 +140,17 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
         # force limits and validity domain at the new node
         ft_all.append(f_t)
         fn_all.append(f_n)
-        slack = VALIDITY_RELAX * smooth_pos(-vertical, 1e-3)
+        slack = VALIDITY_RELAX * smooth_pos(-vertical - options.validity_band, 1e-3)
         if k < n - 1:
             # once past the face the tip stays in or just above the soil until the last interval: the env
             # ends a cycle as soon as the tip has been in soil and is more than its exit clearance above
-            # the surface; before the face (the approach over the ground) the constraint is off
+            # the surface; before the face (the approach over the ground) the constraint is off, and so it
+            # is while less than the env's exit_min_fill is loaded (the env lets the tip leave the soil then)
             before_face = 0.5 * (1.0 + ca.tanh((p_face - xn) / 0.02))
-            g_ineq.append(options.stay_clearance + vertical + 10.0 * before_face)
+            unloaded = p_free[0] * 0.5 * (1.0 - ca.tanh((vn - 0.5 * p_free[1]) / (0.1 * p_free[1] + 1e-9)))
+            g_ineq.append(options.stay_clearance + vertical + 10.0 * (before_face + unloaded))
         g_ineq += [1.0 - f_t / f_push, 1.0 - f_n / f_lift, rho_n - rho_lo + slack, rho_hi - rho_n + slack,
-                   alpha_hi - alpha_n + slack, alpha_n + alpha_hi + slack]
+                   alpha_hi - alpha_n + slack, alpha_n - alpha_lo + slack]
         # energy: the env's bookkeeping, with a smooth positive part (1 J wide)
         e_soil, e_payload = step_work(f_t, f_n, dx, dz, tn, p_soil[0] * GRAVITY * vn, cos=ca.cos, sin=ca.sin,
                                       pos=_smooth_work)

@@ -26,7 +26,7 @@ from wheelloader.estimator import (
 )
 
 from .casadi_model import soil_vector
-from .guess import face_position, first_rise, straight_dig
+from .guess import face_position, first_rise, straight_dig, surface_dig
 from .nlp import build
 from .options import PlannerOptions, StartState
 from .plan import Plan
@@ -73,7 +73,8 @@ class TrajectoryOptimizer:
 
     def solve(self, soil: SoilParams | str | dict, pile: Pile, start: StartState, duration: float, *,
               energy_weight: float | None = None, min_fill: float = 0.0, initial_guess: Plan | BucketPath | None = None,
-              warm: bool = False, reference: BucketPath | None = None, reference_weight: float = 0.0) -> Plan:
+              warm: bool = False, reference: BucketPath | None = None, reference_weight: float = 0.0,
+              exit_min_fill: float = 0.0) -> Plan:
         """Plan a path from ``start`` on ``pile`` lasting ``duration`` seconds.
 
         Parameters
@@ -98,6 +99,11 @@ class TrajectoryOptimizer:
         reference : BucketPath, optional
             A path to stay close to (MPC: the plan being executed), weighted by
             ``reference_weight`` [1/m^2] on the mean squared tip-position distance.
+        exit_min_fill : float
+            The env's end-of-cycle rule (``BucketLoadingEnv``'s option of the same name, a fraction of the
+            capacity): while less than it is loaded the tip may leave the soil (e.g. to pass over a carved
+            wall) without ending the cycle, so the plan may too (default 0: it stays in the soil once past
+            the face).
 
         Returns
         -------
@@ -131,14 +137,21 @@ class TrajectoryOptimizer:
         lbx, ubx = self._bounds(pile, start)
         lbg, ubg = self._constraint_bounds(soil, min_fill)
         args: dict[str, Any] = {"lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
+        face = face_position(pile, start)
         if warm and self._last is not None and initial_guess is None:
             args["x0"] = np.clip(self._last["x"], lbx, ubx)
             args["lam_x0"] = self._last["lam_x"]
             args["lam_g0"] = self._last["lam_g"]
         else:
-            guess = initial_guess if initial_guess is not None else straight_dig(pile, start, duration, self.bucket)
-            args["x0"] = np.clip(self._guess_vector(guess, pile, start, h), lbx, ubx)
-        tail = np.concatenate([ref.ravel(), [reference_weight], [face_position(pile, start)]])
+            if initial_guess is None:
+                initial_guess, face = surface_dig(pile, start, duration, self.bucket, soil.phi, self.options.rho_margin)
+            elif isinstance(initial_guess, Plan) and "face" in initial_guess.raw:
+                face = initial_guess.raw["face"]
+            args["x0"] = np.clip(self._guess_vector(initial_guess, pile, start, h), lbx, ubx)
+        if not (isinstance(exit_min_fill, (int, float)) and 0.0 <= exit_min_fill <= 1.0):
+            raise PlanningError(f"exit_min_fill must be a fraction in [0, 1], got {exit_min_fill!r}")
+        free = [1.0, exit_min_fill * cap] if exit_min_fill > 0.0 else [0.0, 0.0]
+        tail = np.concatenate([ref.ravel(), [reference_weight], [face], free])
         tic = time.perf_counter()
         # each node sees the surface through a window placed around its start position; a node that moves
         # out of its window's range is re-solved once, from where IPOPT stopped, with re-centred windows
@@ -158,7 +171,9 @@ class TrajectoryOptimizer:
             args.update(x0=w, lam_x0=self._last["lam_x"], lam_g0=self._last["lam_g"])
         elapsed = time.perf_counter() - tic
         stats["iter_count"] = iterations
-        return self._plan_from(w, p, h, start, stats, elapsed, float(sol["f"]))
+        plan = self._plan_from(w, p, h, start, stats, elapsed, float(sol["f"]))
+        plan.raw["face"] = face
+        return plan
 
     def reset_warm_start(self) -> None:
         """Forget the previous solution."""
