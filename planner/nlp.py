@@ -128,7 +128,18 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
         f_t, f_n, rho_n, vertical, alpha_n = node(xn, zn, tn, vn, p_soil, p_surf[:, k + 1])
         # fill: area between the start surface and the segment (trapezoid rule on the node depths),
         # capped by the bounds on V
-        removed = bucket.width * dx * smooth_pos(0.5 * (vertical_prev + vertical), 1e-3)
+        if options.midpoints:
+            # the path between two nodes is a straight segment that can pass under a bump or graze a wall:
+            # forces and validity are constrained at its midpoint too, and the fill is Simpson's rule
+            xm, zm, tm, vm = 0.5 * (xk + xn), 0.5 * (zk + zn), 0.5 * (tk + tn), 0.5 * (vk + vn)
+            f_tm, f_nm, rho_m, vertical_m, alpha_m = node(xm, zm, tm, vm, p_soil, p_surf[:, k + 1])
+            slack_m = VALIDITY_RELAX * smooth_pos(-vertical_m - options.validity_band, 1e-3)
+            g_ineq += [1.0 - f_tm / f_push, 1.0 - f_nm / f_lift, rho_m - rho_lo + slack_m, rho_hi - rho_m + slack_m,
+                       alpha_hi - alpha_m + slack_m, alpha_m - alpha_lo + slack_m]
+            removed = bucket.width * dx * (smooth_pos(vertical_prev, 1e-3) + 4.0 * smooth_pos(vertical_m, 1e-3)
+                                           + smooth_pos(vertical, 1e-3)) / 6.0
+        else:
+            removed = bucket.width * dx * smooth_pos(0.5 * (vertical_prev + vertical), 1e-3)
         vertical_prev = vertical
         g_eq.append(vn - vk - removed)
         # acceleration limits

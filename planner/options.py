@@ -51,6 +51,9 @@ class PlannerOptions:
         Height above the surface within which the validity-domain constraints still bind [m] (default 0: they
         fade out from the surface up). The NLP's surface rounds the pile's kinks, so near a carved wall a tip
         the NLP sees just above the surface can be in soil on the pile.
+    midpoints : bool
+        Constrain forces and the validity domain at the midpoint of every interval too, and integrate the
+        fill with Simpson's rule (default False).
     max_iter : int
         IPOPT iteration limit (default 300).
     max_wall_time : float, optional
@@ -79,6 +82,7 @@ class PlannerOptions:
     fill_limit: float = 0.95
     stay_clearance: float = 0.01
     validity_band: float = 0.0
+    midpoints: bool = False
     max_iter: int = 300
     max_wall_time: float | None = None
     ipopt_warm_start: bool = False
