@@ -12,6 +12,7 @@ outcome reports.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -63,6 +64,14 @@ class PlanOutcome:
     first_failures: list[str] = field(default_factory=list)
 
 
+#: IPOPT iterations between two NumPy checks of the iterate (each takes a few milliseconds).
+CHECK_EVERY = 10
+#: The solve stops once the best iterate that passes the check has improved the objective (in bucket fills)
+#: by less than STALL_TOLERANCE over the last STALL_CHECKS checks.
+STALL_CHECKS = 3
+STALL_TOLERANCE = 0.01
+
+
 def _flag_note(flags: dict[str, int]) -> str:
     """The validity flags that fired (samples per flag), without "tip out of soil"."""
     fired = [f"{name}: {count}" for name, count in flags.items() if count and name != "tip out of soil"]
@@ -111,26 +120,49 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
         return verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate,
                            exit_min_fill=exit_min_fill)
 
+    lam = opt.options.energy_weight if energy_weight is None else energy_weight
+    best: dict[str, Any] = {}
+    scores: list[float] = []
+
+    def consider(plan, check) -> None:
+        # the NumPy model's objective (fill against energy, as the NLP's) of a plan that passes the check
+        score = -check.fill / opt.bucket.capacity + lam * check.energy / 1000.0
+        if check.ok and ("score" not in best or score < best["score"] - 1e-12):
+            best.update(score=score, plan=plan, check=check)
+
+    def checkpoint(plan) -> bool:
+        # every CHECK_EVERY iterations: keep the best iterate that passes the check; stop once it has gained
+        # less than STALL_TOLERANCE over the last STALL_CHECKS checkpoints
+        consider(plan, checked(plan, opt))
+        scores.append(best.get("score", math.inf))
+        return len(scores) > STALL_CHECKS and scores[-1 - STALL_CHECKS] - scores[-1] < STALL_TOLERANCE
+
     try:
         guess = initial_guess(pile) if callable(initial_guess) else initial_guess
         plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=guess,
-                         exit_min_fill=exit_min_fill)
+                         exit_min_fill=exit_min_fill, checkpoint=checkpoint, checkpoint_every=CHECK_EVERY)
         spent += plan.iterations
         check = checked(plan, opt)
+        consider(plan, check)
         for level in (1, 2):
-            if check.ok or over_budget():
+            if best or over_budget():
                 break
-            # the smooth CasADi surface can differ from a (carved) pile near its kinks, and the path between
-            # the plan's nodes can graze a crest: re-plan with wider margins, from the plan that failed
+            # no iterate passed the check (the smooth CasADi surface can differ from a carved pile near its
+            # kinks, and the path between the plan's nodes can graze a crest): re-plan with wider margins,
+            # from the plan that failed
             first_failures = first_failures or list(check.failures)
             opt = optimizer_for(opt.bucket, opt.loader, cautious_options(options or PlannerOptions(), level))
+            scores.clear()
             plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=plan,
-                             exit_min_fill=exit_min_fill)
+                             exit_min_fill=exit_min_fill, checkpoint=checkpoint, checkpoint_every=CHECK_EVERY)
             spent += plan.iterations
             check = checked(plan, opt)
+            consider(plan, check)
             retried = f" (re-planned {level}x with wider margins after: {'; '.join(first_failures)})"
     except PlanningError as exc:
         return PlanOutcome(None, False, f"planning failed: {exc}", time.perf_counter() - tic)
+    if best:
+        plan, check = best["plan"], best["check"]
     seconds = time.perf_counter() - tic
     if not check.ok:
         return PlanOutcome(None, False, f"IPOPT: {plan.status}; plan fails the NumPy check: "
@@ -139,6 +171,8 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     # a plan that passes every check of the NumPy re-simulation is feasible even when IPOPT stopped at its
     # iteration limit (then it is not proven optimal): use it and say so
     note = "" if plan.status in ACCEPTED_STATUSES else " (not proven optimal; feasible by the NumPy check)"
+    if plan.status.startswith("iterate"):
+        note = f" (the best iterate that passes the NumPy check, {spent} it. spent)"
     controller = None
     if mpc:
         controller = MPCController(params, pile, duration, bucket=opt.bucket, loader=opt.loader,

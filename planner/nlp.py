@@ -39,6 +39,7 @@ from __future__ import annotations
 import math
 
 import casadi as ca
+import numpy as np
 
 from wheelloader.envs.bookkeeping import step_work
 from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, Loader
@@ -187,7 +188,51 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     if options.ipopt_warm_start:
         solver_opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
                             "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})
+    monitor = IterationMonitor(w.numel(), g.numel())
+    solver_opts["iteration_callback"] = monitor
     solver = ca.nlpsol("bucket_path", "ipopt", nlp, solver_opts)
     outputs = ca.Function("outputs", [w, p], [ca.vertcat(*ft_all), ca.vertcat(*fn_all), energy])
     layout = {"ng": n_eq + n_ineq + 1, "ineq": slice(n_eq, n_eq + n_ineq), "fill_end": n_eq + n_ineq}
-    return solver, {"forces": forces, "outputs": outputs}, layout
+    return solver, {"forces": forces, "outputs": outputs, "monitor": monitor}, layout
+
+
+class IterationMonitor(ca.Callback):
+    """IPOPT's iteration callback: hands every iterate to :attr:`watch` (a function of the decision vector
+    returning True to stop the solve, or None: run on).
+
+    A stop is IPOPT's ``User_Requested_Stop`` at that iterate; it depends on the iterates only, so a solve
+    watched this way is as deterministic as one that is not.
+    """
+
+    def __init__(self, nx: int, ng: int) -> None:
+        ca.Callback.__init__(self)
+        self.nx, self.ng = nx, ng
+        self.watch = None
+        self.construct("iteration_monitor", {})
+
+    def get_n_in(self):
+        return ca.nlpsol_n_out()
+
+    def get_n_out(self):
+        return 1
+
+    def get_name_in(self, i):
+        return ca.nlpsol_out(i)
+
+    def get_name_out(self, i):
+        return "stop"
+
+    def get_sparsity_in(self, i):
+        name = ca.nlpsol_out(i)
+        if name == "f":
+            return ca.Sparsity.scalar()
+        if name in ("x", "lam_x"):
+            return ca.Sparsity.dense(self.nx)
+        if name in ("g", "lam_g"):
+            return ca.Sparsity.dense(self.ng)
+        return ca.Sparsity(0, 0)
+
+    def eval(self, arg):
+        if self.watch is None:
+            return [0]
+        return [1 if self.watch(np.array(arg[0]).ravel()) else 0]
