@@ -177,7 +177,7 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     if mpc:
         controller = MPCController(params, pile, duration, bucket=opt.bucket, loader=opt.loader,
                                    control_rate=control_rate, replan_every=replan_every, initial_plan=plan,
-                                   options=opt.options)
+                                   options=opt.options, exit_min_fill=exit_min_fill)
     path = plan.path(control_rate, name="planned")
     return PlanOutcome(path, True, f"IPOPT {plan.status} in {plan.iterations} it.{note}{retried}; predicted fill "
                        f"{check.fill / opt.bucket.capacity:.0%}, {check.energy / 1e3:.1f} kJ", seconds, controller,

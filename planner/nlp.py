@@ -193,7 +193,8 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     solver = ca.nlpsol("bucket_path", "ipopt", nlp, solver_opts)
     outputs = ca.Function("outputs", [w, p], [ca.vertcat(*ft_all), ca.vertcat(*fn_all), energy])
     layout = {"ng": n_eq + n_ineq + 1, "ineq": slice(n_eq, n_eq + n_ineq), "fill_end": n_eq + n_ineq}
-    return solver, {"forces": forces, "outputs": outputs, "monitor": monitor}, layout
+    constraints = ca.Function("constraints", [w, p], [g])
+    return solver, {"forces": forces, "outputs": outputs, "monitor": monitor, "constraints": constraints}, layout
 
 
 class IterationMonitor(ca.Callback):
