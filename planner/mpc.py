@@ -90,7 +90,7 @@ class MPCController:
     feasible_tolerance : float
         Largest primal infeasibility of an unconverged iterate that is still
         used (default 1e-4: 0.1 mm on positions, 1e-4 of the force limits).
-        An unconverged iterate above it is still used when it passes the NumPy
+        An unconverged warm re-plan above it is still used when it passes the NumPy
         check (:func:`~wheelloader.planner.verify_plan`, a millisecond or two on
         the remaining cycle): feasible for the model the env simulates.
     exit_min_fill : float
@@ -183,7 +183,9 @@ class MPCController:
             return
         feasible = plan.raw.get("primal_infeasibility", math.inf) <= self.feasible_tolerance
         usable = (plan.status in ACCEPTED_STATUSES or feasible) and _finite(plan)
-        if not usable and _finite(plan):
+        if not usable and warm and _finite(plan):
+            # a warm re-plan continues from the last iterate: where it has not converged yet, it is used when
+            # the NumPy re-simulation of the rest of the cycle passes every check
             usable = verify_plan(plan, self.soil, self.pile, self.bucket, self.loader, self.optimizer.options,
                                  rate=self.rate, exit_min_fill=self.exit_min_fill).ok
         seconds = time.perf_counter() - tic

@@ -70,6 +70,11 @@ CHECK_EVERY = 10
 #: by less than STALL_TOLERANCE over the last STALL_CHECKS checks.
 STALL_CHECKS = 3
 STALL_TOLERANCE = 0.01
+#: An iterate is kept only once it loads this fraction of the bucket (by the NumPy check).
+ITERATE_MIN_FILL = 0.5
+#: A plan that loads less than this fraction of the bucket (by the NumPy check) is not used: the tip may
+#: stay out of the soil, and a loader too weak to dig would otherwise "plan" a cycle in the air.
+MIN_FILL = 0.1
 
 
 def _flag_note(flags: dict[str, int]) -> str:
@@ -124,16 +129,18 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     best: dict[str, Any] = {}
     scores: list[float] = []
 
-    def consider(plan, check) -> None:
-        # the NumPy model's objective (fill against energy, as the NLP's) of a plan that passes the check
+    def consider(plan, check, iterate: bool = False) -> None:
+        # the NumPy model's objective (fill against energy, as the NLP's) of a plan that passes the check; an
+        # iterate on the way counts only once it loads ITERATE_MIN_FILL of the bucket (not the air it starts in)
         score = -check.fill / opt.bucket.capacity + lam * check.energy / 1000.0
-        if check.ok and ("score" not in best or score < best["score"] - 1e-12):
+        useful = check.fill >= (ITERATE_MIN_FILL if iterate else MIN_FILL) * opt.bucket.capacity
+        if check.ok and useful and ("score" not in best or score < best["score"] - 1e-12):
             best.update(score=score, plan=plan, check=check)
 
     def checkpoint(plan) -> bool:
         # every CHECK_EVERY iterations: keep the best iterate that passes the check; stop once it has gained
         # less than STALL_TOLERANCE over the last STALL_CHECKS checkpoints
-        consider(plan, checked(plan, opt))
+        consider(plan, checked(plan, opt), iterate=True)
         scores.append(best.get("score", math.inf))
         return len(scores) > STALL_CHECKS and scores[-1 - STALL_CHECKS] - scores[-1] < STALL_TOLERANCE
 
@@ -168,6 +175,10 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
         return PlanOutcome(None, False, f"IPOPT: {plan.status}; plan fails the NumPy check: "
                            + "; ".join(check.failures) + _flag_note(check.details["flags"]) + retried, seconds,
                            plan=plan, check=check, first_failures=first_failures)
+    if not best:
+        return PlanOutcome(None, False, f"IPOPT: {plan.status}; the plan loads only "
+                           f"{check.fill / opt.bucket.capacity:.0%} of the bucket by the NumPy check{retried}",
+                           seconds, plan=plan, check=check, first_failures=first_failures)
     # a plan that passes every check of the NumPy re-simulation is feasible even when IPOPT stopped at its
     # iteration limit (then it is not proven optimal): use it and say so
     note = "" if plan.status in ACCEPTED_STATUSES else " (not proven optimal; feasible by the NumPy check)"
