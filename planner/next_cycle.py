@@ -98,15 +98,23 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     (``success=False``) and the loop falls back. With
     ``mpc`` the outcome carries an :class:`MPCController` (warm-started with
     the plan) that re-plans every ``replan_every`` steps during the cycle.
-    A plan that fails the check is re-planned (at most twice) with wider
+    Every :data:`CHECK_EVERY` IPOPT iterations the iterate is checked too; the
+    best one that passes (by the NumPy model's fill against energy, loading at
+    least :data:`ITERATE_MIN_FILL` of the bucket) is kept, and the solve stops
+    once it has improved by less than :data:`STALL_TOLERANCE` over
+    :data:`STALL_CHECKS` checks (a rule on the iterates, so as deterministic as
+    the iteration limit). A plan loading less than :data:`MIN_FILL` is not used.
+    When no iterate passes, the plan is re-planned (at most twice) with wider
     margins, unless ``replan_within_iterations`` is given and the IPOPT
     iterations spent so far exceed it (an iteration budget: with
     ``options.max_iter`` it bounds the planning work, the same on any
     machine), or the opt-in wall-time cap ``replan_within`` [s] has passed.
     ``energy_weight`` overrides ``options.energy_weight`` (lambda per kJ).
     ``initial_guess`` (a ``BucketPath``, or a function of the pile returning
-    one) is where IPOPT starts; default a straight dig along the surface.
-    ``exit_min_fill`` is the env's (passed to :func:`verify_plan`).
+    one) is where IPOPT starts; default :func:`~wheelloader.planner.guess.surface_dig`
+    (over the air to where the slope lets the tip dig, then at a constant depth).
+    ``exit_min_fill`` is the env's (passed to :func:`verify_plan` and the NLP:
+    the tip may leave the soil while less is loaded).
     """
     tic = time.perf_counter()
     params = as_soil(params)
@@ -182,14 +190,15 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     # a plan that passes every check of the NumPy re-simulation is feasible even when IPOPT stopped at its
     # iteration limit (then it is not proven optimal): use it and say so
     note = "" if plan.status in ACCEPTED_STATUSES else " (not proven optimal; feasible by the NumPy check)"
+    head = f"IPOPT {plan.status} in {plan.iterations} it."
     if plan.status.startswith("iterate"):
-        note = f" (the best iterate that passes the NumPy check, {spent} it. spent)"
+        head, note = f"IPOPT {plan.status} of {spent}", " (the best that passes the NumPy check)"
     controller = None
     if mpc:
         controller = MPCController(params, pile, duration, bucket=opt.bucket, loader=opt.loader,
                                    control_rate=control_rate, replan_every=replan_every, initial_plan=plan,
                                    options=opt.options, exit_min_fill=exit_min_fill)
     path = plan.path(control_rate, name="planned")
-    return PlanOutcome(path, True, f"IPOPT {plan.status} in {plan.iterations} it.{note}{retried}; predicted fill "
+    return PlanOutcome(path, True, f"{head}{note}{retried}; predicted fill "
                        f"{check.fill / opt.bucket.capacity:.0%}, {check.energy / 1e3:.1f} kJ", seconds, controller,
                        plan=plan, check=check, first_failures=first_failures)

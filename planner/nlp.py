@@ -25,10 +25,15 @@ acceleration ramps).
   blade-angle and workspace limits; ``F_T <= margin * max_push_force`` and
   ``F_N <= margin * max_lift_force``; the validity domain where the tip is in
   soil, ``rho_min + rho_margin <= rho <= pi - eps1 - eps2 - delta - phi -
-  rho_margin`` and ``|alpha| <= alpha_max - rho_margin`` (relaxed by :data:`VALIDITY_RELAX` times the height above the
-  surface, so it binds only in soil); the start pose and velocity; and the end out of the pile,
-  ``z_N >= z_s(x_N) + end_clearance``, while past the face every earlier node
-  stays at most ``stay_clearance`` above the surface (no hop out and back in).
+  rho_margin`` and ``-min(phi - slope_margin, alpha_max) + rho_margin <= alpha <= alpha_max - rho_margin``
+  (the model's slope domain, :func:`~wheelloader.estimator.validity.alpha_lower_limit`), relaxed by
+  :data:`VALIDITY_RELAX` times the height above ``validity_band`` over the surface, so they bind in soil
+  and just above it; with ``midpoints`` forces and validity at the interval midpoints too; the start pose
+  and velocity; and the end out of the pile, ``z_N >= z_s(x_N) + end_clearance``, while past the face every
+  earlier node stays at most ``stay_clearance`` above the surface (no hop out and back in) once the env's
+  ``exit_min_fill`` is loaded (before, the env lets the tip leave the soil, e.g. to pass over a carved wall
+  whose slope the model cannot describe).
+* An iteration callback (:class:`IterationMonitor`) hands the iterates to a caller that may stop the solve.
 
 The NLP is built once per (intervals, bucket, loader, options) and cached;
 each call only passes new parameters, bounds and the initial guess.

@@ -95,7 +95,8 @@ class TrajectoryOptimizer:
             Lower bound on the final fill [m^3] (default 0: no bound).
         initial_guess : Plan or BucketPath, optional
             Where IPOPT starts; default the previous solution when ``warm``,
-            else a straight dig along the surface.
+            else :func:`~wheelloader.planner.guess.surface_dig` (whose entry into
+            the soil is then the face past which the tip stays in the soil).
         warm : bool
             Start from the previous solution (and its multipliers) if there is one.
         reference : BucketPath, optional
