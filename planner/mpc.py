@@ -90,13 +90,19 @@ class MPCController:
     feasible_tolerance : float
         Largest primal infeasibility of an unconverged iterate that is still
         used (default 1e-4: 0.1 mm on positions, 1e-4 of the force limits).
+        An unconverged warm re-plan above it is still used when it passes the NumPy
+        check (:func:`~wheelloader.planner.verify_plan`, a millisecond or two on
+        the remaining cycle): feasible for the model the env simulates.
+    exit_min_fill : float
+        The env's end-of-cycle rule (``BucketLoadingEnv``'s option), for the
+        re-plans and their check (default 0).
     """
 
     def __init__(self, soil: SoilParams | str | dict, pile: Pile, duration: float, *, bucket: Bucket | None = None,
                  loader: Loader | None = None, control_rate: float = 60.0, replan_every: int = 6,
                  intervals: int = 12, min_remaining: float = 0.4, initial_plan: Plan | None = None,
                  options: PlannerOptions | None = None, reference_weight: float = 20.0, max_iter: int = 8,
-                 feasible_tolerance: float = 1e-4) -> None:
+                 feasible_tolerance: float = 1e-4, exit_min_fill: float = 0.0) -> None:
         if not (isinstance(replan_every, int) and replan_every >= 1):
             raise PlanningError(f"replan_every must be a positive integer, got {replan_every!r}")
         if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0.0):
@@ -120,6 +126,7 @@ class MPCController:
         self.initial_plan = initial_plan
         self.reference_weight = float(reference_weight)
         self.feasible_tolerance = float(feasible_tolerance)
+        self.exit_min_fill = float(exit_min_fill)
         self.history: list[SolveRecord] = []
         self.reset()
 
@@ -169,14 +176,19 @@ class MPCController:
             warm = bool(self.history) and not self.history[-1].status.startswith("error")
             plan = self.optimizer.solve(self.soil, self.pile, start, remaining,
                                         initial_guess=None if warm else guess, warm=warm, reference=guess,
-                                        reference_weight=self.reference_weight)
+                                        reference_weight=self.reference_weight, exit_min_fill=self.exit_min_fill)
         except PlanningError as exc:
             self.history.append(SolveRecord(k, remaining, time.perf_counter() - tic, f"error: {exc}", 0, False,
                                             self._fallback_name()))
             return
-        seconds = time.perf_counter() - tic
         feasible = plan.raw.get("primal_infeasibility", math.inf) <= self.feasible_tolerance
         usable = (plan.status in ACCEPTED_STATUSES or feasible) and _finite(plan)
+        if not usable and warm and _finite(plan):
+            # a warm re-plan continues from the last iterate: where it has not converged yet, it is used when
+            # the NumPy re-simulation of the rest of the cycle passes every check
+            usable = verify_plan(plan, self.soil, self.pile, self.bucket, self.loader, self.optimizer.options,
+                                 rate=self.rate, exit_min_fill=self.exit_min_fill).ok
+        seconds = time.perf_counter() - tic
         if usable:
             self.plan = plan
             self._plan_start = k / self.rate
@@ -238,9 +250,10 @@ def make_env_policy(env: Any, soil: SoilParams | str | dict | None = None, **kwa
         # a full-cycle plan to start from: the first re-plan is warm-started from it, and it is tracked
         # for as long as re-plans fail (only when the NumPy check accepts it)
         opt = optimizer_for(cfg.bucket, cfg.loader, kwargs.get("options"))
-        plan = opt.solve(params, pile, start, duration)
+        plan = opt.solve(params, pile, start, duration, exit_min_fill=cfg.exit_min_fill)
         if verify_plan(plan, params, pile, cfg.bucket, cfg.loader, opt.options, rate=cfg.control_rate,
                        exit_clearance=cfg.exit_clearance, exit_min_fill=cfg.exit_min_fill).ok:
             kwargs["initial_plan"] = plan
+    kwargs.setdefault("exit_min_fill", cfg.exit_min_fill)
     return MPCController(params, pile, duration, bucket=cfg.bucket, loader=cfg.loader,
                          control_rate=cfg.control_rate, **kwargs)

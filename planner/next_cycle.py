@@ -12,6 +12,7 @@ outcome reports.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -63,6 +64,19 @@ class PlanOutcome:
     first_failures: list[str] = field(default_factory=list)
 
 
+#: IPOPT iterations between two NumPy checks of the iterate (each takes a few milliseconds).
+CHECK_EVERY = 10
+#: The solve stops once the best iterate that passes the check has improved the objective (in bucket fills)
+#: by less than STALL_TOLERANCE over the last STALL_CHECKS checks.
+STALL_CHECKS = 3
+STALL_TOLERANCE = 0.01
+#: An iterate is kept only once it loads this fraction of the bucket (by the NumPy check).
+ITERATE_MIN_FILL = 0.5
+#: A plan that loads less than this fraction of the bucket (by the NumPy check) is not used: the tip may
+#: stay out of the soil, and a loader too weak to dig would otherwise "plan" a cycle in the air.
+MIN_FILL = 0.1
+
+
 def _flag_note(flags: dict[str, int]) -> str:
     """The validity flags that fired (samples per flag), without "tip out of soil"."""
     fired = [f"{name}: {count}" for name, count in flags.items() if count and name != "tip out of soil"]
@@ -84,15 +98,23 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     (``success=False``) and the loop falls back. With
     ``mpc`` the outcome carries an :class:`MPCController` (warm-started with
     the plan) that re-plans every ``replan_every`` steps during the cycle.
-    A plan that fails the check is re-planned (at most twice) with wider
+    Every :data:`CHECK_EVERY` IPOPT iterations the iterate is checked too; the
+    best one that passes (by the NumPy model's fill against energy, loading at
+    least :data:`ITERATE_MIN_FILL` of the bucket) is kept, and the solve stops
+    once it has improved by less than :data:`STALL_TOLERANCE` over
+    :data:`STALL_CHECKS` checks (a rule on the iterates, so as deterministic as
+    the iteration limit). A plan loading less than :data:`MIN_FILL` is not used.
+    When no iterate passes, the plan is re-planned (at most twice) with wider
     margins, unless ``replan_within_iterations`` is given and the IPOPT
     iterations spent so far exceed it (an iteration budget: with
     ``options.max_iter`` it bounds the planning work, the same on any
     machine), or the opt-in wall-time cap ``replan_within`` [s] has passed.
     ``energy_weight`` overrides ``options.energy_weight`` (lambda per kJ).
     ``initial_guess`` (a ``BucketPath``, or a function of the pile returning
-    one) is where IPOPT starts; default a straight dig along the surface.
-    ``exit_min_fill`` is the env's (passed to :func:`verify_plan`).
+    one) is where IPOPT starts; default :func:`~wheelloader.planner.guess.surface_dig`
+    (over the air to where the slope lets the tip dig, then at a constant depth).
+    ``exit_min_fill`` is the env's (passed to :func:`verify_plan` and the NLP:
+    the tip may leave the soil while less is loaded).
     """
     tic = time.perf_counter()
     params = as_soil(params)
@@ -111,38 +133,72 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
         return verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate,
                            exit_min_fill=exit_min_fill)
 
+    lam = opt.options.energy_weight if energy_weight is None else energy_weight
+    best: dict[str, Any] = {}
+    scores: list[float] = []
+
+    def consider(plan, check, iterate: bool = False) -> None:
+        # the NumPy model's objective (fill against energy, as the NLP's) of a plan that passes the check; an
+        # iterate on the way counts only once it loads ITERATE_MIN_FILL of the bucket (not the air it starts in)
+        score = -check.fill / opt.bucket.capacity + lam * check.energy / 1000.0
+        useful = check.fill >= (ITERATE_MIN_FILL if iterate else MIN_FILL) * opt.bucket.capacity
+        if check.ok and useful and ("score" not in best or score < best["score"] - 1e-12):
+            best.update(score=score, plan=plan, check=check)
+
+    def checkpoint(plan) -> bool:
+        # every CHECK_EVERY iterations: keep the best iterate that passes the check; stop once it has gained
+        # less than STALL_TOLERANCE over the last STALL_CHECKS checkpoints
+        consider(plan, checked(plan, opt), iterate=True)
+        scores.append(best.get("score", math.inf))
+        return len(scores) > STALL_CHECKS and scores[-1 - STALL_CHECKS] - scores[-1] < STALL_TOLERANCE
+
     try:
         guess = initial_guess(pile) if callable(initial_guess) else initial_guess
-        plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=guess)
+        plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=guess,
+                         exit_min_fill=exit_min_fill, checkpoint=checkpoint, checkpoint_every=CHECK_EVERY)
         spent += plan.iterations
         check = checked(plan, opt)
+        consider(plan, check)
         for level in (1, 2):
-            if check.ok or over_budget():
+            if best or over_budget():
                 break
-            # the smooth CasADi surface can differ from a (carved) pile near its kinks, and the path between
-            # the plan's nodes can graze a crest: re-plan with wider margins, from the plan that failed
+            # no iterate passed the check (the smooth CasADi surface can differ from a carved pile near its
+            # kinks, and the path between the plan's nodes can graze a crest): re-plan with wider margins,
+            # from the plan that failed
             first_failures = first_failures or list(check.failures)
             opt = optimizer_for(opt.bucket, opt.loader, cautious_options(options or PlannerOptions(), level))
-            plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=plan)
+            scores.clear()
+            plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=plan,
+                             exit_min_fill=exit_min_fill, checkpoint=checkpoint, checkpoint_every=CHECK_EVERY)
             spent += plan.iterations
             check = checked(plan, opt)
+            consider(plan, check)
             retried = f" (re-planned {level}x with wider margins after: {'; '.join(first_failures)})"
     except PlanningError as exc:
         return PlanOutcome(None, False, f"planning failed: {exc}", time.perf_counter() - tic)
+    if best:
+        plan, check = best["plan"], best["check"]
     seconds = time.perf_counter() - tic
     if not check.ok:
         return PlanOutcome(None, False, f"IPOPT: {plan.status}; plan fails the NumPy check: "
                            + "; ".join(check.failures) + _flag_note(check.details["flags"]) + retried, seconds,
                            plan=plan, check=check, first_failures=first_failures)
+    if not best:
+        return PlanOutcome(None, False, f"IPOPT: {plan.status}; the plan loads only "
+                           f"{check.fill / opt.bucket.capacity:.0%} of the bucket by the NumPy check{retried}",
+                           seconds, plan=plan, check=check, first_failures=first_failures)
     # a plan that passes every check of the NumPy re-simulation is feasible even when IPOPT stopped at its
     # iteration limit (then it is not proven optimal): use it and say so
     note = "" if plan.status in ACCEPTED_STATUSES else " (not proven optimal; feasible by the NumPy check)"
+    head = f"IPOPT {plan.status} in {plan.iterations} it."
+    if plan.status.startswith("iterate"):
+        head, note = f"IPOPT {plan.status} of {spent}", " (the best that passes the NumPy check)"
     controller = None
     if mpc:
         controller = MPCController(params, pile, duration, bucket=opt.bucket, loader=opt.loader,
                                    control_rate=control_rate, replan_every=replan_every, initial_plan=plan,
-                                   options=opt.options)
+                                   options=opt.options, exit_min_fill=exit_min_fill)
     path = plan.path(control_rate, name="planned")
-    return PlanOutcome(path, True, f"IPOPT {plan.status} in {plan.iterations} it.{note}{retried}; predicted fill "
+    return PlanOutcome(path, True, f"{head}{note}{retried}; predicted fill "
                        f"{check.fill / opt.bucket.capacity:.0%}, {check.energy / 1e3:.1f} kJ", seconds, controller,
                        plan=plan, check=check, first_failures=first_failures)

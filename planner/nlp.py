@@ -25,10 +25,15 @@ acceleration ramps).
   blade-angle and workspace limits; ``F_T <= margin * max_push_force`` and
   ``F_N <= margin * max_lift_force``; the validity domain where the tip is in
   soil, ``rho_min + rho_margin <= rho <= pi - eps1 - eps2 - delta - phi -
-  rho_margin`` and ``|alpha| <= alpha_max - rho_margin`` (relaxed by :data:`VALIDITY_RELAX` times the height above the
-  surface, so it binds only in soil); the start pose and velocity; and the end out of the pile,
-  ``z_N >= z_s(x_N) + end_clearance``, while past the face every earlier node
-  stays at most ``stay_clearance`` above the surface (no hop out and back in).
+  rho_margin`` and ``-min(phi - slope_margin, alpha_max) + rho_margin <= alpha <= alpha_max - rho_margin``
+  (the model's slope domain, :func:`~wheelloader.estimator.validity.alpha_lower_limit`), relaxed by
+  :data:`VALIDITY_RELAX` times the height above ``validity_band`` over the surface, so they bind in soil
+  and just above it; with ``midpoints`` forces and validity at the interval midpoints too; the start pose
+  and velocity; and the end out of the pile, ``z_N >= z_s(x_N) + end_clearance``, while past the face every
+  earlier node stays at most ``stay_clearance`` above the surface (no hop out and back in) once the env's
+  ``exit_min_fill`` is loaded (before, the env lets the tip leave the soil, e.g. to pass over a carved wall
+  whose slope the model cannot describe).
+* An iteration callback (:class:`IterationMonitor`) hands the iterates to a caller that may stop the solve.
 
 The NLP is built once per (intervals, bucket, loader, options) and cached, in
 memory and on disk (:mod:`.nlp_cache`: once per machine); each call only
@@ -40,11 +45,13 @@ from __future__ import annotations
 import math
 
 import casadi as ca
+import numpy as np
 
 from wheelloader.envs.bookkeeping import step_work
 from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, Loader
+from wheelloader.estimator.validity import alpha_lower_limit
 
-from .casadi_model import casadi_forces, smooth_pos
+from .casadi_model import casadi_forces, smooth_min, smooth_pos
 from .nlp_cache import load_or_build
 from .options import PlannerOptions
 
@@ -67,8 +74,30 @@ def build(bucket: Bucket, loader: Loader, options: PlannerOptions):
     (in memory for this process, on disk for the machine: :mod:`.nlp_cache`)."""
     key = (bucket, loader, options)
     if key not in _CACHE:
-        _CACHE[key] = load_or_build(bucket, loader, options, _build_nlp)
+        # the disk cache holds the NLP's expressions (plain CasADi Functions); the IPOPT solver with its
+        # iteration callback (a Python object, not serialisable) is made on top of them in each process
+        problem, functions, layout = load_or_build(bucket, loader, options, _build_nlp)
+        solver, monitor = _make_solver(problem, options)
+        _CACHE[key] = (solver, {**functions, "monitor": monitor}, layout)
     return _CACHE[key]
+
+
+def _make_solver(problem, options: PlannerOptions):
+    """IPOPT on ``problem`` (a Function ``(x, p) -> (f, g)``) with an :class:`IterationMonitor`."""
+    solver_opts = {
+        "ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
+        "ipopt.max_iter": options.max_iter, "ipopt.tol": options.tolerance,
+        "ipopt.acceptable_tol": 1e-3, "ipopt.acceptable_iter": 5,
+        "ipopt.mu_strategy": "adaptive", "error_on_fail": False,
+    }
+    if options.max_wall_time is not None:
+        solver_opts["ipopt.max_wall_time"] = float(options.max_wall_time)
+    if options.ipopt_warm_start:
+        solver_opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
+                            "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})
+    monitor = IterationMonitor(problem.size1_in(0), problem.size1_out(1))
+    solver_opts["iteration_callback"] = monitor
+    return ca.nlpsol("bucket_path", "ipopt", problem, solver_opts), monitor
 
 
 def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
@@ -84,7 +113,8 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     p_ref = ca.SX.sym("ref", 2, n + 1)
     p_wref = ca.SX.sym("wref")
     p_face = ca.SX.sym("face")
-    p = ca.vertcat(p_start, p_vel0, p_h, p_lam, p_soil, ca.vec(p_surf), ca.vec(p_ref), p_wref, p_face)
+    p_free = ca.SX.sym("free", 2)  # [on (0/1), fill below which the tip may leave the soil [m^3]]
+    p = ca.vertcat(p_start, p_vel0, p_h, p_lam, p_soil, ca.vec(p_surf), ca.vec(p_ref), p_wref, p_face, p_free)
     # single-node force function (also used by predict)
     xs, zs, ths, vs = ca.SX.sym("x"), ca.SX.sym("z"), ca.SX.sym("th"), ca.SX.sym("V")
     p_win = ca.SX.sym("window", grid.window_size)
@@ -111,6 +141,8 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     rho_lo = DEFAULT_OPTIONS.rho_min + options.rho_margin
     rho_hi = math.pi - DEFAULT_OPTIONS.eps1 - DEFAULT_OPTIONS.eps2 - delta - phi - options.rho_margin
     alpha_hi = DEFAULT_OPTIONS.alpha_max - options.rho_margin
+    # the down-slope limit follows phi (validity.alpha_lower_limit): -min(phi - slope_margin, alpha_max)
+    alpha_lo = alpha_lower_limit(phi, DEFAULT_OPTIONS, minimum=lambda a, b: smooth_min(a, b, 1e-3)) + options.rho_margin
     f_push = options.force_margin * loader.max_push_force
     f_lift = options.force_margin * loader.max_lift_force
     acc = loader.max_acceleration
@@ -127,7 +159,18 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
         f_t, f_n, rho_n, vertical, alpha_n = node(xn, zn, tn, vn, p_soil, p_surf[:, k + 1])
         # fill: area between the start surface and the segment (trapezoid rule on the node depths),
         # capped by the bounds on V
-        removed = bucket.width * dx * smooth_pos(0.5 * (vertical_prev + vertical), 1e-3)
+        if options.midpoints:
+            # the path between two nodes is a straight segment that can pass under a bump or graze a wall:
+            # forces and validity are constrained at its midpoint too, and the fill is Simpson's rule
+            xm, zm, tm, vm = 0.5 * (xk + xn), 0.5 * (zk + zn), 0.5 * (tk + tn), 0.5 * (vk + vn)
+            f_tm, f_nm, rho_m, vertical_m, alpha_m = node(xm, zm, tm, vm, p_soil, p_surf[:, k + 1])
+            slack_m = VALIDITY_RELAX * smooth_pos(-vertical_m - options.validity_band, 1e-3)
+            g_ineq += [1.0 - f_tm / f_push, 1.0 - f_nm / f_lift, rho_m - rho_lo + slack_m, rho_hi - rho_m + slack_m,
+                       alpha_hi - alpha_m + slack_m, alpha_m - alpha_lo + slack_m]
+            removed = bucket.width * dx * (smooth_pos(vertical_prev, 1e-3) + 4.0 * smooth_pos(vertical_m, 1e-3)
+                                           + smooth_pos(vertical, 1e-3)) / 6.0
+        else:
+            removed = bucket.width * dx * smooth_pos(0.5 * (vertical_prev + vertical), 1e-3)
         vertical_prev = vertical
         g_eq.append(vn - vk - removed)
         # acceleration limits
@@ -139,15 +182,17 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
         # force limits and validity domain at the new node
         ft_all.append(f_t)
         fn_all.append(f_n)
-        slack = VALIDITY_RELAX * smooth_pos(-vertical, 1e-3)
+        slack = VALIDITY_RELAX * smooth_pos(-vertical - options.validity_band, 1e-3)
         if k < n - 1:
             # once past the face the tip stays in or just above the soil until the last interval: the env
             # ends a cycle as soon as the tip has been in soil and is more than its exit clearance above
-            # the surface; before the face (the approach over the ground) the constraint is off
+            # the surface; before the face (the approach over the ground) the constraint is off, and so it
+            # is while less than the env's exit_min_fill is loaded (the env lets the tip leave the soil then)
             before_face = 0.5 * (1.0 + ca.tanh((p_face - xn) / 0.02))
-            g_ineq.append(options.stay_clearance + vertical + 10.0 * before_face)
+            unloaded = p_free[0] * 0.5 * (1.0 - ca.tanh((vn - 0.5 * p_free[1]) / (0.1 * p_free[1] + 1e-9)))
+            g_ineq.append(options.stay_clearance + vertical + 10.0 * (before_face + unloaded))
         g_ineq += [1.0 - f_t / f_push, 1.0 - f_n / f_lift, rho_n - rho_lo + slack, rho_hi - rho_n + slack,
-                   alpha_hi - alpha_n + slack, alpha_n + alpha_hi + slack]
+                   alpha_hi - alpha_n + slack, alpha_n - alpha_lo + slack]
         # energy: the env's bookkeeping, with a smooth positive part (1 J wide)
         e_soil, e_payload = step_work(f_t, f_n, dx, dz, tn, p_soil[0] * GRAVITY * vn, cos=ca.cos, sin=ca.sin,
                                       pos=_smooth_work)
@@ -161,19 +206,50 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     tracking = ca.sumsqr(X[0:2, 1:] - p_ref[:, 1:]) / n
     objective = (-X[3, n] / bucket.capacity + p_lam * energy / 1000.0
                  + options.smoothing_weight * smooth / n + p_wref * tracking)
-    nlp = {"x": w, "p": p, "f": objective, "g": g}
-    solver_opts = {
-        "ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
-        "ipopt.max_iter": options.max_iter, "ipopt.tol": options.tolerance,
-        "ipopt.acceptable_tol": 1e-3, "ipopt.acceptable_iter": 5,
-        "ipopt.mu_strategy": "adaptive", "error_on_fail": False,
-    }
-    if options.max_wall_time is not None:
-        solver_opts["ipopt.max_wall_time"] = float(options.max_wall_time)
-    if options.ipopt_warm_start:
-        solver_opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
-                            "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})
-    solver = ca.nlpsol("bucket_path", "ipopt", nlp, solver_opts)
+    problem = ca.Function("nlp", [w, p], [objective, g], ["x", "p"], ["f", "g"])
     outputs = ca.Function("outputs", [w, p], [ca.vertcat(*ft_all), ca.vertcat(*fn_all), energy])
     layout = {"ng": n_eq + n_ineq + 1, "ineq": slice(n_eq, n_eq + n_ineq), "fill_end": n_eq + n_ineq}
-    return solver, {"forces": forces, "outputs": outputs}, layout
+    constraints = ca.Function("constraints", [w, p], [g])
+    return problem, {"forces": forces, "outputs": outputs, "constraints": constraints}, layout
+
+
+class IterationMonitor(ca.Callback):
+    """IPOPT's iteration callback: hands every iterate to :attr:`watch` (a function of the decision vector
+    returning True to stop the solve, or None: run on).
+
+    A stop is IPOPT's ``User_Requested_Stop`` at that iterate; it depends on the iterates only, so a solve
+    watched this way is as deterministic as one that is not.
+    """
+
+    def __init__(self, nx: int, ng: int) -> None:
+        ca.Callback.__init__(self)
+        self.nx, self.ng = nx, ng
+        self.watch = None
+        self.construct("iteration_monitor", {})
+
+    def get_n_in(self):
+        return ca.nlpsol_n_out()
+
+    def get_n_out(self):
+        return 1
+
+    def get_name_in(self, i):
+        return ca.nlpsol_out(i)
+
+    def get_name_out(self, i):
+        return "stop"
+
+    def get_sparsity_in(self, i):
+        name = ca.nlpsol_out(i)
+        if name == "f":
+            return ca.Sparsity.scalar()
+        if name in ("x", "lam_x"):
+            return ca.Sparsity.dense(self.nx)
+        if name in ("g", "lam_g"):
+            return ca.Sparsity.dense(self.ng)
+        return ca.Sparsity(0, 0)
+
+    def eval(self, arg):
+        if self.watch is None:
+            return [0]
+        return [1 if self.watch(np.array(arg[0]).ravel()) else 0]

@@ -115,7 +115,8 @@ def load_or_build(bucket: Any, loader: Any, options: Any, build: Callable[[Any, 
     bucket, loader, options
         The settings (hashable dataclasses) the NLP is built for.
     build : callable
-        Returns ``(solver, {"forces": Function, "outputs": Function}, layout)``.
+        Returns ``(problem, {"forces": Function, ...}, layout)``: the NLP as a Function ``(x, p) -> (f, g)``
+        and its helper Functions (plain CasADi Functions, serialisable; the solver is made from them).
 
     Returns
     -------
@@ -199,8 +200,8 @@ def _read(path: Path, key: str) -> tuple:
         raise ValueError("unexpected content")
     lay = meta["layout"]
     layout = {"ng": int(lay["ng"]), "ineq": slice(*lay["ineq"]), "fill_end": int(lay["fill_end"])}
-    if solver.size1_in("lbg") != layout["ng"]:
-        raise ValueError("layout does not match the solver")
+    if solver.n_out() != 2 or solver.size1_out(1) != layout["ng"]:
+        raise ValueError("layout does not match the NLP")
     return solver, functions, layout
 
 

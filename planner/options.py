@@ -46,7 +46,15 @@ class PlannerOptions:
         the real carving from spilling).
     stay_clearance : float
         Past the face, the tip stays at most this high above the surface until the last
-        interval [m] (default 0.01 m; the env ends a cycle at 0.02 m).
+        interval [m] (default 0.005 m; the env ends a cycle at 0.02 m and the NumPy check, allowing 0.01 m
+        for tracking, at 0.01 m).
+    validity_band : float
+        Height above the surface within which the validity-domain constraints still bind [m] (default 0.01 m;
+        above it they fade out). The NLP's surface rounds the pile's kinks, so near a carved wall a tip the
+        NLP sees just above the surface can be in soil on the pile.
+    midpoints : bool
+        Constrain forces and the validity domain at the midpoint of every interval too, and integrate the
+        fill with Simpson's rule (default False).
     max_iter : int
         IPOPT iteration limit (default 300).
     max_wall_time : float, optional
@@ -73,7 +81,9 @@ class PlannerOptions:
     blade_angle_limits: tuple[float, float] = (math.radians(-45.0), math.radians(75.0))
     lift_headroom: float = 1.0
     fill_limit: float = 0.95
-    stay_clearance: float = 0.01
+    stay_clearance: float = 0.005
+    validity_band: float = 0.01
+    midpoints: bool = False
     max_iter: int = 300
     max_wall_time: float | None = None
     ipopt_warm_start: bool = False
@@ -83,7 +93,8 @@ class PlannerOptions:
     def __post_init__(self) -> None:
         if not (isinstance(self.intervals, int) and 4 <= self.intervals <= 400):
             raise PlanningError(f"PlannerOptions.intervals must be an integer in [4, 400], got {self.intervals!r}")
-        for name in ("energy_weight", "smoothing_weight", "rho_margin", "end_clearance", "lift_headroom"):
+        for name in ("energy_weight", "smoothing_weight", "rho_margin", "end_clearance", "lift_headroom",
+                     "validity_band"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
                 raise PlanningError(f"PlannerOptions.{name} must be a finite number >= 0, got {value!r}")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -26,7 +27,7 @@ from wheelloader.estimator import (
 )
 
 from .casadi_model import soil_vector
-from .guess import face_position, first_rise, straight_dig
+from .guess import face_position, first_rise, straight_dig, surface_dig
 from .nlp import build
 from .options import PlannerOptions, StartState
 from .plan import Plan
@@ -73,7 +74,9 @@ class TrajectoryOptimizer:
 
     def solve(self, soil: SoilParams | str | dict, pile: Pile, start: StartState, duration: float, *,
               energy_weight: float | None = None, min_fill: float = 0.0, initial_guess: Plan | BucketPath | None = None,
-              warm: bool = False, reference: BucketPath | None = None, reference_weight: float = 0.0) -> Plan:
+              warm: bool = False, reference: BucketPath | None = None, reference_weight: float = 0.0,
+              exit_min_fill: float = 0.0, checkpoint: Callable[[Plan], bool] | None = None,
+              checkpoint_every: int = 10) -> Plan:
         """Plan a path from ``start`` on ``pile`` lasting ``duration`` seconds.
 
         Parameters
@@ -92,12 +95,23 @@ class TrajectoryOptimizer:
             Lower bound on the final fill [m^3] (default 0: no bound).
         initial_guess : Plan or BucketPath, optional
             Where IPOPT starts; default the previous solution when ``warm``,
-            else a straight dig along the surface.
+            else :func:`~wheelloader.planner.guess.surface_dig` (whose entry into
+            the soil is then the face past which the tip stays in the soil).
         warm : bool
             Start from the previous solution (and its multipliers) if there is one.
         reference : BucketPath, optional
             A path to stay close to (MPC: the plan being executed), weighted by
             ``reference_weight`` [1/m^2] on the mean squared tip-position distance.
+        exit_min_fill : float
+            The env's end-of-cycle rule (``BucketLoadingEnv``'s option of the same name, a fraction of the
+            capacity): while less than it is loaded the tip may leave the soil (e.g. to pass over a carved
+            wall) without ending the cycle, so the plan may too (default 0: it stays in the soil once past
+            the face).
+        checkpoint : callable, optional
+            Called with the iterate as a :class:`Plan` (status ``"iterate k"``) every ``checkpoint_every``
+            IPOPT iterations; returning True stops the solve there (IPOPT's ``User_Requested_Stop``). The
+            caller keeps what it wants of the iterates (e.g. the best one that passes the NumPy check):
+            a stop depends on the iterates only, so the result is as deterministic as without it.
 
         Returns
         -------
@@ -131,34 +145,52 @@ class TrajectoryOptimizer:
         lbx, ubx = self._bounds(pile, start)
         lbg, ubg = self._constraint_bounds(soil, min_fill)
         args: dict[str, Any] = {"lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
+        face = face_position(pile, start)
         if warm and self._last is not None and initial_guess is None:
             args["x0"] = np.clip(self._last["x"], lbx, ubx)
             args["lam_x0"] = self._last["lam_x"]
             args["lam_g0"] = self._last["lam_g"]
         else:
-            guess = initial_guess if initial_guess is not None else straight_dig(pile, start, duration, self.bucket)
-            args["x0"] = np.clip(self._guess_vector(guess, pile, start, h), lbx, ubx)
-        tail = np.concatenate([ref.ravel(), [reference_weight], [face_position(pile, start)]])
+            if initial_guess is None:
+                initial_guess, face = surface_dig(pile, start, duration, self.bucket, soil.phi, self.options.rho_margin)
+            elif isinstance(initial_guess, Plan) and "face" in initial_guess.raw:
+                face = initial_guess.raw["face"]
+            args["x0"] = np.clip(self._guess_vector(initial_guess, pile, start, h), lbx, ubx)
+        if not (isinstance(exit_min_fill, (int, float)) and 0.0 <= exit_min_fill <= 1.0):
+            raise PlanningError(f"exit_min_fill must be a fraction in [0, 1], got {exit_min_fill!r}")
+        free = [1.0, exit_min_fill * cap] if exit_min_fill > 0.0 else [0.0, 0.0]
+        tail = np.concatenate([ref.ravel(), [reference_weight], [face], free])
         tic = time.perf_counter()
         # each node sees the surface through a window placed around its start position; a node that moves
         # out of its window's range is re-solved once, from where IPOPT stopped, with re-centred windows
         # (not after the wall-time limit: the NumPy check judges that iterate on the real pile)
         iterations = 0
-        for attempt in range(2):
-            windows = self._windows(pile, start, args["x0"])
-            args["p"] = p = np.concatenate([self._parameters(soil, pile, start, h, lam, windows), tail])
-            sol = self._solver(**args)
-            stats = dict(self._solver.stats())
-            iterations += int(stats.get("iter_count", 0))
-            w = np.array(sol["x"]).ravel()
-            self._last = {"x": w, "lam_x": np.array(sol["lam_x"]).ravel(), "lam_g": np.array(sol["lam_g"]).ravel()}
-            out_of_time = stats.get("return_status") == "Maximum_WallTime_Exceeded"
-            if attempt == 1 or out_of_time or not self._outside_windows(windows, w):
-                break
-            args.update(x0=w, lam_x0=self._last["lam_x"], lam_g0=self._last["lam_g"])
+        monitor = self._functions["monitor"]
+        try:
+            for attempt in range(2):
+                windows = self._windows(pile, start, args["x0"])
+                args["p"] = p = np.concatenate([self._parameters(soil, pile, start, h, lam, windows), tail])
+                if checkpoint is not None:
+                    monitor.watch = _Watch(self, checkpoint, checkpoint_every, p, h, start, face, iterations)
+                sol = self._solver(**args)
+                stats = dict(self._solver.stats())
+                if isinstance(monitor.watch, _Watch) and monitor.watch.error is not None:
+                    raise monitor.watch.error
+                iterations += int(stats.get("iter_count", 0))
+                w = np.array(sol["x"]).ravel()
+                self._last = {"x": w, "lam_x": np.array(sol["lam_x"]).ravel(),
+                              "lam_g": np.array(sol["lam_g"]).ravel()}
+                stopped = stats.get("return_status") in ("Maximum_WallTime_Exceeded", "User_Requested_Stop")
+                if attempt == 1 or stopped or not self._outside_windows(windows, w):
+                    break
+                args.update(x0=w, lam_x0=self._last["lam_x"], lam_g0=self._last["lam_g"])
+        finally:
+            monitor.watch = None
         elapsed = time.perf_counter() - tic
         stats["iter_count"] = iterations
-        return self._plan_from(w, p, h, start, stats, elapsed, float(sol["f"]))
+        plan = self._plan_from(w, p, h, start, stats, elapsed, float(sol["f"]))
+        plan.raw["face"] = face
+        return plan
 
     def reset_warm_start(self) -> None:
         """Forget the previous solution."""
@@ -259,6 +291,34 @@ class TrajectoryOptimizer:
                     np.array(ft).ravel(), np.array(fn).ravel(), float(energy), bool(stats.get("success", False)),
                     status, int(stats.get("iter_count", -1)), elapsed, objective,
                     raw={"start": start, "h": h, "primal_infeasibility": _final_infeasibility(stats)})
+
+
+class _Watch:
+    """The iteration monitor's watch during one solve: every ``every`` iterations, the iterate as a Plan
+    to ``checkpoint``; an exception it raises stops the solve and is re-raised after it."""
+
+    def __init__(self, optimizer: TrajectoryOptimizer, checkpoint: Callable[[Plan], bool], every: int,
+                 p: np.ndarray, h: float, start: StartState, face: float, offset: int) -> None:
+        self.optimizer, self.checkpoint, self.every = optimizer, checkpoint, max(int(every), 1)
+        self.p, self.h, self.start, self.face = p, h, start, face
+        self.calls, self.offset = 0, offset
+        self.error: BaseException | None = None
+
+    def __call__(self, w: np.ndarray) -> bool:
+        k = self.calls  # IPOPT calls back at iteration 0 (the initial point), 1, 2, ...
+        self.calls += 1
+        if k == 0 or k % self.every:
+            return False
+        it = self.offset + k
+        try:
+            plan = self.optimizer._plan_from(w, self.p, self.h, self.start,
+                                             {"return_status": f"iterate {it}", "iter_count": it, "success": False},
+                                             0.0, math.nan)
+            plan.raw["face"] = self.face
+            return bool(self.checkpoint(plan))
+        except Exception as exc:  # noqa: BLE001 - re-raised after the solve
+            self.error = exc
+            return True
 
 
 def _final_infeasibility(stats: dict) -> float:

@@ -62,13 +62,15 @@ class PlanCheck:
         return out
 
 
-def path_energy(path: BucketPath, soil: SoilParams, pile: Pile, bucket: Bucket) -> dict[str, np.ndarray | float]:
-    """Forces, fill and the env's energy bookkeeping along ``path`` with the NumPy model.
+def path_energy(path: BucketPath, soil: SoilParams, pile: Pile, bucket: Bucket,
+                initial_fill: float = 0.0) -> dict[str, np.ndarray | float]:
+    """Forces, fill and the env's energy bookkeeping along ``path`` with the NumPy model (``initial_fill``
+    [m^3] already in the bucket at its start).
 
     Energy per step: the env's :func:`~wheelloader.envs.bookkeeping.step_work` (work on the soil plus
     lifting work on the payload), with the forces and blade angle at the step's end.
     """
-    state = contact_state(path.x, path.z, path.blade_angle, pile, bucket)
+    state = contact_state(path.x, path.z, path.blade_angle, pile, bucket, initial_fill=initial_fill)
     forces = soil_forces(soil, state, bucket)
     e_soil, e_payload = step_work(forces.tangential[1:], forces.normal[1:], np.diff(path.x), np.diff(path.z),
                                   path.blade_angle[1:], state.load_weight(soil.gamma)[1:])
@@ -126,16 +128,19 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
     bucket = bucket or Bucket()
     loader = loader or Loader()
     options = options or PlannerOptions()
+    initial_fill = 0.0
     if isinstance(plan, Plan):
         path = plan.path(rate)
         accel = _interval_acceleration(plan)
+        start = plan.raw.get("start")
+        initial_fill = min(start.fill, bucket.capacity) if start is not None else 0.0
     elif isinstance(plan, BucketPath):
         path = plan
         vx, vz, _ = path.velocity()
         accel = float(np.max(np.abs(np.diff(np.column_stack([vx, vz]), axis=0)) / np.diff(path.t)[:, None]))
     else:
         raise PlanningError(f"plan must be a Plan or a BucketPath, got {type(plan).__name__}")
-    sim = path_energy(path, soil, pile, bucket)
+    sim = path_energy(path, soil, pile, bucket, initial_fill)
     forces, state = sim["forces"], sim["state"]
     dt = np.diff(path.t)
     vx, vz, om = np.diff(path.x) / dt, np.diff(path.z) / dt, np.diff(path.blade_angle) / dt

@@ -430,7 +430,7 @@ def hidden_default_soil() -> SoilParams:
 
 #: Work budget of the plan between cycles: IPOPT iterations per solve. A plan stopped at this limit is used
 #: only when it passes the NumPy check (feasible, not proven optimal); otherwise it is re-planned with wider
-#: margins while at most half of the budget is spent, and then the loop falls back to
+#: margins while at most the budget is spent, and then the loop falls back to
 #: :func:`~wheelloader.planner.model_bezier_on_face`. An iteration count, not a wall time, so that the same
 #: seed gives the same cycles on a quiet and on a busy machine.
 BETWEEN_CYCLES_MAX_ITER = 130
@@ -449,4 +449,4 @@ def default_planner(mpc: bool = False) -> Callable[[SoilParams, Pile], PlanOutco
     for level in (0, 1, 2):
         optimizer_for(options=cautious_options(options, level))
     return functools.partial(plan_next_cycle, mpc=mpc, options=options,
-                             replan_within_iterations=BETWEEN_CYCLES_MAX_ITER // 2, exit_min_fill=LOOP_EXIT_MIN_FILL)
+                             replan_within_iterations=BETWEEN_CYCLES_MAX_ITER, exit_min_fill=LOOP_EXIT_MIN_FILL)
