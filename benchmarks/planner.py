@@ -424,6 +424,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "results.json").write_text(json.dumps(to_jsonable(results), indent=2))
+    (out / "summary.md").write_text(summary_markdown(results))
     print_table(results)
     if not args.no_plots:
         plot(results, out)
@@ -677,3 +678,32 @@ def _timing_axes(ax, results: dict[str, Any]) -> None:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+def summary_markdown(results: dict) -> str:
+    """The README's planner table from the benchmark's results (energy per m³ from the NumPy re-simulation
+    with the true soil; MPC executed in the env)."""
+
+    def kj(entry: dict, where: str = "numpy") -> str:
+        return f"{entry[where]['energy_per_m3'] / 1e3:.1f}"
+
+    lines = ["| soil | fixed paths 1–4 [kJ/m³] | plan, true soil [kJ/m³] | plan, nominal soil | MPC in the env | "
+             "MPC warm re-plan median (p90), re-plans not used |", "|---|---|---|---|---|---|"]
+    for name, soil in results["soils"].items():
+        st = soil["strategies"]
+        fixed = " / ".join(f"{st[f'path {k}']['numpy']['energy_per_m3'] / 1e3:.0f}" for k in (1, 2, 3, 4))
+        mpc = st["MPC (true soil)"]["mpc"]
+        warm = mpc["warm_solve"]
+        lines.append(f"| {name} | {fixed} | {kj(st['plan (true soil)'])} | {kj(st['plan (nominal)'])} | "
+                     f"{kj(st['MPC (true soil)'], 'env')} | {warm['median'] * 1e3:.1f} ms "
+                     f"({warm['p90'] * 1e3:.1f} ms), "
+                     f"{mpc['failures']} of {mpc['solves']} |")
+    t = results["timing"]
+    load = results.get("load_average") or {}
+    lines += ["", f"*`python benchmarks/planner.py` at {str((results.get('code') or {}).get('commit', ''))[:10]}; "
+              f"full-cycle plan median {t['full_plan_cold']['median']:.2f} s cold, {t['full_plan_warm']['median']:.2f} "
+              f"s warm; MPC warm re-plan median {t['mpc_warm_solve']['median'] * 1e3:.1f} ms (p90 "
+              f"{t['mpc_warm_solve']['p90'] * 1e3:.1f} ms) over all soils; load average at start / end "
+              f"{load.get('start')} / {load.get('end')}; "
+              f"{results.get('wall_seconds', 0):.0f} s.*"]
+    return "\n".join(lines) + "\n"
