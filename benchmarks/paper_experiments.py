@@ -506,25 +506,6 @@ BAND_LEVEL = 0.9
 STUDY_TRAIN = {"path 1": (1,), "paths 1+2": (1, 2)}
 
 
-def seed_averaged_logs(load, names, seeds) -> dict:
-    """Gravel paths 1-4 averaged over the depositions ``seeds`` (and seed 1): ``{k: (raw, filtered)}``."""
-    import numpy as np
-
-    avg = {}
-    for k in range(1, 5):
-        logs = [load(f"gravel_path{k}")] + [load(f"gravel_path{k}_seed{s}") for s in seeds]
-        raw0, filt0 = logs[0]
-        meta = dict(filt0.metadata, seed_average=[1, *seeds])
-
-        def mean_log(base, items, meta=meta):
-            return replace(base, tangential=np.mean([lg.tangential for lg in items], axis=0),
-                           normal=np.mean([lg.normal for lg in items], axis=0),
-                           fill_volume=np.mean([lg.fill_volume for lg in items], axis=0), metadata=meta)
-
-        avg[k] = (mean_log(raw0, [r for r, _ in logs]), mean_log(filt0, [f for _, f in logs]))
-    return avg
-
-
 def study_sets(load, names) -> dict:
     """``{label: {k: (raw, filtered)}}``: every soil with paths 1-4, and the seed-averaged gravel when present."""
     sets = {}
@@ -533,7 +514,7 @@ def study_sets(load, names) -> dict:
             sets[soil] = {k: load(f"{soil}_path{k}") for k in range(1, 5)}
     seeds = [s for s in (2, 3) if all(f"gravel_path{k}_seed{s}" in names for k in range(1, 5))]
     if seeds:
-        sets["gravel (seed-averaged)"] = seed_averaged_logs(load, names, seeds)
+        sets["gravel (seed-averaged)"] = seed_averaged(load, seeds)
     return sets
 
 
