@@ -691,14 +691,19 @@ def summary_markdown(results: dict) -> str:
              "MPC warm re-plan median (p90), re-plans not used |", "|---|---|---|---|---|---|"]
     for name, soil in results["soils"].items():
         st = soil["strategies"]
-        fixed = " / ".join(f"{st[f'path {k}']['numpy']['energy_per_m3'] / 1e3:.0f}" for k in (1, 2, 3, 4))
-        mpc = st["MPC (true soil)"]["mpc"]
-        warm = mpc["warm_solve"]
-        lines.append(f"| {name} | {fixed} | {kj(st['plan (true soil)'])} | {kj(st['plan (nominal)'])} | "
-                     f"{kj(st['MPC (true soil)'], 'env')} | {warm['median'] * 1e3:.1f} ms "
-                     f"({warm['p90'] * 1e3:.1f} ms), "
-                     f"{mpc['failures']} of {mpc['solves']} |")
-    t = results["timing"]
+        fixed = " / ".join(f"{st[f'path {k}']['numpy']['energy_per_m3'] / 1e3:.0f}" if f"path {k}" in st else "–"
+                           for k in (1, 2, 3, 4))
+        plans = [kj(st[key]) if key in st else "–" for key in ("plan (true soil)", "plan (nominal)")]
+        if "MPC (true soil)" in st:
+            mpc = st["MPC (true soil)"]["mpc"]
+            warm = mpc["warm_solve"]
+            mpc_cells = (f"{kj(st['MPC (true soil)'], 'env')} | {warm['median'] * 1e3:.1f} ms "
+                         f"({warm['p90'] * 1e3:.1f} ms), {mpc['failures']} of {mpc['solves']}")
+        else:
+            mpc_cells = "– | –"
+        lines.append(f"| {name} | {fixed} | {plans[0]} | {plans[1]} | {mpc_cells} |")
+    t = {key: results["timing"].get(key) or {"median": float("nan"), "p90": float("nan")}
+         for key in ("full_plan_cold", "full_plan_warm", "mpc_warm_solve")}
     load = results.get("load_average") or {}
     lines += ["", f"*`python benchmarks/planner.py` at {str((results.get('code') or {}).get('commit', ''))[:10]}; "
               f"full-cycle plan median {t['full_plan_cold']['median']:.2f} s cold, {t['full_plan_warm']['median']:.2f} "
