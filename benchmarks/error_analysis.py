@@ -33,9 +33,9 @@ from pathlib import Path
 import numpy as np
 from _machine import machine_info
 
+from wheelloader.estimator import GRAVITY
 from wheelloader.provenance import commit_label
 
-GRAVITY = 9.81
 PHASES = ("entry", "deep cut", "curl")
 TERMS = ("gamma", "cohesion", "adhesion", "surcharge", "penetration", "blade adhesion", "carried load (missing)")
 #: (training cycle, predicted cycle, label) of the paper's experiments, as in paper_experiments.py.
@@ -64,13 +64,14 @@ def phases_of(state, curl_rho: float) -> dict[str, np.ndarray]:
     return {"entry": inside & before, "deep cut": inside & ~before & ~curl, "curl": curl}
 
 
-def term_forces(pred, bucket, density: float) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Blade-frame (F_T, F_N) of each model term along the prediction, and the missing carried load."""
+def term_forces(pred, bucket, density: float, contact_depth: float) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Blade-frame (F_T, F_N) of each model term along the prediction (eq 1 split, ``contact_depth`` the
+    surcharge ramp of the model options predicted with), and the missing carried load."""
     soil, state, f = pred.soil, pred.state, pred.forces
     d = np.maximum(state.depth, 0.0)
     w = bucket.width
     tension = f.fee_force <= 0.0  # eq 1 clamped to 0: no term acts
-    ramp = np.minimum(d / 0.02, 1.0)
+    ramp = np.minimum(d / contact_depth, 1.0)
     fee_terms = {
         "gamma": d * d * w * soil.gamma * GRAVITY * f.n_gamma,
         "cohesion": soil.cohesion * w * d * f.n_c,
@@ -112,7 +113,7 @@ def analyse(train_name: str, test_name: str, data: Path, sigma: float, method: s
     total_sq = float(np.sum(err_r[inside] ** 2))
     masks = phases_of(state, curl_rho)
     density = _reference_density(raw)
-    terms = term_forces(pred, filt.bucket, density)
+    terms = term_forces(pred, filt.bucket, density, cal.model_options.contact_depth)
     res_t = filt.tangential - pred.tangential
     res_n = filt.normal - pred.normal
     phases = {}

@@ -48,8 +48,8 @@ def make_plant(name: str, resolution: float, threads: int) -> Any:
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    from wheelloader.adaptation import NOMINAL_SOIL, Calibrating, FixedBezier, default_planner
-    from wheelloader.estimator import Pile, preset
+    from wheelloader.adaptation import default_planner, make_strategy
+    from wheelloader.estimator import Pile
     from wheelloader.plant_loop import Hindsight, hindsight_parameters, run_plant_loop
 
     plant = make_plant(args.plant, args.resolution, args.threads)
@@ -63,11 +63,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         loops = []
         for seed in range(args.seeds):
             for name in [s for s in args.strategies if s != "oracle"]:
-                strategy = {"fixed": lambda: FixedBezier(preset(NOMINAL_SOIL)),
-                            "ours": lambda: Calibrating(preset(NOMINAL_SOIL), "default", planner),
-                            "paper": lambda: Calibrating(preset(NOMINAL_SOIL), "multi-stage", planner,
-                                                         name="paper")}[name]()
-                loops.append((seed, strategy))
+                loops.append((seed, make_strategy(name, planner)))
         for seed, strategy in loops:
             print(f"{soil}, seed {seed}, {strategy.name} ({time.perf_counter() - started:.0f} s)", flush=True)
             records, logs = run_plant_loop(plant, strategy, Pile.trapezoid(), soil, cycles=args.cycles, seed=seed,

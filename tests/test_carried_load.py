@@ -124,7 +124,7 @@ def test_slip_factor_values():
     assert np.all(slip_factor(th) == 1.0)
 
 
-def test_slip_friction_everywhere_alike():
+def test_slip_friction_everywhere_alike(assert_fit_jacobian):
     soil, state, bucket = preset("dirt"), _state_with_velocity(), Bucket()
     f = soil_forces(soil, state, bucket, BOTH)
     paper = soil_forces(soil, state, bucket)
@@ -142,15 +142,7 @@ def test_slip_friction_everywhere_alike():
     data = FitData.from_state(state, f.tangential, f.normal, bucket, BOTH)
     p = soil_to_fit(soil, bucket.edge_thickness)
     p[2] = 800.0  # adhesion off zero for the finite differences
-    f_t, f_n, jt, jn = data.forces_and_jacobian(p)
-    jac = np.vstack([jt, jn])
-    for j in range(len(FIT_NAMES)):
-        h = 1e-6 * max(abs(p[j]), 1.0 if j not in (3, 4, 6) else 0.1)
-        up, dn = p.copy(), p.copy()
-        up[j] += h
-        dn[j] -= h
-        fd = (np.concatenate(data.forces(up)[:2]) - np.concatenate(data.forces(dn)[:2])) / (2 * h)
-        assert np.max(np.abs(jac[:, j] - fd)) <= 1e-5 * (np.max(np.abs(fd)) + 1e-12), FIT_NAMES[j]
+    assert_fit_jacobian(data, p)
 
 
 def test_calibration_recovers_a_soil_with_slip_friction():

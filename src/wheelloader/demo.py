@@ -35,13 +35,11 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     ``window``: ours calibrates on the last ``window`` cycles together (default
     :data:`wheelloader.adaptation.DEFAULT_WINDOW`).
     """
-    if plant not in DEMO_PLANTS:
-        from wheelloader.estimator import ParameterError
+    from wheelloader.estimator import ParameterError
 
+    if plant not in DEMO_PLANTS:
         raise ParameterError(f"plant must be one of {DEMO_PLANTS}, got {plant!r}")
     if plant != "fee-env" and mpc:
-        from wheelloader.estimator import ParameterError
-
         raise ParameterError("--mpc needs the env's feedback and runs only with the fee-env plant")
     import gymnasium as gym
 

@@ -23,7 +23,6 @@ digging again: an interrupted run resumes where it stopped.
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 import time
 from collections.abc import Callable
@@ -165,11 +164,11 @@ def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParam
                      + (" (saved cycle of another plan dug again)" if replaced else ""))
         pile = log.pile_after
         if k < cycles:
-            calib = strategy.update(smooth, _true_soil(soil, strategy))
+            calib = strategy.update(smooth, _true_soil(soil))
     return records, logs
 
 
-def _true_soil(soil: SoilParams | str, strategy: Strategy) -> SoilParams:
+def _true_soil(soil: SoilParams | str) -> SoilParams:
     """What :meth:`Strategy.update` receives as the plant's truth: on a plant that is not the model there is
     none in FEE terms; the soil's FEE parameters (a preset or the given ones) stand in, and only the
     simulation-world oracle reads them."""
@@ -177,12 +176,6 @@ def _true_soil(soil: SoilParams | str, strategy: Strategy) -> SoilParams:
 
     return preset(soil) if isinstance(soil, str) else soil
 
-
-def save_records(records: list[CycleRecord], path: str | Path) -> Path:
-    """Write the records as JSON (one list)."""
-    path = Path(path)
-    path.write_text(json.dumps([r.to_dict() for r in records], indent=1))
-    return path
 
 
 class Hindsight(Calibrating):

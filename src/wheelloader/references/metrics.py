@@ -7,11 +7,17 @@ import numpy as np
 from wheelloader.estimator import CycleLog
 
 
+def blade_frame(fx: np.ndarray, fz: np.ndarray, blade_angle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The references' blade-frame forces ``(F_T, F_N)`` of a world-frame force ``(F_x, F_z)`` on the bucket:
+    ``F_T = -(F_x cos a + F_z sin a)``, ``F_N = F_x sin a - F_z cos a`` with ``a`` the blade angle."""
+    a = np.asarray(blade_angle, dtype=float)
+    return -(fx * np.cos(a) + fz * np.sin(a)), fx * np.sin(a) - fz * np.cos(a)
+
+
 def world_force(log: CycleLog) -> tuple[np.ndarray, np.ndarray]:
     """The soil's force on the bucket in the world frame ``(F_x, F_z)`` [N] from the log's F_T, F_N.
 
-    Inverts the blade-frame projection of the references (``F_T = -(F_x cos a + F_z sin a)``,
-    ``F_N = F_x sin a - F_z cos a`` with ``a`` the blade angle; see the MPM README's conventions).
+    The inverse of :func:`blade_frame` (the references' convention; see the MPM README).
     """
     a = np.asarray(log.path.blade_angle, dtype=float)
     t, n = np.asarray(log.tangential, dtype=float), np.asarray(log.normal, dtype=float)

@@ -12,6 +12,7 @@ import numpy as np
 
 from wheelloader.estimator import Bucket, BucketPath, CycleLog, Pile, SoilParams, as_soil
 
+from ..metrics import blade_frame
 from ._backend import TAICHI_VERSION, initialised_threads
 from .scene import SceneSettings, bucket_scene, surface_columns
 from .soil import DEFAULT_YOUNGS_MODULUS, ContinuumSoil
@@ -179,9 +180,7 @@ class MPMPlant:
                     window[k] += mids[k] - t[k]
             end_positions = solver.positions()
             force = impulse / window[:, None]
-            a = path.blade_angle
-            tangential = -(force[:, 0] * np.cos(a) + force[:, 1] * np.sin(a))
-            normal = force[:, 0] * np.sin(a) - force[:, 1] * np.cos(a)
+            tangential, normal = blade_frame(force[:, 0], force[:, 1], path.blade_angle)
             pile_after, balance = _carved_pile(pile, scene, start_positions, end_positions,
                                                self.shape.inside(tuple(poses[-1]), end_positions),
                                                solver.particle_volume)
