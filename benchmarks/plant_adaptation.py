@@ -7,6 +7,11 @@ loop), then (c) ``oracle``: one set of FEE parameters fitted afterwards to all o
 this plant). Energy, fill and the next-cycle prediction error are measured by the plant for every
 strategy alike (:mod:`wheelloader.plant_loop`).
 
+Each loop (soil x seed x strategy) is one unit of :mod:`wheelloader.sweep`: with Ray installed they run as
+Ray tasks on this machine (``--ray local``, one per CPU; ``--threads`` Taichi threads each), on a cluster with
+``--ray auto`` / ``--ray ray://HOST:10001``, or one after the other with ``--ray off``; the oracle's loops
+start when all the others of its soil are done. The tables are the same whatever ran them (times aside).
+
 Every cycle's log is saved under ``OUT/cycles/<soil>/seed<k>/<strategy>/`` as it finishes; running the
 same command again resumes (a saved cycle is read when its planned path is the same).
 
@@ -29,6 +34,7 @@ from typing import Any
 from _machine import machine_info
 
 from wheelloader.provenance import commit_label
+from wheelloader.ray_mode import add_ray_arguments
 
 PLANTS = ("mpm", "fee-env", "dem")
 STRATEGIES = ("fixed", "ours", "paper", "oracle")
@@ -48,45 +54,59 @@ def make_plant(name: str, resolution: float, threads: int) -> Any:
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    from wheelloader.adaptation import default_planner, make_strategy
-    from wheelloader.estimator import Pile
-    from wheelloader.plant_loop import Hindsight, hindsight_parameters, run_plant_loop
+    from wheelloader.plant_loop import hindsight_parameters, plant_loop_unit
+    from wheelloader.sweep import Unit, run_sweep
 
     plant = make_plant(args.plant, args.resolution, args.threads)
-    planner = None if args.no_planner else default_planner()
     out = Path(args.out)
-    rows: list[dict[str, Any]] = []
-    oracles: dict[str, Any] = {}
     started = time.perf_counter()
-    for soil in args.soils:
-        soil_logs = []
-        loops = []
-        for seed in range(args.seeds):
-            for name in [s for s in args.strategies if s != "oracle"]:
-                loops.append((seed, make_strategy(name, planner)))
-        for seed, strategy in loops:
-            print(f"{soil}, seed {seed}, {strategy.name} ({time.perf_counter() - started:.0f} s)", flush=True)
-            records, logs = run_plant_loop(plant, strategy, Pile.trapezoid(), soil, cycles=args.cycles, seed=seed,
-                                           cache=out / "cycles" / soil / f"seed{seed}" / strategy.name,
-                                           progress=lambda line: print(line, flush=True))
-            soil_logs += logs
-            rows += [dict(r.to_dict(), soil=soil, seed=seed) for r in records]
-        if "oracle" in args.strategies and soil_logs:
+    loop_kwargs = {"plant": plant, "cycles": args.cycles, "planner": not args.no_planner}
+    learning = [s for s in args.strategies if s != "oracle"]
+    keys = [(soil, seed, name) for soil in args.soils for seed in range(args.seeds) for name in learning]
+    units = [Unit(plant_loop_unit, {**loop_kwargs, "strategy": name, "soil": soil, "seed": seed,
+                                    "cache": out / "cycles" / soil / f"seed{seed}" / name},
+                  label=f"{soil} | seed {seed} | {name}", num_cpus=args.threads) for soil, seed, name in keys]
+    # phase 1: every loop that learns (or does not) from its own cycles, as sweep units (Ray tasks when present)
+    print(f"{len(units)} loops ({args.cycles} cycles each) on the {args.plant} plant, --ray {args.ray}", flush=True)
+    loops = run_sweep(units, args.ray, ray_cpus=args.ray_cpus, progress=_print).values_or_raise()
+    by_key = dict(zip(keys, loops, strict=True))
+    oracles: dict[str, Any] = {}
+    oracle_keys: list[tuple[str, int, str]] = []
+    oracle_units = []
+    if "oracle" in args.strategies:
+        # phase 2: one set of FEE parameters fitted afterwards to all of the soil's cycles, then its loops
+        for soil in args.soils:
+            soil_logs = [lg for (s, _, _), loop in by_key.items() if s == soil for lg in loop["logs"]]
+            if not soil_logs:
+                continue
             params, how = hindsight_parameters(soil_logs)
             oracles[soil] = {"params": params.to_dict(), "fitted": how}
+            print(f"{soil}: oracle parameters: {how}", flush=True)
             for seed in range(args.seeds):
-                print(f"{soil}, seed {seed}, oracle ({how})", flush=True)
-                records, _ = run_plant_loop(plant, Hindsight(params, planner), Pile.trapezoid(), soil,
-                                            cycles=args.cycles, seed=seed,
-                                            cache=out / "cycles" / soil / f"seed{seed}" / "oracle",
-                                            progress=lambda line: print(line, flush=True), stale="redig")
-                rows += [dict(r.to_dict(), soil=soil, seed=seed) for r in records]
+                oracle_keys.append((soil, seed, "oracle"))
+                oracle_units.append(Unit(plant_loop_unit, {**loop_kwargs, "strategy": "oracle", "soil": soil,
+                                                           "seed": seed, "oracle_params": params, "stale": "redig",
+                                                           "cache": out / "cycles" / soil / f"seed{seed}" / "oracle"},
+                                         label=f"{soil} | seed {seed} | oracle", num_cpus=args.threads))
+        if oracle_units:
+            loops = run_sweep(oracle_units, args.ray, ray_cpus=args.ray_cpus, progress=_print).values_or_raise()
+            by_key.update(zip(oracle_keys, loops, strict=True))
+    rows: list[dict[str, Any]] = []
+    for soil in args.soils:  # the table's order: soil, seed, strategy, cycle (whatever ran the loops)
+        for seed in range(args.seeds):
+            for name in args.strategies:
+                if (soil, seed, name) in by_key:
+                    rows += [dict(r, soil=soil, seed=seed) for r in by_key[(soil, seed, name)]["records"]]
     return {"benchmark": "plant_adaptation", "plant": args.plant, "settings": vars(args) | {"out": str(args.out)},
             "machine": machine_info(), "rows": rows, "oracle": oracles, "wall_s": time.perf_counter() - started,
             "metrics": {"energy": "work of the plant's bucket force along the path (plant_loop, references.metrics)",
                         "fill": "plant's soil inside the bucket at the end",
                         "prediction": "F_R RMSE of the parameters planned with vs the plant's force filtered "
                                       "(sigma 0.1 s), % of mean |F_R| in soil"}}
+
+
+def _print(line: str) -> None:
+    print(line, flush=True)
 
 
 def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
@@ -132,7 +152,8 @@ def markdown(result: dict[str, Any]) -> str:
     load = "/".join(f"{v:.1f}" for v in result["machine"].get("loadavg_1_5_15min") or [])
     lines += ["", f"*`python benchmarks/adaptation.py --plant {result['plant']}` ({', '.join(s['soils'])}; "
               f"{s['seeds']} seed(s); {s['cycles']} cycles; MPM dx {s['resolution']} m) at "
-              f"{commit_label(result['machine'])}; the last invocation took {result['wall_s'] / 60:.0f} min (cycles "
+              f"{commit_label(result['machine'])}; loops run with `--ray {s.get('ray', 'off')}`; the last "
+              f"invocation took {result['wall_s'] / 60:.0f} min (cycles "
               f"saved by earlier ones are read, not dug again), load average at its end {load}. Energy = plant-"
               "measured work / plant-measured fill over all cycles; fill in % of the nominal 0.2 m³; fixed paths "
               "are Bézier paths (not checked); a plan that fails the check falls back to the Bézier path placed "
@@ -151,6 +172,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--resolution", type=float, default=0.02, help="MPM grid spacing [m] (verified: 0.02)")
     parser.add_argument("--threads", type=int, default=1, help="Taichi CPU threads")
     parser.add_argument("--no-planner", action="store_true", help="dig Bezier paths only")
+    add_ray_arguments(parser)
     parser.add_argument("--report", action="store_true",
                         help="only rewrite the Markdown and the figure from OUT/plant_adaptation.json")
     parser.add_argument("--quick", action="store_true",

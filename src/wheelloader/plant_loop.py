@@ -178,6 +178,32 @@ def _true_soil(soil: SoilParams | str) -> SoilParams:
 
 
 
+def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycles: int, seed: int,
+                    cache: Path | str | None, planner: bool = True, oracle_params: SoilParams | None = None,
+                    stale: str = "error", sigma_s: float = DEFAULT_FILTER["sigma_s"]) -> dict[str, Any]:
+    """One loop of :func:`run_plant_loop` as a unit of :mod:`wheelloader.sweep` (picklable arguments only).
+
+    Builds the strategy by name in the process that runs it (``fixed``, ``ours``, ``paper``, or ``oracle``
+    with ``oracle_params``, see :class:`Hindsight`) with the loop's default planner when ``planner`` is true,
+    prints the loop's progress lines, and returns ``{"records": [CycleRecord.to_dict(), ...], "logs":
+    [CycleLog, ...]}``.
+    """
+    from wheelloader.adaptation import default_planner, make_strategy
+
+    plan = default_planner() if planner else None
+    if strategy == "oracle":
+        if oracle_params is None:
+            raise WheelloaderError("plant_loop_unit: the oracle needs oracle_params (hindsight_parameters)")
+        chosen: Strategy = Hindsight(oracle_params, plan)
+    else:
+        chosen = make_strategy(strategy, plan)
+    name = soil if isinstance(soil, str) else "custom soil"
+    records, logs = run_plant_loop(plant, chosen, Pile.trapezoid(), soil, cycles=cycles, seed=seed, cache=cache,
+                                   sigma_s=sigma_s, stale=stale,
+                                   progress=lambda line: print(f"[{name}, seed {seed}]{line}", flush=True))
+    return {"records": [r.to_dict() for r in records], "logs": logs}
+
+
 class Hindsight(Calibrating):
     """The hindsight oracle of a plant that is not the model: plan every cycle with one set of FEE
     parameters fitted afterwards to the plant's cycles of that soil (:func:`hindsight_parameters`); it

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from wheelloader.adaptation import LOOP_ENV_KWARGS
 from wheelloader.envs import BucketLoadingEnv
 from wheelloader.envs.scripted import run_path
 from wheelloader.estimator import BucketPath, CycleLog, Pile, SoilParams
@@ -18,7 +19,11 @@ class FEEEnvPlant:
     ----------
     **env_kwargs
         Keyword arguments of the env besides ``soil`` and ``pile`` (e.g. ``sensor_noise``, ``truth``,
-        ``exit_min_fill``). The tracked trajectory, not the planned one, is what the log records.
+        ``exit_min_fill``), on top of the adaptation loop's env settings
+        (:data:`wheelloader.adaptation.LOOP_ENV_KWARGS`: the carved pile relaxes, and a cycle ends when the tip
+        leaves the soil only once the bucket holds ``LOOP_EXIT_MIN_FILL`` of its capacity, so that a plan that
+        crosses a carved step in the air is dug in full). The tracked trajectory, not the planned one, is what
+        the log records.
     """
 
     name = "fee-env"
@@ -27,7 +32,7 @@ class FEEEnvPlant:
         for key in ("soil", "pile"):
             if key in env_kwargs:
                 raise TypeError(f"FEEEnvPlant: {key!r} is an argument of dig(), not of the plant")
-        self.env_kwargs = env_kwargs
+        self.env_kwargs = {**LOOP_ENV_KWARGS, **env_kwargs}
 
     def dig(self, path: BucketPath, pile: Pile, soil: SoilParams | str, *, seed: int = 0) -> CycleLog:
         """Dig ``path`` into ``pile`` of ``soil``; the log's ``pile_after`` is the carved surface."""
