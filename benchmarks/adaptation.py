@@ -72,10 +72,11 @@ def _ours_options(args: argparse.Namespace) -> dict[str, Any]:
     if args.forgetting is not None:
         out["forgetting"] = args.forgetting
     out["keep_untrustworthy"] = args.keep_untrustworthy  # default True: adopt every converged fit
-    if args.carried_load or args.slip_friction:
+    if args.carried_load or args.slip_friction or args.failure_angle != "min_n_gamma":
         from wheelloader.estimator import ModelOptions
 
-        out["options"] = ModelOptions(carried_load=args.carried_load, slip_friction=args.slip_friction)
+        out["options"] = ModelOptions(carried_load=args.carried_load, slip_friction=args.slip_friction,
+                                      failure_angle=args.failure_angle)
     if args.fill != "log":
         out["fill"] = args.fill
     return out
@@ -126,6 +127,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="ours: bucket-load source of calibration and prediction (default: %(default)s)")
     parser.add_argument("--carried-load", action="store_true", help="ours: the opt-in carried-load term")
     parser.add_argument("--slip-friction", action="store_true", help="ours: the opt-in slip-mobilised friction")
+    parser.add_argument("--failure-angle", choices=("min_n_gamma", "min_weight_force"), default="min_n_gamma",
+                        help="ours: how the model picks beta* (default: the paper's min N_gamma; "
+                             "min_weight_force: the opt-in least weight force)")
     args = parser.parse_args(argv)
 
     from wheelloader.adaptation import strategy_loop
@@ -164,7 +168,8 @@ def main(argv: list[str] | None = None) -> int:
                   "sensor_noise_N": 150.0,
                   "ours": {"window": window_used(args), "forgetting": args.forgetting,
                            "keep_untrustworthy": args.keep_untrustworthy, "fill": args.fill,
-                           "carried_load": args.carried_load, "slip_friction": args.slip_friction}},
+                           "carried_load": args.carried_load, "slip_friction": args.slip_friction,
+                           "failure_angle": args.failure_angle}},
         "summary": summary,
         "rows": rows,
         "wall_time_s": time.perf_counter() - start,

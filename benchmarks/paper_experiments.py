@@ -499,6 +499,12 @@ STUDY_VARIANTS = {
     "paper model, model fill, granular prior": {"fill": "model", "prior": "granular"},
     "+ slip-mobilised friction, model fill": {"fill": "model", "slip_friction": True},
     "paper model, model fill, cross-cycle band noise": {"fill": "model", "band_noise": "cross-cycle"},
+    "least-weight-force failure angle, logged fill": {"fill": "log", "failure_angle": "min_weight_force"},
+    "least-weight-force failure angle, model fill": {"fill": "model", "failure_angle": "min_weight_force"},
+    "least-weight-force failure angle + carried load, model fill": {"fill": "model", "carried_load": True,
+                                                                     "failure_angle": "min_weight_force"},
+    "least-weight-force failure angle + slip-mobilised friction, model fill": {
+        "fill": "model", "slip_friction": True, "failure_angle": "min_weight_force"},
 }
 #: Level of the prediction bands whose coverage the study measures.
 BAND_LEVEL = 0.9
@@ -535,7 +541,8 @@ def estimator_study(load, names, args) -> dict:
     times: dict = {}
     for label, spec in STUDY_VARIANTS.items():
         options = ModelOptions(carried_load=bool(spec.get("carried_load", False)),
-                               slip_friction=bool(spec.get("slip_friction", False)))
+                               slip_friction=bool(spec.get("slip_friction", False)),
+                               failure_angle=spec.get("failure_angle", "min_n_gamma"))
         per: dict = {}
         for set_name, logs in sets.items():
             per[set_name] = {}

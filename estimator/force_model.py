@@ -60,7 +60,14 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .failure_angle import beta_bounds, log_ngamma_slope, optimal_beta, optimal_beta_scalar
+from .failure_angle import (
+    beta_bounds,
+    log_ngamma_slope,
+    optimal_beta,
+    optimal_beta_scalar,
+    optimal_beta_weight_force,
+    optimal_beta_weight_force_scalar,
+)
 from .kinematics import ContactState
 from .machine import Bucket
 from .soil import SoilParams
@@ -228,16 +235,19 @@ def soil_forces(soil: SoilParams, state: ContactState, bucket: Bucket,
     """
     phi, delta = soil.phi, soil.delta
     alpha, rho, flags = clamp_angles(state.alpha, state.rho, phi, delta, options)
-    beta = optimal_beta(alpha, rho, phi, delta, options)
-    n_gamma, n_c, n_a, n_q = bearing_factors(alpha, rho, beta, phi, delta)
-    n_gamma = np.maximum(n_gamma, 0.0)
     d = state.depth
     out = d <= 0.0
     flags = flags | np.where(out, FLAG_OUT_OF_SOIL, 0)
     d = np.where(out, 0.0, d)
     w = bucket.width
-    w_load = state.load_weight(soil.gamma)
     ramp = np.minimum(d / options.contact_depth, 1.0)
+    if options.failure_angle == "min_weight_force":  # opt-in (failure_angle module docstring)
+        beta = optimal_beta_weight_force(alpha, rho, phi, delta, d, ramp * state.fill_volume / w, options)
+    else:
+        beta = optimal_beta(alpha, rho, phi, delta, options)  # eq 14
+    n_gamma, n_c, n_a, n_q = bearing_factors(alpha, rho, beta, phi, delta)
+    n_gamma = np.maximum(n_gamma, 0.0)
+    w_load = state.load_weight(soil.gamma)
     fee = (d * d * w * soil.gamma * GRAVITY * n_gamma + soil.cohesion * w * d * n_c
            + soil.adhesion * w * d * n_a + ramp * w_load * n_q)  # eq 1
     tension = fee < 0.0
@@ -302,7 +312,15 @@ def soil_forces_single(soil: SoilParams, depth: float, rho: float, alpha: float,
         alpha, flags = options.alpha_max, flags | FLAG_ALPHA_CLAMPED
     elif alpha < alpha_lo:
         alpha, flags = alpha_lo, flags | FLAG_ALPHA_CLAMPED
-    beta = optimal_beta_scalar(alpha, rho, phi, delta, options, beta_guess)
+    w = bucket.width
+    ramp = depth / options.contact_depth
+    if ramp > 1.0:
+        ramp = 1.0
+    if options.failure_angle == "min_weight_force":  # opt-in; V_fill = W_load / (gamma g) here
+        surcharge = ramp * load_weight / (soil.gamma * GRAVITY * w) if soil.gamma > 0.0 else 0.0
+        beta = optimal_beta_weight_force_scalar(alpha, rho, phi, delta, depth, surcharge, options)
+    else:
+        beta = optimal_beta_scalar(alpha, rho, phi, delta, options, beta_guess)
     s_beta = math.sin(rho + delta + beta + phi)
     sin_beta = math.sin(beta)
     sab = math.sin(alpha + beta + phi)
@@ -310,10 +328,6 @@ def soil_forces_single(soil: SoilParams, depth: float, rho: float, alpha: float,
     n_c = math.cos(phi) / (sin_beta * s_beta)
     n_a = -math.cos(rho + beta + phi) / (math.sin(rho) * s_beta)
     n_q = sab / s_beta
-    w = bucket.width
-    ramp = depth / options.contact_depth
-    if ramp > 1.0:
-        ramp = 1.0
     fee = (depth * depth * w * soil.gamma * GRAVITY * n_gamma + soil.cohesion * w * depth * n_c
            + soil.adhesion * w * depth * n_a + ramp * load_weight * n_q)
     if fee < 0.0:

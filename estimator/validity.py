@@ -96,6 +96,12 @@ class ModelOptions:
         (:func:`~wheelloader.estimator.force_model.slip_factor`). Not in the env or the planner either.
     slip_speed : float
         ``v_0`` of ``slip_friction`` [m/s]; default 0.05 m/s.
+    failure_angle : {"min_n_gamma", "min_weight_force"}
+        How beta* is chosen: ``"min_n_gamma"`` (default) minimises N_gamma as the paper does (eq 14);
+        ``"min_weight_force"`` (opt-in, beyond the paper) minimises the force of the soil's weight,
+        wedge and surcharge, ``d^2 N_gamma + q N_q`` with ``q = r V_fill / w``
+        (:mod:`~wheelloader.estimator.failure_angle`). The planner's CasADi model does not implement it
+        (it is named in :attr:`extra_terms`).
     """
 
     eps1: float = math.radians(5.0)
@@ -107,13 +113,18 @@ class ModelOptions:
     carried_load: bool = False
     slip_friction: bool = False
     slip_speed: float = 0.05
+    failure_angle: str = "min_n_gamma"
 
     @property
     def extra_terms(self) -> tuple[str, ...]:
         """Names of the opt-in terms beyond the paper's model that are on (empty: the paper's model)."""
-        return tuple(name for name in ("carried_load", "slip_friction") if getattr(self, name))
+        names = tuple(name for name in ("carried_load", "slip_friction") if getattr(self, name))
+        return names + (("failure_angle",) if self.failure_angle != "min_n_gamma" else ())
 
     def __post_init__(self) -> None:
+        if self.failure_angle not in ("min_n_gamma", "min_weight_force"):
+            raise ParameterError("ModelOptions.failure_angle must be 'min_n_gamma' (the paper's rule) or "
+                                 f"'min_weight_force', got {self.failure_angle!r}")
         for name in ("carried_load", "slip_friction"):
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError(f"ModelOptions.{name} must be True or False, got {getattr(self, name)!r}")

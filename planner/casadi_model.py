@@ -30,13 +30,15 @@ import casadi as ca
 import numpy as np
 
 from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, ModelOptions, SoilParams
-from wheelloader.estimator.failure_angle import beta_bounds, unrolled_beta
+from wheelloader.estimator.failure_angle import beta_bounds, unrolled_beta, unrolled_beta_weight_force
 from wheelloader.estimator.soil_vector import SOIL_VECTOR_NAMES
 from wheelloader.estimator.soil_vector import soil_vector as estimator_soil_vector
 from wheelloader.estimator.validity import alpha_lower_limit
 
 #: Guarded Newton steps from the middle of the valid branch.
 NEWTON_STEPS = 8
+#: Guarded Newton steps of the opt-in least-weight-force beta*, from the paper's beta*.
+WEIGHT_FORCE_STEPS = 12
 #: Order of the soil parameter vector the CasADi model takes (the estimator's soil vector; K = k_c/b + k_phi).
 SOIL_VECTOR = SOIL_VECTOR_NAMES
 #: Smoothing widths: depth [m], angle clamps [rad], force clamp [N], length clamp [m].
@@ -110,9 +112,15 @@ def casadi_forces(soil, vertical_depth, rho, alpha, load_weight, bucket: Bucket,
     depth = smooth_pos(vertical_depth, SMOOTH_DEPTH) * ca.cos(alpha)
     s = rho_c + delta + phi
     lo, hi = beta_bounds(alpha_c, rho_c, phi, delta, options, minimum=lambda a, b: smooth_min(a, b, SMOOTH_ANGLE))
-    beta = unrolled_beta(alpha_c, phi, s, lo, hi, NEWTON_STEPS, tan=ca.tan,
-                         clip=lambda v, a, b: smooth_min(smooth_max(v, a, SMOOTH_ANGLE), b, SMOOTH_ANGLE),
+    clip = lambda v, a, b: smooth_min(smooth_max(v, a, SMOOTH_ANGLE), b, SMOOTH_ANGLE)  # noqa: E731
+    beta = unrolled_beta(alpha_c, phi, s, lo, hi, NEWTON_STEPS, tan=ca.tan, clip=clip,
                          positive=lambda dg: smooth_max(dg, 1.0, 0.1))
+    ramp = smooth_min(depth / options.contact_depth, 1.0, 1e-3)
+    if options.failure_angle == "min_weight_force":  # opt-in (estimator.failure_angle); V_fill = W_load/(gamma g)
+        surcharge = ramp * load_weight / (gamma * GRAVITY * w)
+        beta = unrolled_beta_weight_force(beta, alpha_c, rho_c, phi, delta, depth * depth, surcharge, lo, hi,
+                                          WEIGHT_FORCE_STEPS, sin=ca.sin, cos=ca.cos, clip=clip,
+                                          positive=lambda dg: smooth_max(dg, 0.1, 0.01))
     s_beta = ca.sin(s + beta)
     sin_beta = ca.sin(beta)
     sab = ca.sin(alpha_c + beta + phi)
@@ -120,7 +128,6 @@ def casadi_forces(soil, vertical_depth, rho, alpha, load_weight, bucket: Bucket,
     n_c = ca.cos(phi) / (sin_beta * s_beta)  # eq 11
     n_a = -ca.cos(rho_c + beta + phi) / (ca.sin(rho_c) * s_beta)  # eq 12
     n_q = sab / s_beta  # eq 13
-    ramp = smooth_min(depth / options.contact_depth, 1.0, 1e-3)
     fee = (depth * depth * w * gamma * GRAVITY * n_gamma + cohesion * w * depth * n_c
            + adhesion * w * depth * n_a + ramp * load_weight * n_q)  # eq 1
     fee = smooth_pos(fee, SMOOTH_FORCE)

@@ -11,7 +11,16 @@ import math
 
 import numpy as np
 
-from wheelloader.estimator import Bucket, BucketPath, Loader, Pile, SoilParams, default_path
+from wheelloader.estimator import (
+    DEFAULT_OPTIONS,
+    Bucket,
+    BucketPath,
+    Loader,
+    ModelOptions,
+    Pile,
+    SoilParams,
+    default_path,
+)
 
 from .verify import cycle_end_index, path_energy
 
@@ -66,7 +75,8 @@ MODEL_LIFTS = (0.04, 0.0, -0.04, -0.08)
 
 
 def model_bezier_on_face(soil: SoilParams, pile: Pile, rate: float = 60.0, bucket: Bucket | None = None,
-                         loader: Loader | None = None, exit_min_fill: float = LOOP_EXIT_MIN_FILL) -> BucketPath:
+                         loader: Loader | None = None, exit_min_fill: float = LOOP_EXIT_MIN_FILL,
+                         model_options: ModelOptions = DEFAULT_OPTIONS) -> BucketPath:
     """The default Bezier path moved to where ``soil``'s force model predicts the least energy per m^3.
 
     Starts from :func:`bezier_on_face` (geometric placement) and tries it
@@ -77,7 +87,7 @@ def model_bezier_on_face(soil: SoilParams, pile: Pile, rate: float = 60.0, bucke
     predicted energy per m^3 (the NumPy model with ``soil``: calibrated
     parameters make this choice better) wins. The fallback of the
     calibrating strategies when a plan fails its check; up to 28 model
-    evaluations.
+    evaluations. ``model_options``: the force model's (the planner's failure-angle rule).
     """
     bucket = Bucket() if bucket is None else bucket
     loader = Loader() if loader is None else loader
@@ -92,7 +102,7 @@ def model_bezier_on_face(soil: SoilParams, pile: Pile, rate: float = 60.0, bucke
                 continue
             part = BucketPath(path.t[:end + 1], path.x[:end + 1], path.z[:end + 1], path.blade_angle[:end + 1],
                               path.name)
-            sim = path_energy(part, soil, pile, bucket)
+            sim = path_energy(part, soil, pile, bucket, model_options=model_options)
             forces = sim["forces"]
             if forces.tangential.max() > loader.max_push_force or forces.normal.max() > loader.max_lift_force:
                 continue

@@ -121,7 +121,7 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     alpha = grid.window_slope_angle(xs, p_win)
     vertical = grid.window_height(xs, p_win) - zs
     w_load = p_soil[0] * GRAVITY * vs
-    out = casadi_forces(p_soil, vertical, alpha - ths, alpha, w_load, bucket, DEFAULT_OPTIONS)
+    out = casadi_forces(p_soil, vertical, alpha - ths, alpha, w_load, bucket, options.model_options)
     rho = alpha - ths
     forces = ca.Function("forces", [xs, zs, ths, vs, p_soil, p_win], [out["F_T"], out["F_N"]])
     node = ca.Function("node", [xs, zs, ths, vs, p_soil, p_win], [out["F_T"], out["F_N"], rho, vertical, alpha])

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wheelloader.estimator import PlanningError
+from wheelloader.estimator import DEFAULT_OPTIONS, ModelOptions, PlanningError
 
 from .surface import SurfaceGrid
 
@@ -65,6 +65,9 @@ class PlannerOptions:
         Build IPOPT with its warm-start settings (``warm_start_init_point``, ``mu_init`` 1e-4): a
         ``solve(..., warm=True)`` then starts from the previous primal *and* dual solution. For MPC,
         where successive problems differ little (default False).
+    failure_angle : {"min_n_gamma", "min_weight_force"}
+        How the planner's force model (the CasADi NLP and the NumPy check) picks beta*: the paper's rule
+        (default) or the opt-in least weight force (:class:`~wheelloader.estimator.ModelOptions`).
     tolerance : float
         IPOPT tolerance (default 1e-4; the objective is O(1)).
     surface : SurfaceGrid
@@ -89,8 +92,18 @@ class PlannerOptions:
     ipopt_warm_start: bool = False
     tolerance: float = 1e-4
     surface: SurfaceGrid = field(default_factory=SurfaceGrid)
+    failure_angle: str = "min_n_gamma"
+
+    @property
+    def model_options(self) -> ModelOptions:
+        """The force-model options the planner plans and checks with."""
+        return ModelOptions(failure_angle=self.failure_angle) if self.failure_angle != "min_n_gamma" \
+            else DEFAULT_OPTIONS
 
     def __post_init__(self) -> None:
+        if self.failure_angle not in ("min_n_gamma", "min_weight_force"):
+            raise PlanningError("PlannerOptions.failure_angle must be 'min_n_gamma' or 'min_weight_force', "
+                                f"got {self.failure_angle!r}")
         if not (isinstance(self.intervals, int) and 4 <= self.intervals <= 400):
             raise PlanningError(f"PlannerOptions.intervals must be an integer in [4, 400], got {self.intervals!r}")
         for name in ("energy_weight", "smoothing_weight", "rho_margin", "end_clearance", "lift_headroom",

@@ -17,9 +17,11 @@ import numpy as np
 
 from wheelloader.envs.bookkeeping import cycle_done, cycle_progress, outside_validity, step_work
 from wheelloader.estimator import (
+    DEFAULT_OPTIONS,
     Bucket,
     BucketPath,
     Loader,
+    ModelOptions,
     Pile,
     PlanningError,
     SoilParams,
@@ -63,15 +65,17 @@ class PlanCheck:
 
 
 def path_energy(path: BucketPath, soil: SoilParams, pile: Pile, bucket: Bucket,
-                initial_fill: float = 0.0) -> dict[str, np.ndarray | float]:
+                initial_fill: float = 0.0, model_options: ModelOptions = DEFAULT_OPTIONS
+                ) -> dict[str, np.ndarray | float]:
     """Forces, fill and the env's energy bookkeeping along ``path`` with the NumPy model (``initial_fill``
-    [m^3] already in the bucket at its start).
+    [m^3] already in the bucket at its start; ``model_options``: the force model's, e.g. the opt-in
+    failure-angle rule of the planner's :attr:`PlannerOptions.model_options`).
 
     Energy per step: the env's :func:`~wheelloader.envs.bookkeeping.step_work` (work on the soil plus
     lifting work on the payload), with the forces and blade angle at the step's end.
     """
     state = contact_state(path.x, path.z, path.blade_angle, pile, bucket, initial_fill=initial_fill)
-    forces = soil_forces(soil, state, bucket)
+    forces = soil_forces(soil, state, bucket, model_options)
     e_soil, e_payload = step_work(forces.tangential[1:], forces.normal[1:], np.diff(path.x), np.diff(path.z),
                                   path.blade_angle[1:], state.load_weight(soil.gamma)[1:])
     energy = float(np.sum(e_soil) + np.sum(e_payload))
@@ -140,7 +144,7 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
         accel = float(np.max(np.abs(np.diff(np.column_stack([vx, vz]), axis=0)) / np.diff(path.t)[:, None]))
     else:
         raise PlanningError(f"plan must be a Plan or a BucketPath, got {type(plan).__name__}")
-    sim = path_energy(path, soil, pile, bucket, initial_fill)
+    sim = path_energy(path, soil, pile, bucket, initial_fill, options.model_options)
     forces, state = sim["forces"], sim["state"]
     dt = np.diff(path.t)
     vx, vz, om = np.diff(path.x) / dt, np.diff(path.z) / dt, np.diff(path.blade_angle) / dt

@@ -32,7 +32,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import CalibrationError
-from ..failure_angle import BETA_AT_RHO_LIMIT, BETA_AT_SLOPE_LIMIT, BETA_INTERIOR, optimal_beta
+from ..failure_angle import (
+    BETA_AT_RHO_LIMIT,
+    BETA_AT_SLOPE_LIMIT,
+    BETA_INTERIOR,
+    optimal_beta,
+    optimal_beta_weight_force,
+)
 from ..force_model import DEFAULT_OPTIONS, GRAVITY, ModelOptions, carried_load_factors, slip_factor
 from ..kinematics import ContactState
 from ..machine import Bucket
@@ -76,7 +82,8 @@ class Factors:
     d_delta: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
 
-def factors(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS, derivatives: bool = False) -> Factors:
+def factors(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS, derivatives: bool = False,
+            depth=None, surcharge=None) -> Factors:
     """Bearing factors (eqs 10-13) at beta* (eq 14) for broadcast ``phi``, ``delta``.
 
     With ``derivatives=True`` also the total derivatives ``dN/dphi`` and
@@ -85,11 +92,23 @@ def factors(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS, der
     bound for bound solutions) and the clamp of rho at its upper limit.
     The envelope theorem makes ``dN_gamma/dbeta = 0`` at interior roots, but
     N_c, N_a, N_q do depend on beta, so their beta terms are kept.
+
+    With ``options.failure_angle == "min_weight_force"`` beta* minimises ``d^2 N_gamma + q N_q``
+    (:func:`~wheelloader.estimator.failure_angle.optimal_beta_weight_force`), which needs the samples'
+    ``depth`` [m] and ``surcharge`` ``q = r V_fill / w`` [m^2]; its derivatives in phi and delta are
+    central differences of that solver (clamps included).
     """
     clamps = clamp_details(alpha, rho, phi, delta, options)
     alpha_e, rho_e, rho_high = clamps.alpha, clamps.rho, clamps.rho_high
     flags_rho = clamps.rho_low | rho_high
-    beta, where = optimal_beta(alpha_e, rho_e, phi, delta, options, return_where=True)
+    weight_rule = options.failure_angle == "min_weight_force"
+    if weight_rule:
+        if depth is None or surcharge is None:
+            raise CalibrationError("factors: the min_weight_force failure angle needs depth and surcharge")
+        beta = optimal_beta_weight_force(alpha_e, rho_e, phi, delta, depth, surcharge, options)
+        where = None
+    else:
+        beta, where = optimal_beta(alpha_e, rho_e, phi, delta, options, return_where=True)
     u = rho_e + delta + beta + phi
     S = np.sin(u)
     CU = np.cos(u)
@@ -159,9 +178,20 @@ def factors(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS, der
     db_dp_in = np.where(np.isfinite(db_dp_in), db_dp_in, 0.0)
     db_dd_in = np.where(np.isfinite(db_dd_in), db_dd_in, 0.0)
     # on a bound beta* moves with it: pi - s - eps2 (s = rho_eff + delta + phi) or pi/2 - alpha_eff
-    interior, rho_limit, slope_limit = where == BETA_INTERIOR, where == BETA_AT_RHO_LIMIT, where == BETA_AT_SLOPE_LIMIT
-    db_dp = np.select([interior, rho_limit, slope_limit], [db_dp_in, -(1.0 + drho), -dalpha], 0.0)
-    db_dd = np.select([interior, rho_limit], [db_dd_in, -(1.0 + drho)], 0.0)
+    if not weight_rule:
+        interior, rho_limit = where == BETA_INTERIOR, where == BETA_AT_RHO_LIMIT
+        slope_limit = where == BETA_AT_SLOPE_LIMIT
+    if weight_rule:
+        def beta_at(ph, de):
+            cl = clamp_details(alpha, rho, ph, de, options)
+            return optimal_beta_weight_force(cl.alpha, cl.rho, ph, de, depth, surcharge, options)
+
+        step = 1e-6
+        db_dp = (beta_at(phi + step, delta) - beta_at(phi - step, delta)) / (2.0 * step)
+        db_dd = (beta_at(phi, delta + step) - beta_at(phi, delta - step)) / (2.0 * step)
+    else:
+        db_dp = np.select([interior, rho_limit, slope_limit], [db_dp_in, -(1.0 + drho), -dalpha], 0.0)
+        db_dd = np.select([interior, rho_limit], [db_dd_in, -(1.0 + drho)], 0.0)
 
     def total(dd_b, dd_x, dd_r, db_dx, dd_a=0.0, da_dx=0.0):
         return dd_x + dd_b * db_dx + dd_r * drho + dd_a * da_dx
@@ -330,6 +360,11 @@ class FitData:
         """Surcharge ramp ``min(d / contact_depth, 1)`` (force_model)."""
         return np.minimum(self.depth / self.options.contact_depth, 1.0)
 
+    @property
+    def surcharge(self) -> np.ndarray:
+        """``q = r V_fill / w`` [m^2] of the weight-force failure angle (failure_angle module docstring)."""
+        return self.ramp * self.fill_volume / self.width
+
     # ---------------------------------------------------------- basis
     def fee_basis(self, f: Factors):
         """``(B_gamma, B_c, B_a, q0)`` of the module docstring from :class:`Factors` (broadcast)."""
@@ -379,7 +414,7 @@ class FitData:
     def forces(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Model ``(F_T, F_N, tension)`` of the in-soil samples for fit vector ``p`` (same as soil_forces)."""
         gamma, c, ca, phi, delta, k, n = (float(v) for v in p)
-        f = factors(self.alpha, self.rho, phi, delta, self.options)
+        f = factors(self.alpha, self.rho, phi, delta, self.options, depth=self.depth, surcharge=self.surcharge)
         bg, bc, ba, q0 = self.fee_basis(f)
         fee = gamma * bg + c * bc + ca * ba + q0  # eq 1
         tension = fee < 0.0
@@ -399,7 +434,8 @@ class FitData:
     def forces_and_jacobian(self, p: np.ndarray):
         """``(F_T, F_N, J_T, J_N)``: forces and their analytic Jacobians (samples x 7) w.r.t. :data:`FIT_NAMES`."""
         gamma, c, ca, phi, delta, k, n = (float(v) for v in p)
-        f = factors(self.alpha, self.rho, phi, delta, self.options, derivatives=True)
+        f = factors(self.alpha, self.rho, phi, delta, self.options, derivatives=True, depth=self.depth,
+                    surcharge=self.surcharge)
         bg, bc, ba, q0 = self.fee_basis(f)
         fee_raw = gamma * bg + c * bc + ca * ba + q0
         on = fee_raw >= 0.0

@@ -131,7 +131,8 @@ def weights(lam: float) -> tuple[float, float]:
 
 def _linear_columns(data: FitData, phis: np.ndarray, deltas: np.ndarray):
     """For P pairs: T- and N-row columns of (gamma, C, C_a) (P, N, 3) and the offsets (P, N)."""
-    f = factors(data.alpha[None, :], data.rho[None, :], phis[:, None], deltas[:, None], data.options)
+    f = factors(data.alpha[None, :], data.rho[None, :], phis[:, None], deltas[:, None], data.options,
+                depth=data.depth[None, :], surcharge=data.surcharge[None, :])
     bg, bc, ba, q0 = data.fee_basis(f)
     sd = np.sin(deltas)[:, None]
     cd = np.cos(deltas)[:, None]

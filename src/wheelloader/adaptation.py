@@ -225,7 +225,7 @@ class Calibrating(Strategy):
         if outcome.path is None or not outcome.success:
             # the last good path was planned for another (uncarved) surface: the safe fallback is the
             # baseline Bezier path moved to the current face
-            fallback = model_bezier_on_face(self.params, pile, self.rate)
+            fallback = model_bezier_on_face(self.params, pile, self.rate, model_options=self.model_options)
             return PlanOutcome(fallback, False, f"{outcome.message}; fell back to the {fallback.name} path",
                                time.perf_counter() - start)
         self.last_good_path = outcome.path
@@ -436,15 +436,16 @@ def hidden_default_soil() -> SoilParams:
 BETWEEN_CYCLES_MAX_ITER = 130
 
 
-def default_planner(mpc: bool = False) -> Callable[[SoilParams, Pile], PlanOutcome]:
+def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma") -> Callable[[SoilParams, Pile], PlanOutcome]:
     """The planner used between cycles.
 
     A full-cycle CasADi plan within :data:`BETWEEN_CYCLES_MAX_ITER` IPOPT
     iterations, checked with the NumPy model, tracked in the env; with
     ``mpc`` an MPC controller re-plans the rest of the cycle every 0.1 s
-    (slower, see the planner benchmark).
+    (slower, see the planner benchmark). ``failure_angle``: the planner's
+    force-model rule for beta* (:class:`~wheelloader.planner.PlannerOptions`).
     """
-    options = PlannerOptions(max_iter=BETWEEN_CYCLES_MAX_ITER)
+    options = PlannerOptions(max_iter=BETWEEN_CYCLES_MAX_ITER, failure_angle=failure_angle)
     # build the NLPs once (the plan and its two wider-margin re-plans), before the loop's timings start
     for level in (0, 1, 2):
         optimizer_for(options=cautious_options(options, level))
