@@ -54,13 +54,15 @@ def make_plant(name: str, resolution: float, threads: int) -> Any:
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
+    from wheelloader.estimator import ModelOptions
     from wheelloader.plant_loop import hindsight_parameters, plant_loop_unit
     from wheelloader.sweep import Unit, run_sweep
 
     plant = make_plant(args.plant, args.resolution, args.threads)
     out = Path(args.out)
     started = time.perf_counter()
-    loop_kwargs = {"plant": plant, "cycles": args.cycles, "planner": not args.no_planner}
+    loop_kwargs = {"plant": plant, "cycles": args.cycles, "planner": not args.no_planner,
+                   "failure_angle": args.failure_angle}
     learning = [s for s in args.strategies if s != "oracle"]
     keys = [(soil, seed, name) for soil in args.soils for seed in range(args.seeds) for name in learning]
     units = [Unit(plant_loop_unit, {**loop_kwargs, "strategy": name, "soil": soil, "seed": seed,
@@ -79,7 +81,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             soil_logs = [lg for (s, _, _), loop in by_key.items() if s == soil for lg in loop["logs"]]
             if not soil_logs:
                 continue
-            params, how = hindsight_parameters(soil_logs)
+            params, how = hindsight_parameters(soil_logs, options=ModelOptions(failure_angle=args.failure_angle))
             oracles[soil] = {"params": params.to_dict(), "fitted": how}
             print(f"{soil}: oracle parameters: {how}", flush=True)
             for seed in range(args.seeds):
@@ -151,7 +153,9 @@ def markdown(result: dict[str, Any]) -> str:
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     load = "/".join(f"{v:.1f}" for v in result["machine"].get("loadavg_1_5_15min") or [])
     lines += ["", f"*`python benchmarks/adaptation.py --plant {result['plant']}` ({', '.join(s['soils'])}; "
-              f"{s['seeds']} seed(s); {s['cycles']} cycles; MPM dx {s['resolution']} m) at "
+              f"{s['seeds']} seed(s); {s['cycles']} cycles; MPM dx {s['resolution']} m"
+              + ("" if s.get("failure_angle", "min_n_gamma") == "min_n_gamma" else
+                 f"; ours and oracle with `--failure-angle {s['failure_angle']}`") + ") at "
               f"{commit_label(result['machine'])}; loops run with `--ray {s.get('ray', 'off')}`; the last "
               f"invocation took {result['wall_s'] / 60:.0f} min (cycles "
               f"saved by earlier ones are read, not dug again), load average at its end {load}. Energy = plant-"
@@ -172,6 +176,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--resolution", type=float, default=0.02, help="MPM grid spacing [m] (verified: 0.02)")
     parser.add_argument("--threads", type=int, default=1, help="Taichi CPU threads")
     parser.add_argument("--no-planner", action="store_true", help="dig Bezier paths only")
+    parser.add_argument("--failure-angle", choices=("min_n_gamma", "min_weight_force"), default="min_n_gamma",
+                        help="beta* rule of ours' and the oracle's model (calibration, prediction, planner); "
+                             "default the paper's min N_gamma; paper and fixed are unaffected")
     add_ray_arguments(parser)
     parser.add_argument("--report", action="store_true",
                         help="only rewrite the Markdown and the figure from OUT/plant_adaptation.json")

@@ -33,8 +33,10 @@ import numpy as np
 
 from wheelloader.adaptation import Calibrating, CycleRecord, Strategy
 from wheelloader.estimator import (
+    DEFAULT_OPTIONS,
     FLAG_OUT_OF_SOIL,
     CycleLog,
+    ModelOptions,
     Pile,
     SoilParams,
     WheelloaderError,
@@ -141,7 +143,7 @@ def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParam
                                    "(CycleLog.pile_after)")
         logs.append(log)
         smooth = filtered(log, sigma_s)
-        pred = predict(params_used, smooth)
+        pred = predict(params_used, smooth, options=strategy.model_options, fill=strategy.fill)
         quality = pred.quality
         in_soil = pred.state.depth > 0.0
         violations = int(np.count_nonzero((pred.forces.flags & ~FLAG_OUT_OF_SOIL) & in_soil))
@@ -180,21 +182,28 @@ def _true_soil(soil: SoilParams | str) -> SoilParams:
 
 def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycles: int, seed: int,
                     cache: Path | str | None, planner: bool = True, oracle_params: SoilParams | None = None,
-                    stale: str = "error", sigma_s: float = DEFAULT_FILTER["sigma_s"]) -> dict[str, Any]:
+                    stale: str = "error", sigma_s: float = DEFAULT_FILTER["sigma_s"],
+                    failure_angle: str = "min_n_gamma") -> dict[str, Any]:
     """One loop of :func:`run_plant_loop` as a unit of :mod:`wheelloader.sweep` (picklable arguments only).
 
     Builds the strategy by name in the process that runs it (``fixed``, ``ours``, ``paper``, or ``oracle``
     with ``oracle_params``, see :class:`Hindsight`) with the loop's default planner when ``planner`` is true,
     prints the loop's progress lines, and returns ``{"records": [CycleRecord.to_dict(), ...], "logs":
-    [CycleLog, ...]}``.
+    [CycleLog, ...]}``. ``failure_angle``: the force-model rule for beta* of ``ours`` and ``oracle`` (their
+    calibration, predictions and planner; :class:`~wheelloader.estimator.ModelOptions`); ``paper`` keeps the
+    paper's model, ``fixed`` uses none.
     """
     from wheelloader.adaptation import default_planner, make_strategy
 
-    plan = default_planner() if planner else None
+    model = ModelOptions(failure_angle=failure_angle)
+    learning = strategy in ("ours", "oracle")
+    plan = default_planner(failure_angle=failure_angle if learning else "min_n_gamma") if planner else None
     if strategy == "oracle":
         if oracle_params is None:
             raise WheelloaderError("plant_loop_unit: the oracle needs oracle_params (hindsight_parameters)")
-        chosen: Strategy = Hindsight(oracle_params, plan)
+        chosen: Strategy = Hindsight(oracle_params, plan, options=model)
+    elif strategy == "ours" and model.extra_terms:
+        chosen = make_strategy(strategy, plan, ours_options={"options": model})
     else:
         chosen = make_strategy(strategy, plan)
     name = soil if isinstance(soil, str) else "custom soil"
@@ -209,16 +218,19 @@ class Hindsight(Calibrating):
     parameters fitted afterwards to the plant's cycles of that soil (:func:`hindsight_parameters`); it
     learns nothing between cycles."""
 
-    def __init__(self, params: SoilParams, planner: Any = None, rate: float = 60.0) -> None:
-        super().__init__(params, "hindsight", planner, rate, name="oracle")
+    def __init__(self, params: SoilParams, planner: Any = None, rate: float = 60.0,
+                 options: ModelOptions | None = None) -> None:
+        super().__init__(params, "hindsight", planner, rate, name="oracle", options=options)
 
     def update(self, log: CycleLog, true_soil: SoilParams) -> tuple[float, bool, str]:
         return 0.0, True, "hindsight parameters"
 
 
 def hindsight_parameters(logs: list[CycleLog], method: str = "default",
-                         sigma_s: float = DEFAULT_FILTER["sigma_s"]) -> tuple[SoilParams, str]:
-    """FEE parameters fitted to all ``logs`` of one soil (filtered), and how they were fitted.
+                         sigma_s: float = DEFAULT_FILTER["sigma_s"],
+                         options: ModelOptions | None = None) -> tuple[SoilParams, str]:
+    """FEE parameters fitted to all ``logs`` of one soil (filtered), and how they were fitted (``options``:
+    the force model's, e.g. its failure-angle rule; default the paper's model).
 
     Uses the several-cycle calibration ``calibrate([log, ...])`` where the estimator has it; otherwise the
     single-cycle fit, among one per log, whose F_R error summed over all logs is lowest (said in the
@@ -226,17 +238,18 @@ def hindsight_parameters(logs: list[CycleLog], method: str = "default",
     """
     if not logs:
         raise WheelloaderError("hindsight_parameters needs at least one cycle log")
+    options = DEFAULT_OPTIONS if options is None else options
     smooth = [filtered(lg, sigma_s) for lg in logs]
     try:
-        result = calibrate(smooth, method=method)
+        result = calibrate(smooth, method=method, options=options)
     except (TypeError, WheelloaderError) as exc:
         fallback = f"several-cycle calibration unavailable ({exc})"
     else:
         return result.params, f"one {method} fit to all {len(logs)} cycles"
     best, best_cost = None, math.inf
     for lg in smooth:
-        candidate = calibrate(lg, method=method).params
-        cost = sum(predict(candidate, other).quality.rmse_r ** 2 for other in smooth)
+        candidate = calibrate(lg, method=method, options=options).params
+        cost = sum(predict(candidate, other, options=options).quality.rmse_r ** 2 for other in smooth)
         if cost < best_cost:
             best, best_cost = candidate, cost
     assert best is not None  # logs is not empty
