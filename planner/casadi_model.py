@@ -37,8 +37,9 @@ from wheelloader.estimator.validity import alpha_lower_limit
 
 #: Guarded Newton steps from the middle of the valid branch.
 NEWTON_STEPS = 8
-#: Guarded Newton steps of the opt-in least-weight-force beta*, from the paper's beta*.
-WEIGHT_FORCE_STEPS = 12
+#: Guarded Newton steps of the opt-in least-weight-force beta*, from the middle of the branch (5 steps: the
+#: weight force within 0.4 % of its minimum on 2 x 10^4 random configurations, within 3e-5 at the 99th percentile).
+WEIGHT_FORCE_STEPS = 5
 #: Order of the soil parameter vector the CasADi model takes (the estimator's soil vector; K = k_c/b + k_phi).
 SOIL_VECTOR = SOIL_VECTOR_NAMES
 #: Smoothing widths: depth [m], angle clamps [rad], force clamp [N], length clamp [m].
@@ -113,14 +114,15 @@ def casadi_forces(soil, vertical_depth, rho, alpha, load_weight, bucket: Bucket,
     s = rho_c + delta + phi
     lo, hi = beta_bounds(alpha_c, rho_c, phi, delta, options, minimum=lambda a, b: smooth_min(a, b, SMOOTH_ANGLE))
     clip = lambda v, a, b: smooth_min(smooth_max(v, a, SMOOTH_ANGLE), b, SMOOTH_ANGLE)  # noqa: E731
-    beta = unrolled_beta(alpha_c, phi, s, lo, hi, NEWTON_STEPS, tan=ca.tan, clip=clip,
-                         positive=lambda dg: smooth_max(dg, 1.0, 0.1))
     ramp = smooth_min(depth / options.contact_depth, 1.0, 1e-3)
     if options.failure_angle == "min_weight_force":  # opt-in (estimator.failure_angle); V_fill = W_load/(gamma g)
         surcharge = ramp * load_weight / (gamma * GRAVITY * w)
-        beta = unrolled_beta_weight_force(beta, alpha_c, rho_c, phi, delta, depth * depth, surcharge, lo, hi,
-                                          WEIGHT_FORCE_STEPS, sin=ca.sin, cos=ca.cos, clip=clip,
+        beta = unrolled_beta_weight_force(0.5 * (lo + hi), alpha_c, rho_c, phi, delta, depth * depth, surcharge,
+                                          lo, hi, WEIGHT_FORCE_STEPS, sin=ca.sin, cos=ca.cos, clip=clip,
                                           positive=lambda dg: smooth_max(dg, 0.1, 0.01))
+    else:
+        beta = unrolled_beta(alpha_c, phi, s, lo, hi, NEWTON_STEPS, tan=ca.tan, clip=clip,
+                             positive=lambda dg: smooth_max(dg, 1.0, 0.1))
     s_beta = ca.sin(s + beta)
     sin_beta = ca.sin(beta)
     sab = ca.sin(alpha_c + beta + phi)
