@@ -230,7 +230,7 @@ def weight_force_slope(beta, alpha, rho, phi, delta, depth_sq, surcharge, sin=np
 
 
 def optimal_beta_weight_force(alpha, rho, phi, delta, depth, surcharge, options: ModelOptions = DEFAULT_OPTIONS,
-                              tol: float = 1e-11, max_iter: int = 60):
+                              tol: float = 1e-13, max_iter: int = 60, return_where: bool = False):
     """beta* of the least weight force ``h = d^2 N_gamma + q N_q`` on the valid branch (module docstring).
 
     Parameters
@@ -247,20 +247,28 @@ def optimal_beta_weight_force(alpha, rho, phi, delta, depth, surcharge, options:
         Margins eps1, eps2.
     tol, max_iter : float, int
         Newton step below which the iteration stops [rad], and its largest number of iterations.
+    return_where : bool
+        Also return where beta* lies (``BETA_*`` codes, as :func:`optimal_beta`).
 
     Returns
     -------
-    numpy.ndarray
+    numpy.ndarray or tuple
         beta* [rad]; where ``d = q = 0`` (nothing to minimise) the paper's rule (:func:`optimal_beta`).
+        With ``return_where`` also the ``BETA_*`` code per sample.
     """
     arrays = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (alpha, rho, phi, delta, depth, surcharge)))
     shape = arrays[0].shape
     alpha, rho, phi, delta, depth, surcharge = (np.ravel(v) for v in arrays)
     d2 = np.square(np.maximum(depth, 0.0))
     q = np.maximum(surcharge, 0.0)
-    beta = np.array(optimal_beta(alpha, rho, phi, delta, options, tol=tol, max_iter=max_iter), dtype=float)
     lo, hi = (np.broadcast_to(v, alpha.shape) for v in beta_bounds(alpha, rho, phi, delta, options))
     loaded = (d2 + q) > 0.0
+    beta = np.array(hi, dtype=float)
+    where = np.full(alpha.shape, BETA_INTERIOR)
+    if not loaded.all():  # nothing to minimise: the paper's rule
+        empty = ~loaded
+        beta[empty], where[empty] = optimal_beta(alpha[empty], rho[empty], phi[empty], delta[empty], options,
+                                                 return_where=True)
     slope_lo = weight_force_slope(lo, alpha, rho, phi, delta, d2, q)
     slope_hi = weight_force_slope(hi, alpha, rho, phi, delta, d2, q)
     at_lo = loaded & (slope_lo >= 0.0)
@@ -269,32 +277,46 @@ def optimal_beta_weight_force(alpha, rho, phi, delta, depth, surcharge, options:
     inner = loaded & ~(at_lo | at_hi)
     if np.any(inner):
         a, b = lo[inner], hi[inner]
+        g_a, g_b = slope_lo[inner], slope_hi[inner]  # h' < 0 at a, > 0 at b
         args = [v[inner] for v in (alpha, rho, phi, delta, d2, q)]
-        # start from the paper's beta* (inside the bracket), safeguarded Newton as optimal_beta
-        x = np.clip(beta[inner], a + 1e-9 * (b - a), b - 1e-9 * (b - a))
+        # Newton (curvature by central differences) inside the bracket; where its step leaves the bracket or
+        # the curvature is not positive, the regula falsi point of the bracket (Illinois: the end kept twice
+        # has its slope halved), so no sample falls back to plain bisection
+        x = 0.5 * (a + b)
+        kept = np.zeros(x.size, dtype=int)  # +1: b kept last time, -1: a kept last time
         out = np.empty_like(x)
         active = np.arange(x.size)
-        step = 1e-7
+        step = 1e-6
         for _ in range(max_iter):
             g = weight_force_slope(x, *args)
             dg = (weight_force_slope(x + step, *args) - weight_force_slope(x - step, *args)) / (2.0 * step)
             pos = g > 0.0
-            b = np.where(pos, x, b)
-            a = np.where(pos, a, x)
+            g_a = np.where(~pos & (kept == -1), g_a, np.where(pos & (kept == -1), 0.5 * g_a, g_a))
+            g_b = np.where(pos & (kept == 1), g_b, np.where(~pos & (kept == 1), 0.5 * g_b, g_b))
+            b, g_b = np.where(pos, x, b), np.where(pos, g, g_b)
+            a, g_a = np.where(pos, a, x), np.where(pos, g_a, g)
+            kept = np.where(pos, -1, 1)
             with np.errstate(divide="ignore", invalid="ignore"):
                 newton = x - g / dg
+                falsi = a - g_a * (b - a) / (g_b - g_a)
             ok = (dg > 0.0) & (newton > a) & (newton < b)
-            x_new = np.where(ok, newton, 0.5 * (a + b))
+            falsi = np.where((falsi > a) & (falsi < b), falsi, 0.5 * (a + b))
+            x_new = np.where(ok, newton, falsi)
             going = np.abs(x_new - x) >= tol
             out[active] = x_new
             if not going.any():
                 break
             if not going.all():
-                active, x_new, a, b = active[going], x_new[going], a[going], b[going]
+                active, x_new, a, b, g_a, g_b, kept = (v[going] for v in (active, x_new, a, b, g_a, g_b, kept))
                 args = [v[going] for v in args]
             x = x_new
         beta[inner] = out
-    return beta.reshape(shape)
+    if not return_where:
+        return beta.reshape(shape)
+    at_rho_limit = (math.pi - (rho + delta + phi) - options.eps2) <= (0.5 * math.pi - alpha)
+    bound = np.where(at_lo, BETA_AT_EPS1, np.where(at_rho_limit, BETA_AT_RHO_LIMIT, BETA_AT_SLOPE_LIMIT))
+    where = np.where(at_lo | at_hi, bound, where)
+    return beta.reshape(shape), where.reshape(shape)
 
 
 def optimal_beta_weight_force_scalar(alpha: float, rho: float, phi: float, delta: float, depth: float,
@@ -318,8 +340,8 @@ def optimal_beta_weight_force_scalar(alpha: float, rho: float, phi: float, delta
     if slope(hi) <= 0.0:
         return hi
     a, b = lo, hi
-    x = min(max(paper, lo + 1e-9 * (hi - lo)), hi - 1e-9 * (hi - lo))
-    step = 1e-7
+    x = 0.5 * (lo + hi)
+    step = 1e-6
     for _ in range(60):
         g = slope(x)
         dg = (slope(x + step) - slope(x - step)) / (2.0 * step)
@@ -330,7 +352,7 @@ def optimal_beta_weight_force_scalar(alpha: float, rho: float, phi: float, delta
         xn = x - g / dg if dg > 0.0 else a - 1.0
         if not a < xn < b:
             xn = 0.5 * (a + b)
-        if abs(xn - x) < 1e-11:
+        if abs(xn - x) < 1e-13:
             return xn
         x = xn
     return x

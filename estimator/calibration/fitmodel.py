@@ -38,6 +38,7 @@ from ..failure_angle import (
     BETA_INTERIOR,
     optimal_beta,
     optimal_beta_weight_force,
+    weight_force_slope,
 )
 from ..force_model import DEFAULT_OPTIONS, GRAVITY, ModelOptions, carried_load_factors, slip_factor
 from ..kinematics import ContactState
@@ -58,6 +59,9 @@ __all__ = ["FIT_NAMES", "LINEAR_INDEX", "MIN_SAMPLES", "NONLINEAR_INDEX", "Facto
 
 #: Names of the fit vector: the soil vector (:mod:`wheelloader.estimator.soil_vector`).
 FIT_NAMES: tuple[str, ...] = SOIL_VECTOR_NAMES
+
+#: Step [rad] of the central differences of the weight force's slope (least-weight-force failure angle).
+FD_STEP = 1e-6
 
 #: Smallest number of in-soil samples a calibration accepts.
 MIN_SAMPLES = 12
@@ -95,8 +99,9 @@ def factors(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS, der
 
     With ``options.failure_angle == "min_weight_force"`` beta* minimises ``d^2 N_gamma + q N_q``
     (:func:`~wheelloader.estimator.failure_angle.optimal_beta_weight_force`), which needs the samples'
-    ``depth`` [m] and ``surcharge`` ``q = r V_fill / w`` [m^2]; its derivatives in phi and delta are
-    central differences of that solver (clamps included).
+    ``depth`` [m] and ``surcharge`` ``q = r V_fill / w`` [m^2]; its derivatives in phi and delta come from
+    the implicit function theorem on ``h'(beta) = 0`` for interior roots, with the partial derivatives of
+    ``h'`` by central differences (the moving bound for bound solutions, as above).
     """
     clamps = clamp_details(alpha, rho, phi, delta, options)
     alpha_e, rho_e, rho_high = clamps.alpha, clamps.rho, clamps.rho_high
@@ -105,8 +110,8 @@ def factors(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS, der
     if weight_rule:
         if depth is None or surcharge is None:
             raise CalibrationError("factors: the min_weight_force failure angle needs depth and surcharge")
-        beta = optimal_beta_weight_force(alpha_e, rho_e, phi, delta, depth, surcharge, options)
-        where = None
+        beta, where = optimal_beta_weight_force(alpha_e, rho_e, phi, delta, depth, surcharge, options,
+                                                return_where=True)
     else:
         beta, where = optimal_beta(alpha_e, rho_e, phi, delta, options, return_where=True)
     u = rho_e + delta + beta + phi
@@ -177,21 +182,31 @@ def factors(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS, der
     # fixed: N_gamma is stationary in beta there (envelope theorem), so only N_c, N_a, N_q lose a term
     db_dp_in = np.where(np.isfinite(db_dp_in), db_dp_in, 0.0)
     db_dd_in = np.where(np.isfinite(db_dd_in), db_dd_in, 0.0)
-    # on a bound beta* moves with it: pi - s - eps2 (s = rho_eff + delta + phi) or pi/2 - alpha_eff
-    if not weight_rule:
-        interior, rho_limit = where == BETA_INTERIOR, where == BETA_AT_RHO_LIMIT
-        slope_limit = where == BETA_AT_SLOPE_LIMIT
-    if weight_rule:
-        def beta_at(ph, de):
-            cl = clamp_details(alpha, rho, ph, de, options)
-            return optimal_beta_weight_force(cl.alpha, cl.rho, ph, de, depth, surcharge, options)
+    if weight_rule:  # implicit function theorem on h'(beta) = 0 (the weight force's slope)
+        d2 = np.square(np.maximum(depth, 0.0))
+        q = np.maximum(surcharge, 0.0)
+        loaded = (d2 + q) > 0.0
 
-        step = 1e-6
-        db_dp = (beta_at(phi + step, delta) - beta_at(phi - step, delta)) / (2.0 * step)
-        db_dd = (beta_at(phi, delta + step) - beta_at(phi, delta - step)) / (2.0 * step)
-    else:
-        db_dp = np.select([interior, rho_limit, slope_limit], [db_dp_in, -(1.0 + drho), -dalpha], 0.0)
-        db_dd = np.select([interior, rho_limit], [db_dd_in, -(1.0 + drho)], 0.0)
+        def partial(shift_b=0.0, shift_a=0.0, shift_r=0.0, shift_p=0.0, shift_d=0.0):
+            up = weight_force_slope(beta + shift_b, alpha_e + shift_a, rho_e + shift_r, phi + shift_p,
+                                    delta + shift_d, d2, q)
+            down = weight_force_slope(beta - shift_b, alpha_e - shift_a, rho_e - shift_r, phi - shift_p,
+                                      delta - shift_d, d2, q)
+            return (up - down) / (2.0 * FD_STEP)
+
+        with np.errstate(divide="ignore", invalid="ignore"):
+            h_b = partial(shift_b=FD_STEP)
+            h_r = partial(shift_r=FD_STEP)
+            wf_dp = -(partial(shift_p=FD_STEP) + h_r * drho + partial(shift_a=FD_STEP) * dalpha) / h_b
+            wf_dd = -(partial(shift_d=FD_STEP) + h_r * drho) / h_b
+        wf_dp = np.where(np.isfinite(wf_dp), wf_dp, 0.0)
+        wf_dd = np.where(np.isfinite(wf_dd), wf_dd, 0.0)
+        db_dp_in = np.where(loaded, wf_dp, db_dp_in)  # an empty bucket: the paper's rule (above)
+        db_dd_in = np.where(loaded, wf_dd, db_dd_in)
+    # on a bound beta* moves with it: pi - s - eps2 (s = rho_eff + delta + phi) or pi/2 - alpha_eff
+    interior, rho_limit, slope_limit = where == BETA_INTERIOR, where == BETA_AT_RHO_LIMIT, where == BETA_AT_SLOPE_LIMIT
+    db_dp = np.select([interior, rho_limit, slope_limit], [db_dp_in, -(1.0 + drho), -dalpha], 0.0)
+    db_dd = np.select([interior, rho_limit], [db_dd_in, -(1.0 + drho)], 0.0)
 
     def total(dd_b, dd_x, dd_r, db_dx, dd_a=0.0, da_dx=0.0):
         return dd_x + dd_b * db_dx + dd_r * drho + dd_a * da_dx
