@@ -165,10 +165,16 @@ def optimal_beta_scalar(alpha: float, rho: float, phi: float, delta: float,
     g, _ = log_ngamma_slope(hi, alpha, phi, s, tan)
     if g <= 0.0:
         return hi
-    a, b = lo, hi
     x = guess if guess is not None and lo < guess < hi else 0.5 * (lo + hi)
+    return _root_in_bracket(lambda b: log_ngamma_slope(b, alpha, phi, s, tan), lo, hi, x, 1e-11)
+
+
+def _root_in_bracket(slope_and_curvature, a: float, b: float, x: float, tol: float) -> float:
+    """Root of an increasing-through-zero slope in ``(a, b)`` (slope < 0 at a, > 0 at b) by safeguarded Newton
+    from ``x``: a step that leaves the bracket, or a curvature that is not positive, bisects instead; stops when
+    a step is shorter than ``tol`` (at most 60 steps). The scalar solvers' shared loop."""
     for _ in range(60):
-        g, dg = log_ngamma_slope(x, alpha, phi, s, tan)
+        g, dg = slope_and_curvature(x)
         if g > 0.0:
             b = x
         else:
@@ -176,7 +182,7 @@ def optimal_beta_scalar(alpha: float, rho: float, phi: float, delta: float,
         xn = x - g / dg if dg > 0.0 else a - 1.0
         if not a < xn < b:
             xn = 0.5 * (a + b)
-        if abs(xn - x) < 1e-11:
+        if abs(xn - x) < tol:
             return xn
         x = xn
     return x
@@ -339,23 +345,9 @@ def optimal_beta_weight_force_scalar(alpha: float, rho: float, phi: float, delta
         return lo
     if slope(hi) <= 0.0:
         return hi
-    a, b = lo, hi
-    x = 0.5 * (lo + hi)
     step = 1e-6
-    for _ in range(60):
-        g = slope(x)
-        dg = (slope(x + step) - slope(x - step)) / (2.0 * step)
-        if g > 0.0:
-            b = x
-        else:
-            a = x
-        xn = x - g / dg if dg > 0.0 else a - 1.0
-        if not a < xn < b:
-            xn = 0.5 * (a + b)
-        if abs(xn - x) < 1e-13:
-            return xn
-        x = xn
-    return x
+    return _root_in_bracket(lambda b: (slope(b), (slope(b + step) - slope(b - step)) / (2.0 * step)),
+                            lo, hi, 0.5 * (lo + hi), 1e-13)
 
 
 def unrolled_beta_weight_force(start, alpha, rho, phi, delta, depth_sq, surcharge, lo, hi, steps: int, *, sin, cos,
