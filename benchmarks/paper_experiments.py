@@ -537,7 +537,11 @@ def estimator_study(load, names, args) -> dict:
     from wheelloader.estimator.calibration import calibrate, predict
 
     sets = study_sets(load, names)
-    out: dict = {"variants": {}, "train_sets": {k: list(v) for k, v in STUDY_TRAIN.items()}, "times_s": {}}
+    out: dict = {"variants": {}, "train_sets": {k: list(v) for k, v in STUDY_TRAIN.items()}, "times_s": {},
+                 # the reference's own material where its logs give it in FEE terms (the MPM soils are built
+                 # from presets: density, friction, cohesion, wall friction; the DEM logs carry none)
+                 "material": {name: logs[1][1].metadata["soil_params"] for name, logs in sets.items()
+                              if isinstance(logs[1][1].metadata.get("soil_params"), dict)}}
     times: dict = {}
     for label, spec in STUDY_VARIANTS.items():
         options = ModelOptions(carried_load=bool(spec.get("carried_load", False)),
@@ -609,6 +613,26 @@ def estimator_report(results: dict, args) -> str:
             for set_name, r in nxt.items():
                 lines.append(f"| {set_name} | " + " | ".join(f"{v['filtered']:.1f} %, covers {v['band_coverage']:.0%}"
                                                              for v in r.values()) + " |")
+        lines.append("")
+    material = study.get("material") or {}
+    if material:
+        import math
+
+        shown = [label for label in study["variants"] if "model fill" in label and "prior" not in label
+                 and "band noise" not in label]
+        lines += ["## Parameters against the reference's own material (trained on paths 1+2)", "",
+                  "The continuum soils are built from FEE presets (density, internal and wall friction, "
+                  "cohesion), so their material is known in the model's terms: γ [kg/m³], C [Pa], φ and δ [°] "
+                  "of each fit beside it.", "",
+                  "| soil | material γ, C, φ, δ | " + " | ".join(shown) + " |", "|---|---|" + "---|" * len(shown)]
+
+        def cells(p):
+            return (f"{p['gamma']:.0f}, {p['cohesion']:.0f}, {math.degrees(p['phi']):.1f}, "
+                    f"{math.degrees(p['delta']):.1f}")
+
+        for set_name, mat in material.items():
+            fits = [study["variants"][label].get(set_name, {}).get("paths 1+2", {}).get("params") for label in shown]
+            lines.append(f"| {set_name} | {cells(mat)} | " + " | ".join(cells(f) if f else "–" for f in fits) + " |")
         lines.append("")
     lines += ["## Calibration time (varpro, all variants and soils)", "", "| cycles | median | max | fits |",
               "|---|---|---|---|"]
