@@ -115,3 +115,36 @@ def test_tiny_mpm_loop():
     assert logs[0].metadata["plant"] == "mpm"
     assert records[0].fill_m3 > 0.0 and records[0].energy_J > 0.0
     assert logs[0].pile_after is not None
+
+
+def test_env_plant_digs_with_the_loops_end_of_cycle_rule():
+    """The env plant ends a cycle on exit only once the bucket holds LOOP_EXIT_MIN_FILL (as the loop's env), so
+    a path that leaves the soil early and re-enters is dug in full."""
+    from wheelloader.adaptation import LOOP_ENV_KWARGS
+
+    assert FEEEnvPlant().env_kwargs == LOOP_ENV_KWARGS
+    assert FEEEnvPlant(exit_min_fill=0.0).env_kwargs["exit_min_fill"] == 0.0  # the caller's setting wins
+    # a path that scratches 1 cm into the face, leaves it, then digs: with the loop's rule it is dug to the end
+    pile = Pile.trapezoid()
+    t = np.linspace(0.0, 6.0, 361)
+    x = np.linspace(-0.3, 1.2, t.size)  # the default trapezoid's toe is at x = 0
+    z = np.where(x < 0.3, pile.surface_height(x) - 0.01, pile.surface_height(x) - 0.15)
+    z[(x > 0.15) & (x < 0.3)] += 0.1
+    z = np.maximum(z, -0.2)
+    path = BucketPath(t, x, z, np.full_like(t, 0.2))
+    full = FEEEnvPlant(sensor_noise=0.0).dig(path, pile, "gravel")
+    early = FEEEnvPlant(sensor_noise=0.0, exit_min_fill=0.0).dig(path, pile, "gravel")
+    assert full.fill_volume[-1] > 2.0 * early.fill_volume[-1]
+
+
+def test_plant_loop_unit_builds_ours_with_the_failure_angle_rule(tmp_path):
+    from wheelloader.plant_loop import plant_loop_unit
+
+    out = plant_loop_unit(FEEEnvPlant(sensor_noise=0.0), "ours", "gravel", cycles=2, seed=0, cache=tmp_path / "c",
+                          planner=False, failure_angle="min_weight_force")
+    assert [r["cycle"] for r in out["records"]] == [1, 2] and len(out["logs"]) == 2
+    assert out["records"][1]["calibration_ok"]
+    assert sorted(p.name for p in (tmp_path / "c").iterdir()) == ["cycle1.csv", "cycle1.json", "cycle2.csv",
+                                                                  "cycle2.json"]
+    with pytest.raises(WheelloaderError, match="oracle_params"):
+        plant_loop_unit(FEEEnvPlant(), "oracle", "gravel", cycles=1, seed=0, cache=None, planner=False)

@@ -295,7 +295,7 @@ def run_loop(env: Any, strategy: Strategy, cycles: int = 5, seed: int = 0,
             obs, _, terminated, truncated, info = env.step(controller(obs))
             if int(info["flags"]) & ~FLAG_OUT_OF_SOIL and info["depth"] > 0.0:
                 violations += 1
-        log = base.last_cycle_log() if terminated else _finish(env)
+        log = base.last_cycle_log() if terminated else finish_cycle(env)
         logs.append(log)
         quality = predict(params_used, log, options=strategy.model_options, fill=strategy.fill).quality
         fill = float(info["fill_volume"])
@@ -394,8 +394,8 @@ def strategy_loop(*, soil: SoilParams, pile: Mapping[str, Any] | Pile, truth: Ma
     return [r.to_dict() for r in records]
 
 
-def _finish(env: Any) -> CycleLog:
-    """Close a cycle that hit the time limit and return its log."""
+def finish_cycle(env: Any) -> CycleLog:
+    """Close a cycle that hit the time limit (the pile kept, as carved) and return its log."""
     env.reset(options={"keep_pile": True, "soil": "keep"})
     return env.unwrapped.cycle_logs()[-1]
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from wheelloader.adaptation import LOOP_ENV_KWARGS
+from wheelloader.adaptation import LOOP_ENV_KWARGS, finish_cycle
 from wheelloader.envs import BucketLoadingEnv
 from wheelloader.envs.scripted import run_path
 from wheelloader.estimator import BucketPath, CycleLog, Pile, SoilParams
@@ -39,7 +39,8 @@ class FEEEnvPlant:
         start = (float(path.x[0]), float(path.z[0]), float(path.blade_angle[0]))
         env = BucketLoadingEnv(soil=soil, pile=pile, start_pose=start, start_noise=(0.0, 0.0, 0.0),
                                **self.env_kwargs)
-        run_path(env, path, seed=seed)
-        log = env.unwrapped.last_cycle_log()
+        ran = run_path(env, path, seed=seed)
+        # a path that ends in the soil (or outlasts the episode) has not finished its cycle: close it
+        log = env.unwrapped.last_cycle_log() if ran["terminated"] else finish_cycle(env)
         log.metadata["plant"] = self.name
         return log
