@@ -127,6 +127,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="ours: bucket-load source of calibration and prediction (default: %(default)s)")
     parser.add_argument("--carried-load", action="store_true", help="ours: the opt-in carried-load term")
     parser.add_argument("--slip-friction", action="store_true", help="ours: the opt-in slip-mobilised friction")
+    parser.add_argument("--cut-angle", type=float, default=None, metavar="DEG",
+                        help="the planner's opt-in cutting cone [deg] (PlannerOptions.cut_angle; default: off)")
     parser.add_argument("--failure-angle", choices=("min_n_gamma", "min_weight_force"), default="min_n_gamma",
                         help="ours: how the model picks beta* (default: the paper's min N_gamma; "
                              "min_weight_force: the opt-in least weight force)")
@@ -152,7 +154,9 @@ def main(argv: list[str] | None = None) -> int:
                     units.append(Unit(strategy_loop, {"soil": hidden, "pile": pile_kwargs, "truth": TRUTH,
                                                       "strategy": name, "cycles": cycles, "seed": seed,
                                                       "planner": planner, "rl_policy": args.rl_policy,
-                                                      "ours_options": _ours_options(args)},
+                                                      "ours_options": _ours_options(args),
+                                                      "cut_angle": None if args.cut_angle is None
+                                                      else math.radians(args.cut_angle)},
                                       label=f"{soil_name:>13} | {pile_name} | seed {seed} | {name:>6}"))
     start = time.perf_counter()
     sweep = run_sweep(units, args.ray, ray_cpus=args.ray_cpus, describe=_describe, progress=_print)
@@ -169,7 +173,8 @@ def main(argv: list[str] | None = None) -> int:
                   "ours": {"window": window_used(args), "forgetting": args.forgetting,
                            "keep_untrustworthy": args.keep_untrustworthy, "fill": args.fill,
                            "carried_load": args.carried_load, "slip_friction": args.slip_friction,
-                           "failure_angle": args.failure_angle}},
+                           "failure_angle": args.failure_angle},
+                  "planner_cut_angle_deg": args.cut_angle},
         "summary": summary,
         "rows": rows,
         "wall_time_s": time.perf_counter() - start,

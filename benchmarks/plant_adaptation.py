@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 import time
 from pathlib import Path
@@ -62,7 +63,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     out = Path(args.out)
     started = time.perf_counter()
     loop_kwargs = {"plant": plant, "cycles": args.cycles, "planner": not args.no_planner,
-                   "failure_angle": args.failure_angle}
+                   "failure_angle": args.failure_angle,
+                   "cut_angle": None if args.cut_angle is None else math.radians(args.cut_angle)}
     learning = [s for s in args.strategies if s != "oracle"]
     keys = [(soil, seed, name) for soil in args.soils for seed in range(args.seeds) for name in learning]
     units = [Unit(plant_loop_unit, {**loop_kwargs, "strategy": name, "soil": soil, "seed": seed,
@@ -155,7 +157,8 @@ def markdown(result: dict[str, Any]) -> str:
     lines += ["", f"*`python benchmarks/adaptation.py --plant {result['plant']}` ({', '.join(s['soils'])}; "
               f"{s['seeds']} seed(s); {s['cycles']} cycles; MPM dx {s['resolution']} m"
               + ("" if s.get("failure_angle", "min_n_gamma") == "min_n_gamma" else
-                 f"; ours and oracle with `--failure-angle {s['failure_angle']}`") + ") at "
+                 f"; ours and oracle with `--failure-angle {s['failure_angle']}`")
+              + ("" if s.get("cut_angle") is None else f"; planner with `--cut-angle {s['cut_angle']:g}`") + ") at "
               f"{commit_label(result['machine'])}; loops run with `--ray {s.get('ray', 'off')}`; the last "
               f"invocation took {result['wall_s'] / 60:.0f} min (cycles "
               f"saved by earlier ones are read, not dug again), load average at its end {load}. Energy = plant-"
@@ -179,6 +182,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--failure-angle", choices=("min_n_gamma", "min_weight_force"), default="min_n_gamma",
                         help="beta* rule of ours' and the oracle's model (calibration, prediction, planner); "
                              "default the paper's min N_gamma; paper and fixed are unaffected")
+    parser.add_argument("--cut-angle", type=float, default=None, metavar="DEG",
+                        help="the planner's opt-in cutting cone [deg] for every strategy that plans (default: off)")
     add_ray_arguments(parser)
     parser.add_argument("--report", action="store_true",
                         help="only rewrite the Markdown and the figure from OUT/plant_adaptation.json")

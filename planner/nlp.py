@@ -51,7 +51,7 @@ from wheelloader.envs.bookkeeping import step_work
 from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, Loader
 from wheelloader.estimator.validity import alpha_lower_limit
 
-from .casadi_model import casadi_forces, smooth_min, smooth_pos
+from .casadi_model import casadi_forces, smooth_max, smooth_min, smooth_pos
 from .nlp_cache import load_or_build
 from .options import PlannerOptions
 
@@ -157,6 +157,7 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
         g_eq += [xn - xk - dx, zn - zk - dz, tn - tk - h * u[2]]
         # forces at the new node (and its depth below the surface)
         f_t, f_n, rho_n, vertical, alpha_n = node(xn, zn, tn, vn, p_soil, p_surf[:, k + 1])
+        vertical_start = vertical_prev  # depth at node k (vertical_prev moves on below)
         # fill: area between the start surface and the segment (trapezoid rule on the node depths),
         # capped by the bounds on V
         if options.midpoints:
@@ -193,6 +194,20 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
             g_ineq.append(options.stay_clearance + vertical + 10.0 * (before_face + unloaded))
         g_ineq += [1.0 - f_t / f_push, 1.0 - f_n / f_lift, rho_n - rho_lo + slack, rho_hi - rho_n + slack,
                    alpha_hi - alpha_n + slack, alpha_n - alpha_lo + slack]
+        if options.cut_angle is not None:
+            # opt-in cutting cone: deeper than cut_depth the velocity stays within cut_angle of the blade
+            # (along >= cos(cut_angle - rho_margin) |v|, the margin as the validity domain's; off, by a
+            # 10 m/s slack, above cut_depth and out of soil)
+            # at both ends of the interval (the blade turns while the velocity is constant)
+            speed = ca.sqrt(u[0] * u[0] + u[1] * u[1] + 1e-6)
+            # it binds from 2 cm above cut_depth: the NLP's surface is smoothed, the check's is the polyline
+            # the deeper end of the interval decides (a lift out of the soil ends shallow but starts deep)
+            deeper = smooth_max(vertical_start, vertical, 1e-3)
+            shallow = 0.5 * (1.0 - ca.tanh((deeper - options.cut_depth + 0.02) / 0.005))
+            cone = max(options.cut_angle - options.rho_margin, 0.5 * options.cut_angle)
+            for blade in (tk, tn):
+                along = u[0] * ca.cos(blade) + u[1] * ca.sin(blade)
+                g_ineq.append(along - math.cos(cone) * speed + 10.0 * shallow)
         # energy: the env's bookkeeping, with a smooth positive part (1 J wide)
         e_soil, e_payload = step_work(f_t, f_n, dx, dz, tn, p_soil[0] * GRAVITY * vn, cos=ca.cos, sin=ca.sin,
                                       pos=_smooth_work)

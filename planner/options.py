@@ -68,6 +68,15 @@ class PlannerOptions:
     failure_angle : {"min_n_gamma", "min_weight_force"}
         How the planner's force model (the CasADi NLP and the NumPy check) picks beta*: the paper's rule
         (default) or the opt-in least weight force (:class:`~wheelloader.estimator.ModelOptions`).
+    cut_angle : float, optional
+        Opt-in cutting cone [rad]: deeper than ``cut_depth`` in soil, the tip's velocity stays within this
+        angle of the blade direction, i.e. the blade cuts its way (the FEE's wedge forms ahead of a blade
+        that advances along itself) instead of the bucket being pushed sideways or lifted through the soil
+        on its floor, which the model does not describe (default None: off). The fixed Bezier path moves
+        within 54 deg of its blade.
+    cut_depth : float
+        Depth below which the cutting cone binds [m] (default 0.05 m; above it the bucket may lift and curl
+        out of the soil).
     tolerance : float
         IPOPT tolerance (default 1e-4; the objective is O(1)).
     surface : SurfaceGrid
@@ -93,6 +102,8 @@ class PlannerOptions:
     tolerance: float = 1e-4
     surface: SurfaceGrid = field(default_factory=SurfaceGrid)
     failure_angle: str = "min_n_gamma"
+    cut_angle: float | None = None
+    cut_depth: float = 0.05
 
     @property
     def model_options(self) -> ModelOptions:
@@ -104,6 +115,12 @@ class PlannerOptions:
         if self.failure_angle not in ("min_n_gamma", "min_weight_force"):
             raise PlanningError("PlannerOptions.failure_angle must be 'min_n_gamma' or 'min_weight_force', "
                                 f"got {self.failure_angle!r}")
+        if self.cut_angle is not None and not (isinstance(self.cut_angle, (int, float))
+                                               and 0.0 < self.cut_angle < math.pi / 2):
+            raise PlanningError(f"PlannerOptions.cut_angle must be None or an angle in (0, pi/2) rad, "
+                                f"got {self.cut_angle!r}")
+        if not (isinstance(self.cut_depth, (int, float)) and math.isfinite(self.cut_depth) and self.cut_depth >= 0):
+            raise PlanningError(f"PlannerOptions.cut_depth must be a finite number >= 0 m, got {self.cut_depth!r}")
         if not (isinstance(self.intervals, int) and 4 <= self.intervals <= 400):
             raise PlanningError(f"PlannerOptions.intervals must be an integer in [4, 400], got {self.intervals!r}")
         for name in ("energy_weight", "smoothing_weight", "rho_margin", "end_clearance", "lift_headroom",

@@ -154,6 +154,12 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
     early_exit = premature_exit(path, pile, state.depth, state.fill_volume / bucket.capacity,
                                 exit_clearance - tracking_margin, exit_min_fill)
     slack = 1.0 + tolerance
+    off_blade = 0
+    if options.cut_angle is not None:  # the opt-in cutting cone (PlannerOptions.cut_angle)
+        th = path.blade_angle[1:]
+        along = vx * np.cos(th) + vz * np.sin(th)
+        deep = (state.depth[1:] > options.cut_depth) & (np.hypot(vx, vz) > 1e-3)
+        off_blade = int(np.count_nonzero(deep & (along < math.cos(options.cut_angle + 0.05) * np.hypot(vx, vz))))
     checks = {
         "tangential force above the loader's push limit": float(forces.tangential.max()) > loader.max_push_force,
         "normal force above the loader's lift limit": float(forces.normal.max()) > loader.max_lift_force,
@@ -165,6 +171,7 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
         "tip moves backwards": bool(np.any(vx < -1e-6)),
         "path does not end out of the pile": end_clear < 0.5 * options.end_clearance,
         "tip leaves the soil before the end (the env would end the cycle there)": early_exit is not None,
+        "bucket moves off its blade in soil (outside the cutting cone)": off_blade > 0,
     }
     failures = tuple(name for name, failed in checks.items() if failed)
     rho_in = state.rho[in_soil]
@@ -176,7 +183,8 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
         min_rho_in_soil=float(rho_in.min()) if rho_in.size else math.nan,
         fill=sim["fill"], spilled=sim["spilled"], energy=sim["energy"], end_clearance=end_clear,
         backward_steps=int(np.count_nonzero(vx < -1e-6)),
-        details={"flags": forces.flag_summary(), "samples": len(path), "early_exit_s": early_exit},
+        details={"flags": forces.flag_summary(), "samples": len(path), "early_exit_s": early_exit,
+                 "off_blade_steps": off_blade},
     )
 
 

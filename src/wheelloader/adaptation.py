@@ -344,16 +344,16 @@ def make_strategy(name: str, planner: Any = None, rl_policy: str | None = None,
     raise WheelloaderError(f"unknown strategy {name!r}; choose from {STRATEGY_NAMES}")
 
 
-@functools.lru_cache(maxsize=2)
-def _process_planner(mpc: bool) -> Callable[[SoilParams, Pile], PlanOutcome]:
+@functools.lru_cache(maxsize=4)
+def _process_planner(mpc: bool, cut_angle: float | None = None) -> Callable[[SoilParams, Pile], PlanOutcome]:
     """:func:`default_planner`, built once per process (the NLPs are cached per process anyway)."""
-    return default_planner(mpc=mpc)
+    return default_planner(mpc=mpc, cut_angle=cut_angle)
 
 
 def strategy_loop(*, soil: SoilParams, pile: Mapping[str, Any] | Pile, truth: Mapping[str, float],
                   strategy: str, cycles: int, seed: int, planner: str | None = "plan",
-                  rl_policy: str | None = None, ours_options: Mapping[str, Any] | None = None
-                  ) -> list[dict[str, Any]]:
+                  rl_policy: str | None = None, ours_options: Mapping[str, Any] | None = None,
+                  cut_angle: float | None = None) -> list[dict[str, Any]]:
     """One loop of the adaptation benchmark, self-contained so that it can run in another process (a
     :class:`wheelloader.sweep.Unit`): build the plant env and a fresh strategy, run :func:`run_loop`.
 
@@ -372,6 +372,8 @@ def strategy_loop(*, soil: SoilParams, pile: Mapping[str, Any] | Pile, truth: Ma
         The PPO ``.zip`` of strategy ``rl``.
     ours_options : mapping, optional
         Keyword arguments of strategy ``ours`` (:func:`make_strategy`).
+    cut_angle : float, optional
+        The planner's opt-in cutting cone [rad] (:class:`~wheelloader.planner.PlannerOptions`).
 
     Returns
     -------
@@ -384,7 +386,7 @@ def strategy_loop(*, soil: SoilParams, pile: Mapping[str, Any] | Pile, truth: Ma
 
     if planner not in ("plan", "mpc", None):
         raise WheelloaderError(f"planner must be 'plan', 'mpc' or None, got {planner!r}")
-    plan_fn = None if planner is None else _process_planner(planner == "mpc")
+    plan_fn = None if planner is None else _process_planner(planner == "mpc", cut_angle)
     env = gym.make("wheelloader/BucketLoading-v0", soil=soil, pile=pile, truth=dict(truth), **LOOP_ENV_KWARGS)
     try:
         records, _ = run_loop(env, make_strategy(strategy, plan_fn, rl_policy, ours_options), cycles=cycles,
@@ -436,16 +438,18 @@ def hidden_default_soil() -> SoilParams:
 BETWEEN_CYCLES_MAX_ITER = 130
 
 
-def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma") -> Callable[[SoilParams, Pile], PlanOutcome]:
+def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma",
+                    cut_angle: float | None = None) -> Callable[[SoilParams, Pile], PlanOutcome]:
     """The planner used between cycles.
 
     A full-cycle CasADi plan within :data:`BETWEEN_CYCLES_MAX_ITER` IPOPT
     iterations, checked with the NumPy model, tracked in the env; with
     ``mpc`` an MPC controller re-plans the rest of the cycle every 0.1 s
     (slower, see the planner benchmark). ``failure_angle``: the planner's
-    force-model rule for beta* (:class:`~wheelloader.planner.PlannerOptions`).
+    force-model rule for beta*; ``cut_angle``: its opt-in cutting cone [rad]
+    (:class:`~wheelloader.planner.PlannerOptions`).
     """
-    options = PlannerOptions(max_iter=BETWEEN_CYCLES_MAX_ITER, failure_angle=failure_angle)
+    options = PlannerOptions(max_iter=BETWEEN_CYCLES_MAX_ITER, failure_angle=failure_angle, cut_angle=cut_angle)
     # build the NLPs once (the plan and its two wider-margin re-plans), before the loop's timings start
     for level in (0, 1, 2):
         optimizer_for(options=cautious_options(options, level))

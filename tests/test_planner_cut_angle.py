@@ -1,0 +1,72 @@
+"""The planner's opt-in cutting cone (PlannerOptions.cut_angle): in soil the bucket advances along its blade."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from wheelloader.estimator import BucketPath, Pile, contact_state
+from wheelloader.estimator.errors import PlanningError
+from wheelloader.planner import PlannerOptions, optimizer_for, verify_plan
+
+CONE = math.radians(55.0)
+
+
+def _angles_off_blade(path: BucketPath, pile: Pile, deeper_than: float) -> np.ndarray:
+    dt = np.diff(path.t)
+    vx, vz = np.diff(path.x) / dt, np.diff(path.z) / dt
+    th = path.blade_angle[1:]
+    along = vx * np.cos(th) + vz * np.sin(th)
+    depth = pile.surface_height(path.x[1:]) - path.z[1:]
+    moving = (depth > deeper_than) & (np.hypot(vx, vz) > 1e-3)
+    return np.arccos(np.clip(along[moving] / np.hypot(vx, vz)[moving], -1.0, 1.0))
+
+
+def test_options_are_checked():
+    with pytest.raises(PlanningError, match="cut_angle"):
+        PlannerOptions(cut_angle=math.radians(95.0))
+    with pytest.raises(PlanningError, match="cut_depth"):
+        PlannerOptions(cut_angle=CONE, cut_depth=-0.1)
+
+
+def test_the_check_flags_a_bucket_lifted_through_the_soil_on_its_floor():
+    pile = Pile.trapezoid()
+    t = np.linspace(0.0, 2.0, 121)
+    # the tip 30 cm inside the face, blade flat (pointing +x), lifted straight up by 0.4 m: off its blade
+    x = np.full_like(t, 0.9)
+    z = 0.2 + 0.2 * t
+    path = BucketPath(t, x, z, np.zeros_like(t))
+    assert "bucket moves off its blade in soil (outside the cutting cone)" in verify_plan(
+        path, "gravel", pile, options=PlannerOptions(cut_angle=CONE)).failures
+    assert not any("cutting cone" in f for f in verify_plan(path, "gravel", pile).failures)
+    # the same lift with the blade pointing up (along the motion) cuts its way: no cone failure
+    steep = BucketPath(t, x, z, np.full_like(t, math.radians(80.0)))
+    assert not any("cutting cone" in f for f in verify_plan(steep, "gravel", pile,
+                                                             options=PlannerOptions(cut_angle=CONE)).failures)
+
+
+@pytest.mark.parametrize("failure_angle", ["min_n_gamma", "min_weight_force"])
+def test_a_plan_with_the_cone_keeps_the_blade_leading(failure_angle):
+    """The loop's planner (best checked iterate within the loop's iteration budget) with the cone."""
+    from wheelloader.adaptation import BETWEEN_CYCLES_MAX_ITER, LOOP_EXIT_MIN_FILL
+    from wheelloader.planner import plan_next_cycle
+
+    pile = Pile.trapezoid()
+    options = PlannerOptions(cut_angle=CONE, failure_angle=failure_angle, max_iter=BETWEEN_CYCLES_MAX_ITER)
+    outcome = plan_next_cycle("gravel", pile, options=options, replan_within_iterations=BETWEEN_CYCLES_MAX_ITER,
+                              exit_min_fill=LOOP_EXIT_MIN_FILL)
+    assert outcome.success, outcome.message
+    path = outcome.path
+    check = verify_plan(path, "gravel", pile, options=options, exit_min_fill=LOOP_EXIT_MIN_FILL)
+    assert not any("cutting cone" in f for f in check.failures), check.failures
+    state = contact_state(path.x, path.z, path.blade_angle, pile, optimizer_for(options=options).bucket)
+    assert state.fill_volume[-1] > 0.05  # it digs
+    off = _angles_off_blade(path, pile, options.cut_depth)
+    assert off.size > 0 and off.max() <= CONE + 0.06
+    # without the cone the same planner lets the bucket move further off its blade
+    free = plan_next_cycle("gravel", pile, options=PlannerOptions(failure_angle=failure_angle,
+                                                                  max_iter=BETWEEN_CYCLES_MAX_ITER),
+                           replan_within_iterations=BETWEEN_CYCLES_MAX_ITER, exit_min_fill=LOOP_EXIT_MIN_FILL)
+    assert _angles_off_blade(free.path, pile, options.cut_depth).max() > off.max() + 0.1
