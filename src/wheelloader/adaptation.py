@@ -345,9 +345,10 @@ def make_strategy(name: str, planner: Any = None, rl_policy: str | None = None,
 
 
 @functools.lru_cache(maxsize=4)
-def _process_planner(mpc: bool, cut_angle: float | None = None) -> Callable[[SoilParams, Pile], PlanOutcome]:
+def _process_planner(mpc: bool, cut_angle: float | None = None,
+                     failure_angle: str = "min_n_gamma") -> Callable[[SoilParams, Pile], PlanOutcome]:
     """:func:`default_planner`, built once per process (the NLPs are cached per process anyway)."""
-    return default_planner(mpc=mpc, cut_angle=cut_angle)
+    return default_planner(mpc=mpc, cut_angle=cut_angle, failure_angle=failure_angle)
 
 
 def strategy_loop(*, soil: SoilParams, pile: Mapping[str, Any] | Pile, truth: Mapping[str, float],
@@ -386,7 +387,10 @@ def strategy_loop(*, soil: SoilParams, pile: Mapping[str, Any] | Pile, truth: Ma
 
     if planner not in ("plan", "mpc", None):
         raise WheelloaderError(f"planner must be 'plan', 'mpc' or None, got {planner!r}")
-    plan_fn = None if planner is None else _process_planner(planner == "mpc", cut_angle)
+    # ours plans with the model it calibrates (its failure-angle rule); the others with the paper's
+    model = (ours_options or {}).get("options") if strategy == "ours" else None
+    rule = model.failure_angle if model is not None else "min_n_gamma"
+    plan_fn = None if planner is None else _process_planner(planner == "mpc", cut_angle, rule)
     env = gym.make("wheelloader/BucketLoading-v0", soil=soil, pile=pile, truth=dict(truth), **LOOP_ENV_KWARGS)
     try:
         records, _ = run_loop(env, make_strategy(strategy, plan_fn, rl_policy, ours_options), cycles=cycles,
