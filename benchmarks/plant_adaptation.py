@@ -54,6 +54,26 @@ def make_plant(name: str, resolution: float, threads: int) -> Any:
                      "scenario (dem/README.md) and cannot yet start a cycle on a carved pile; use --plant mpm")
 
 
+def planned_fill_limit(plant: Any, setting: str) -> float | None:
+    """The planner's fill limit (share of the nominal capacity): ``auto`` plans up to 95 % of the plant's struck
+    capacity where the plant has one (the MPM bucket's fill outline holds 0.135 of the nominal 0.2 m^3; a plan
+    that carves more bulldozes the rest), else the planner's default; or the given number."""
+    if setting == "auto":
+        struck = getattr(plant, "struck_capacity", None)
+        if struck is None:
+            return None
+        from wheelloader.estimator import Bucket
+
+        return round(0.95 * struck / Bucket().capacity, 4)
+    try:
+        value = float(setting)
+    except ValueError:
+        raise SystemExit(f"--fill-limit must be 'auto' or a number in (0, 1], got {setting!r}") from None
+    if not 0.0 < value <= 1.0:
+        raise SystemExit(f"--fill-limit must be 'auto' or a number in (0, 1], got {setting!r}")
+    return value
+
+
 def run(args: argparse.Namespace) -> dict[str, Any]:
     from wheelloader.estimator import ModelOptions
     from wheelloader.plant_loop import hindsight_parameters, plant_loop_unit
@@ -62,7 +82,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     plant = make_plant(args.plant, args.resolution, args.threads)
     out = Path(args.out)
     started = time.perf_counter()
-    loop_kwargs = {"plant": plant, "cycles": args.cycles, "planner": not args.no_planner,
+    fill_limit = planned_fill_limit(plant, args.fill_limit)
+    args.fill_limit_used = fill_limit
+    loop_kwargs = {"plant": plant, "cycles": args.cycles, "planner": not args.no_planner, "fill_limit": fill_limit,
                    "failure_angle": args.failure_angle,
                    "cut_angle": None if args.cut_angle is None else math.radians(args.cut_angle)}
     learning = [s for s in args.strategies if s != "oracle"]
@@ -158,7 +180,9 @@ def markdown(result: dict[str, Any]) -> str:
               f"{s['seeds']} seed(s); {s['cycles']} cycles; MPM dx {s['resolution']} m"
               + ("" if s.get("failure_angle", "min_n_gamma") == "min_n_gamma" else
                  f"; ours and oracle with `--failure-angle {s['failure_angle']}`")
-              + ("" if s.get("cut_angle") is None else f"; planner with `--cut-angle {s['cut_angle']:g}`") + ") at "
+              + ("" if s.get("cut_angle") is None else f"; planner with `--cut-angle {s['cut_angle']:g}`")
+              + ("" if s.get("fill_limit_used") is None else f", planned fill ≤ {s['fill_limit_used']:.0%} of 0.2 m³")
+              + ") at "
               f"{commit_label(result['machine'])}; loops run with `--ray {s.get('ray', 'off')}`; the last "
               f"invocation took {result['wall_s'] / 60:.0f} min (cycles "
               f"saved by earlier ones are read, not dug again), load average at its end {load}. Energy = plant-"
@@ -182,6 +206,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--failure-angle", choices=("min_n_gamma", "min_weight_force"), default="min_n_gamma",
                         help="beta* rule of ours' and the oracle's model (calibration, prediction, planner); "
                              "default the paper's min N_gamma; paper and fixed are unaffected")
+    parser.add_argument("--fill-limit", default="auto", metavar="SHARE",
+                        help="largest planned fill, share of the nominal capacity: 'auto' (default: 95 %% of the "
+                             "plant's struck capacity where it has one, MPM 0.64; else the planner's 0.95) or a "
+                             "number")
     parser.add_argument("--cut-angle", type=float, default=None, metavar="DEG",
                         help="the planner's opt-in cutting cone [deg] for every strategy that plans (default: off)")
     add_ray_arguments(parser)

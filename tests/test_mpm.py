@@ -192,3 +192,15 @@ def test_observer_sees_every_sample():
     log = tiny_plant().dig(path, TINY_PILE, "gravel", seed=3, observer=lambda t, pos: seen.append((t, pos.shape)))
     assert [t for t, _ in seen] == pytest.approx(list(path.t))
     assert all(shape == (log.metadata["particles"], 2) for _, shape in seen)
+
+
+def test_struck_capacity_is_the_fill_outline():
+    """The default bucket's fill outline (tip, floor 0.45 m back, back plate 0.45 m up, top plate 0.15 m, strike
+    line to the tip) holds 0.45 x 0.45 - 0.3 x 0.45 / 2 = 0.135 m^2 per metre (README of the MPM reference)."""
+    plant = MPMPlant()
+    outline = plant.shape.outline
+    x, z = outline[:, 0], outline[:, 1]
+    by_hand = 0.5 * abs(sum(x[i] * z[(i + 1) % len(x)] - x[(i + 1) % len(x)] * z[i] for i in range(len(x))))
+    assert plant.struck_capacity == pytest.approx(by_hand * plant.bucket.width)
+    assert plant.struck_capacity == pytest.approx(0.135, abs=1e-9)
+    assert MPMPlant(bucket=Bucket(width=0.5)).struck_capacity == pytest.approx(0.0675, abs=1e-9)

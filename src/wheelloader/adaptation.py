@@ -442,18 +442,21 @@ def hidden_default_soil() -> SoilParams:
 BETWEEN_CYCLES_MAX_ITER = 130
 
 
-def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma",
-                    cut_angle: float | None = None) -> Callable[[SoilParams, Pile], PlanOutcome]:
+def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_angle: float | None = None,
+                    fill_limit: float | None = None) -> Callable[[SoilParams, Pile], PlanOutcome]:
     """The planner used between cycles.
 
     A full-cycle CasADi plan within :data:`BETWEEN_CYCLES_MAX_ITER` IPOPT
     iterations, checked with the NumPy model, tracked in the env; with
     ``mpc`` an MPC controller re-plans the rest of the cycle every 0.1 s
     (slower, see the planner benchmark). ``failure_angle``: the planner's
-    force-model rule for beta*; ``cut_angle``: its opt-in cutting cone [rad]
+    force-model rule for beta*; ``cut_angle``: its opt-in cutting cone [rad]; ``fill_limit``: the largest
+    planned fill as a share of the bucket's nominal capacity (None: the planner's default)
     (:class:`~wheelloader.planner.PlannerOptions`).
     """
-    options = PlannerOptions(max_iter=BETWEEN_CYCLES_MAX_ITER, failure_angle=failure_angle, cut_angle=cut_angle)
+    extra = {} if fill_limit is None else {"fill_limit": fill_limit}
+    options = PlannerOptions(max_iter=BETWEEN_CYCLES_MAX_ITER, failure_angle=failure_angle, cut_angle=cut_angle,
+                             **extra)
     # build the NLPs once (the plan and its two wider-margin re-plans), before the loop's timings start
     for level in (0, 1, 2):
         optimizer_for(options=cautious_options(options, level))

@@ -131,6 +131,15 @@ class MPMPlant:
         return ContinuumSoil.from_soil(soil, youngs_modulus=self.settings.youngs_modulus,
                                        poisson_ratio=self.settings.poisson_ratio)
 
+    @property
+    def struck_capacity(self) -> float:
+        """Volume the bucket's fill outline holds [m^3] (its area, shoelace formula, times the bucket width):
+        what the plant counts as fill at most; soil heaped above the strike line is carried, not counted."""
+        outline = self.shape.outline
+        x, z = outline[:, 0], outline[:, 1]
+        area = 0.5 * abs(float(np.dot(x, np.roll(z, -1)) - np.dot(z, np.roll(x, -1))))
+        return area * self.bucket.width
+
     def dig(self, path: BucketPath, pile: Pile, soil: SoilParams | str | ContinuumSoil, *, seed: int = 0,
             observer: Callable[[float, np.ndarray], None] | None = None) -> CycleLog:
         """Dig ``path`` into ``pile`` of ``soil``; see :class:`wheelloader.references.Plant`.
