@@ -86,7 +86,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     args.fill_limit_used = fill_limit
     loop_kwargs = {"plant": plant, "cycles": args.cycles, "planner": not args.no_planner, "fill_limit": fill_limit,
                    "failure_angle": args.failure_angle,
-                   "cut_angle": None if args.cut_angle is None else math.radians(args.cut_angle)}
+                   "cut_angle": None if args.cut_angle is None else math.radians(args.cut_angle),
+                   "heel_clearance": args.heel_clearance}
     learning = [s for s in args.strategies if s != "oracle"]
     keys = [(soil, seed, name) for soil in args.soils for seed in range(args.seeds) for name in learning]
     units = [Unit(plant_loop_unit, {**loop_kwargs, "strategy": name, "soil": soil, "seed": seed,
@@ -181,6 +182,7 @@ def markdown(result: dict[str, Any]) -> str:
               + ("" if s.get("failure_angle", "min_n_gamma") == "min_n_gamma" else
                  f"; ours and oracle with `--failure-angle {s['failure_angle']}`")
               + ("" if s.get("cut_angle") is None else f"; planner with `--cut-angle {s['cut_angle']:g}`")
+              + ("" if s.get("heel_clearance") is None else f"; `--heel-clearance {s['heel_clearance']:g}`")
               + ("" if s.get("fill_limit_used") is None else f", planned fill ≤ {s['fill_limit_used']:.0%} of 0.2 m³")
               + ") at "
               f"{commit_label(result['machine'])}; loops run with `--ray {s.get('ray', 'off')}`; the last "
@@ -210,6 +212,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="largest planned fill, share of the nominal capacity: 'auto' (default: 95 %% of the "
                              "plant's struck capacity where it has one, MPM 0.64; else the planner's 0.95) or a "
                              "number")
+    parser.add_argument("--heel-clearance", type=float, default=None, metavar="M",
+                        help="the planner's opt-in heel clearance [m] for every strategy that plans (default: off)")
     parser.add_argument("--cut-angle", type=float, default=None, metavar="DEG",
                         help="the planner's opt-in cutting cone [deg] for every strategy that plans (default: off)")
     add_ray_arguments(parser)

@@ -77,6 +77,11 @@ class PlannerOptions:
     cut_depth : float
         Depth below which the cutting cone binds [m] (default 0.05 m; above it the bucket may lift and curl
         out of the soil).
+    heel_clearance : float, optional
+        Opt-in: the heel of the bucket (the back end of its floor, ``floor_length`` behind the tip along the
+        blade) stays at least this high above the surface [m] (default None: off; 0 keeps it out of the
+        soil). The FEE describes the soil in front of the blade; a buried heel drags the floor and the back
+        plate through soil the model does not see (the fixed Bezier path keeps its heel above the surface).
     tolerance : float
         IPOPT tolerance (default 1e-4; the objective is O(1)).
     surface : SurfaceGrid
@@ -104,6 +109,7 @@ class PlannerOptions:
     failure_angle: str = "min_n_gamma"
     cut_angle: float | None = None
     cut_depth: float = 0.05
+    heel_clearance: float | None = None
 
     @property
     def model_options(self) -> ModelOptions:
@@ -121,6 +127,10 @@ class PlannerOptions:
                                 f"got {self.cut_angle!r}")
         if not (isinstance(self.cut_depth, (int, float)) and math.isfinite(self.cut_depth) and self.cut_depth >= 0):
             raise PlanningError(f"PlannerOptions.cut_depth must be a finite number >= 0 m, got {self.cut_depth!r}")
+        if self.heel_clearance is not None and not (isinstance(self.heel_clearance, (int, float))
+                                                    and math.isfinite(self.heel_clearance)):
+            raise PlanningError(f"PlannerOptions.heel_clearance must be None or a finite height [m], "
+                                f"got {self.heel_clearance!r}")
         if not (isinstance(self.intervals, int) and 4 <= self.intervals <= 400):
             raise PlanningError(f"PlannerOptions.intervals must be an integer in [4, 400], got {self.intervals!r}")
         for name in ("energy_weight", "smoothing_weight", "rho_margin", "end_clearance", "lift_headroom",

@@ -33,6 +33,9 @@ from wheelloader.estimator import (
 from .options import PlannerOptions
 from .plan import Plan
 
+#: How far below its clearance the NumPy check lets the heel go [m] (the NLP sees a smoothed surface).
+HEEL_TOLERANCE = 0.02
+
 
 @dataclass(frozen=True)
 class PlanCheck:
@@ -160,6 +163,12 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
         along = vx * np.cos(th) + vz * np.sin(th)
         deep = (state.depth[1:] > options.cut_depth) & (np.hypot(vx, vz) > 1e-3)
         off_blade = int(np.count_nonzero(deep & (along < math.cos(options.cut_angle + 0.05) * np.hypot(vx, vz))))
+    heel_buried = 0
+    if options.heel_clearance is not None:  # the opt-in heel clearance (PlannerOptions.heel_clearance)
+        heel_x = path.x - bucket.floor_length * np.cos(path.blade_angle)
+        heel_z = path.z - bucket.floor_length * np.sin(path.blade_angle)
+        heel_buried = int(np.count_nonzero(heel_z - pile.surface_height(heel_x)
+                                           < options.heel_clearance - HEEL_TOLERANCE))
     checks = {
         "tangential force above the loader's push limit": float(forces.tangential.max()) > loader.max_push_force,
         "normal force above the loader's lift limit": float(forces.normal.max()) > loader.max_lift_force,
@@ -172,6 +181,7 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
         "path does not end out of the pile": end_clear < 0.5 * options.end_clearance,
         "tip leaves the soil before the end (the env would end the cycle there)": early_exit is not None,
         "bucket moves off its blade in soil (outside the cutting cone)": off_blade > 0,
+        "bucket's heel in the soil (below the heel clearance)": heel_buried > 0,
     }
     failures = tuple(name for name, failed in checks.items() if failed)
     rho_in = state.rho[in_soil]
@@ -184,7 +194,7 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
         fill=sim["fill"], spilled=sim["spilled"], energy=sim["energy"], end_clearance=end_clear,
         backward_steps=int(np.count_nonzero(vx < -1e-6)),
         details={"flags": forces.flag_summary(), "samples": len(path), "early_exit_s": early_exit,
-                 "off_blade_steps": off_blade},
+                 "off_blade_steps": off_blade, "heel_buried_steps": heel_buried},
     )
 
 

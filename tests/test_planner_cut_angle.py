@@ -1,4 +1,4 @@
-"""The planner's opt-in cutting cone (PlannerOptions.cut_angle): in soil the bucket advances along its blade."""
+"""The planner's opt-in physics: the cutting cone (PlannerOptions.cut_angle) and the heel clearance."""
 
 from __future__ import annotations
 
@@ -70,3 +70,45 @@ def test_a_plan_with_the_cone_keeps_the_blade_leading(failure_angle):
                                                                   max_iter=BETWEEN_CYCLES_MAX_ITER),
                            replan_within_iterations=BETWEEN_CYCLES_MAX_ITER, exit_min_fill=LOOP_EXIT_MIN_FILL)
     assert _angles_off_blade(free.path, pile, options.cut_depth).max() > off.max() + 0.1
+
+
+def _heel_depth(path: BucketPath, pile: Pile, floor_length: float) -> np.ndarray:
+    heel_x = path.x - floor_length * np.cos(path.blade_angle)
+    heel_z = path.z - floor_length * np.sin(path.blade_angle)
+    return pile.surface_height(heel_x) - heel_z
+
+
+def test_heel_clearance_is_checked():
+    with pytest.raises(PlanningError, match="heel_clearance"):
+        PlannerOptions(heel_clearance=float("nan"))
+    pile = Pile.trapezoid()
+    t = np.linspace(0.0, 2.0, 121)
+    # 10 cm under the flat top, blade tilted up 20 deg: the heel trails 0.45 sin(20 deg) = 0.15 m lower still
+    x = 2.0 + 0.3 * t
+    z = np.full_like(t, 0.9)
+    path = BucketPath(t, x, z, np.full_like(t, math.radians(20.0)))
+    buried = "bucket's heel in the soil (below the heel clearance)"
+    assert buried in verify_plan(path, "gravel", pile, options=PlannerOptions(heel_clearance=0.0)).failures
+    assert buried not in verify_plan(path, "gravel", pile).failures
+
+
+def test_a_plan_with_heel_clearance_keeps_the_heel_out():
+    from wheelloader.adaptation import BETWEEN_CYCLES_MAX_ITER, LOOP_EXIT_MIN_FILL
+    from wheelloader.planner import plan_next_cycle
+    from wheelloader.planner.verify import HEEL_TOLERANCE
+
+    pile = Pile.trapezoid()
+    options = PlannerOptions(heel_clearance=0.0, failure_angle="min_weight_force", max_iter=BETWEEN_CYCLES_MAX_ITER)
+    outcome = plan_next_cycle("gravel", pile, options=options, replan_within_iterations=BETWEEN_CYCLES_MAX_ITER,
+                              exit_min_fill=LOOP_EXIT_MIN_FILL)
+    assert outcome.success, outcome.message
+    floor = optimizer_for(options=options).bucket.floor_length
+    assert _heel_depth(outcome.path, pile, floor).max() <= HEEL_TOLERANCE
+    state = contact_state(outcome.path.x, outcome.path.z, outcome.path.blade_angle, pile,
+                          optimizer_for(options=options).bucket)
+    assert state.fill_volume[-1] > 0.05
+    # the same planner without it buries the heel on this pile
+    free = plan_next_cycle("gravel", pile, options=PlannerOptions(failure_angle="min_weight_force",
+                                                                  max_iter=BETWEEN_CYCLES_MAX_ITER),
+                           replan_within_iterations=BETWEEN_CYCLES_MAX_ITER, exit_min_fill=LOOP_EXIT_MIN_FILL)
+    assert _heel_depth(free.path, pile, floor).max() > HEEL_TOLERANCE + 0.01
