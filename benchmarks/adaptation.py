@@ -127,6 +127,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="ours: bucket-load source of calibration and prediction (default: %(default)s)")
     parser.add_argument("--carried-load", action="store_true", help="ours: the opt-in carried-load term")
     parser.add_argument("--slip-friction", action="store_true", help="ours: the opt-in slip-mobilised friction")
+    parser.add_argument("--end-blade-angle", type=float, default=None, metavar="DEG",
+                        help="the planner's opt-in smallest blade angle at the end [deg] (default: off)")
     parser.add_argument("--heel-clearance", type=float, default=None, metavar="M",
                         help="the planner's opt-in heel clearance [m] (PlannerOptions.heel_clearance; default: off)")
     parser.add_argument("--cut-angle", type=float, default=None, metavar="DEG",
@@ -159,7 +161,9 @@ def main(argv: list[str] | None = None) -> int:
                                                       "ours_options": _ours_options(args),
                                                       "cut_angle": None if args.cut_angle is None
                                                       else math.radians(args.cut_angle),
-                                                      "heel_clearance": args.heel_clearance},
+                                                      "heel_clearance": args.heel_clearance,
+                                                      "end_blade_angle": None if args.end_blade_angle is None
+                                                      else math.radians(args.end_blade_angle)},
                                       label=f"{soil_name:>13} | {pile_name} | seed {seed} | {name:>6}"))
     start = time.perf_counter()
     sweep = run_sweep(units, args.ray, ray_cpus=args.ray_cpus, describe=_describe, progress=_print)
@@ -177,7 +181,8 @@ def main(argv: list[str] | None = None) -> int:
                            "keep_untrustworthy": args.keep_untrustworthy, "fill": args.fill,
                            "carried_load": args.carried_load, "slip_friction": args.slip_friction,
                            "failure_angle": args.failure_angle},
-                  "planner_cut_angle_deg": args.cut_angle, "planner_heel_clearance_m": args.heel_clearance},
+                  "planner_cut_angle_deg": args.cut_angle, "planner_heel_clearance_m": args.heel_clearance,
+                  "planner_end_blade_angle_deg": args.end_blade_angle},
         "summary": summary,
         "rows": rows,
         "wall_time_s": time.perf_counter() - start,

@@ -55,10 +55,12 @@ def make_plant(name: str, resolution: float, threads: int) -> Any:
 
 
 def planned_fill_limit(plant: Any, setting: str) -> float | None:
-    """The planner's fill limit (share of the nominal capacity): ``auto`` plans up to 95 % of the plant's struck
-    capacity where the plant has one (the MPM bucket's fill outline holds 0.135 of the nominal 0.2 m^3; a plan
-    that carves more bulldozes the rest), else the planner's default; or the given number."""
-    if setting == "auto":
+    """The planner's fill limit (share of the nominal capacity): ``default`` the planner's (0.95); ``struck`` up to
+    95 % of the plant's struck capacity where the plant has one (the MPM bucket's fill outline holds 0.135 of the
+    nominal 0.2 m^3), else the planner's default; or the given number."""
+    if setting == "default":
+        return None
+    if setting == "struck":
         struck = getattr(plant, "struck_capacity", None)
         if struck is None:
             return None
@@ -68,9 +70,9 @@ def planned_fill_limit(plant: Any, setting: str) -> float | None:
     try:
         value = float(setting)
     except ValueError:
-        raise SystemExit(f"--fill-limit must be 'auto' or a number in (0, 1], got {setting!r}") from None
+        raise SystemExit(f"--fill-limit must be 'default', 'struck' or a number in (0, 1], got {setting!r}") from None
     if not 0.0 < value <= 1.0:
-        raise SystemExit(f"--fill-limit must be 'auto' or a number in (0, 1], got {setting!r}")
+        raise SystemExit(f"--fill-limit must be 'default', 'struck' or a number in (0, 1], got {setting!r}")
     return value
 
 
@@ -87,7 +89,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     loop_kwargs = {"plant": plant, "cycles": args.cycles, "planner": not args.no_planner, "fill_limit": fill_limit,
                    "failure_angle": args.failure_angle,
                    "cut_angle": None if args.cut_angle is None else math.radians(args.cut_angle),
-                   "heel_clearance": args.heel_clearance}
+                   "heel_clearance": args.heel_clearance,
+                   "end_blade_angle": None if args.end_blade_angle is None else math.radians(args.end_blade_angle)}
     learning = [s for s in args.strategies if s != "oracle"]
     keys = [(soil, seed, name) for soil in args.soils for seed in range(args.seeds) for name in learning]
     units = [Unit(plant_loop_unit, {**loop_kwargs, "strategy": name, "soil": soil, "seed": seed,
@@ -183,6 +186,7 @@ def markdown(result: dict[str, Any]) -> str:
                  f"; ours and oracle with `--failure-angle {s['failure_angle']}`")
               + ("" if s.get("cut_angle") is None else f"; planner with `--cut-angle {s['cut_angle']:g}`")
               + ("" if s.get("heel_clearance") is None else f"; `--heel-clearance {s['heel_clearance']:g}`")
+              + ("" if s.get("end_blade_angle") is None else f"; `--end-blade-angle {s['end_blade_angle']:g}`")
               + ("" if s.get("fill_limit_used") is None else f", planned fill ≤ {s['fill_limit_used']:.0%} of 0.2 m³")
               + ") at "
               f"{commit_label(result['machine'])}; loops run with `--ray {s.get('ray', 'off')}`; the last "
@@ -208,10 +212,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--failure-angle", choices=("min_n_gamma", "min_weight_force"), default="min_n_gamma",
                         help="beta* rule of ours' and the oracle's model (calibration, prediction, planner); "
                              "default the paper's min N_gamma; paper and fixed are unaffected")
-    parser.add_argument("--fill-limit", default="auto", metavar="SHARE",
-                        help="largest planned fill, share of the nominal capacity: 'auto' (default: 95 %% of the "
-                             "plant's struck capacity where it has one, MPM 0.64; else the planner's 0.95) or a "
-                             "number")
+    parser.add_argument("--fill-limit", default="default", metavar="SHARE",
+                        help="largest planned fill, share of the nominal capacity: 'default' (the planner's 0.95), "
+                             "'struck' (95 %% of the plant's struck capacity where it has one: MPM 0.64) or a number")
+    parser.add_argument("--end-blade-angle", type=float, default=None, metavar="DEG",
+                        help="the planner's opt-in smallest blade angle at the end [deg] (default: off)")
     parser.add_argument("--heel-clearance", type=float, default=None, metavar="M",
                         help="the planner's opt-in heel clearance [m] for every strategy that plans (default: off)")
     parser.add_argument("--cut-angle", type=float, default=None, metavar="DEG",

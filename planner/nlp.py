@@ -219,6 +219,8 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     # end out of the pile
     end_clear = X[1, n] - grid.window_height(X[0, n], p_surf[:, n]) - options.end_clearance
     g_ineq.append(end_clear)
+    if options.end_blade_angle is not None:  # opt-in: end curled, carrying the load
+        g_ineq.append(X[2, n] - options.end_blade_angle)
     fill_end = X[3, n]
     g = ca.vertcat(*g_eq, *g_ineq, fill_end)
     n_eq, n_ineq = len(g_eq), len(g_ineq)

@@ -82,6 +82,10 @@ class PlannerOptions:
         blade) stays at least this high above the surface [m] (default None: off; 0 keeps it out of the
         soil). The FEE describes the soil in front of the blade; a buried heel drags the floor and the back
         plate through soil the model does not see (the fixed Bezier path keeps its heel above the surface).
+    end_blade_angle : float, optional
+        Opt-in: the smallest blade angle at the end of the plan [rad] (default None: off). A bucket carries
+        its load curled; the model's fill is the soil carved, whatever the bucket's tilt, so without it a
+        plan may end tilted forward and, in a plant, lose what it carved (the fixed Bezier path ends at 45 deg).
     tolerance : float
         IPOPT tolerance (default 1e-4; the objective is O(1)).
     surface : SurfaceGrid
@@ -110,6 +114,7 @@ class PlannerOptions:
     cut_angle: float | None = None
     cut_depth: float = 0.05
     heel_clearance: float | None = None
+    end_blade_angle: float | None = None
 
     @property
     def model_options(self) -> ModelOptions:
@@ -131,6 +136,11 @@ class PlannerOptions:
                                                     and math.isfinite(self.heel_clearance)):
             raise PlanningError(f"PlannerOptions.heel_clearance must be None or a finite height [m], "
                                 f"got {self.heel_clearance!r}")
+        if self.end_blade_angle is not None and not (
+                isinstance(self.end_blade_angle, (int, float))
+                and self.blade_angle_limits[0] <= self.end_blade_angle <= self.blade_angle_limits[1]):
+            raise PlanningError(f"PlannerOptions.end_blade_angle must be None or within blade_angle_limits "
+                                f"{self.blade_angle_limits!r} rad, got {self.end_blade_angle!r}")
         if not (isinstance(self.intervals, int) and 4 <= self.intervals <= 400):
             raise PlanningError(f"PlannerOptions.intervals must be an integer in [4, 400], got {self.intervals!r}")
         for name in ("energy_weight", "smoothing_weight", "rho_margin", "end_clearance", "lift_headroom",

@@ -182,6 +182,8 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
         "tip leaves the soil before the end (the env would end the cycle there)": early_exit is not None,
         "bucket moves off its blade in soil (outside the cutting cone)": off_blade > 0,
         "bucket's heel in the soil (below the heel clearance)": heel_buried > 0,
+        "bucket not curled at the end (below the end blade angle)": (
+            options.end_blade_angle is not None and float(path.blade_angle[-1]) < options.end_blade_angle - 0.02),
     }
     failures = tuple(name for name, failed in checks.items() if failed)
     rho_in = state.rho[in_soil]

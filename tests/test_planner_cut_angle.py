@@ -112,3 +112,25 @@ def test_a_plan_with_heel_clearance_keeps_the_heel_out():
                                                                   max_iter=BETWEEN_CYCLES_MAX_ITER),
                            replan_within_iterations=BETWEEN_CYCLES_MAX_ITER, exit_min_fill=LOOP_EXIT_MIN_FILL)
     assert _heel_depth(free.path, pile, floor).max() > HEEL_TOLERANCE + 0.01
+
+
+def test_end_blade_angle_is_checked():
+    with pytest.raises(PlanningError, match="end_blade_angle"):
+        PlannerOptions(end_blade_angle=math.radians(80.0))  # beyond the blade-angle limits (75 deg)
+    pile = Pile.trapezoid()
+    t = np.linspace(0.0, 1.0, 61)
+    path = BucketPath(t, -0.5 + 0.2 * t, np.full_like(t, 0.3), np.zeros_like(t))  # in the air, blade flat
+    flat = "bucket not curled at the end (below the end blade angle)"
+    assert flat in verify_plan(path, "gravel", pile, options=PlannerOptions(end_blade_angle=math.radians(45))).failures
+    assert flat not in verify_plan(path, "gravel", pile).failures
+
+
+def test_a_plan_with_an_end_blade_angle_ends_curled():
+    from wheelloader.adaptation import BETWEEN_CYCLES_MAX_ITER, LOOP_EXIT_MIN_FILL
+    from wheelloader.planner import plan_next_cycle
+
+    options = PlannerOptions(end_blade_angle=math.radians(45.0), max_iter=BETWEEN_CYCLES_MAX_ITER)
+    outcome = plan_next_cycle("gravel", Pile.trapezoid(), options=options,
+                              replan_within_iterations=BETWEEN_CYCLES_MAX_ITER, exit_min_fill=LOOP_EXIT_MIN_FILL)
+    assert outcome.success, outcome.message
+    assert outcome.path.blade_angle[-1] >= math.radians(45.0) - 0.02
