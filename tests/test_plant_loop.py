@@ -154,3 +154,31 @@ def test_plant_loop_unit_builds_ours_with_the_failure_angle_rule(tmp_path):
                                                                   "cycle2.json"]
     with pytest.raises(WheelloaderError, match="oracle_params"):
         plant_loop_unit(FEEEnvPlant(), "oracle", "gravel", cycles=1, seed=0, cache=None, planner=False)
+
+
+def test_first_cycle_benchmark_smoke(tmp_path):
+    """``benchmarks/plant_first_cycle.py --quick``: the fixed path and one planner variant dug at 8 cm; a second
+    run reads the saved cycles instead of digging again."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    try:
+        import taichi  # noqa: F401
+    except ImportError:
+        if os.environ.get("WHEELLOADER_REQUIRE_MPM") == "1":
+            pytest.fail("WHEELLOADER_REQUIRE_MPM=1 but taichi is not installed")
+        pytest.skip('taichi not installed: pip install "wheelloader[mpm]"')
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "plant_first_cycle.py"
+    for attempt in range(2):
+        done = subprocess.run([sys.executable, str(script), "--quick", "--ray", "off", "--out", str(tmp_path)],
+                              capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr[-2000:]
+        result = json.loads((tmp_path / "plant_first_cycle.json").read_text())
+        rows = {r["variant"]: r for r in result["rows"]}
+        assert rows["fixed Bezier path"]["fill_m3"] > 0.0 and rows["fixed Bezier path"]["energy_J"] > 0.0
+        planned = rows["+ heel clearance, end curled 45°"]
+        assert planned["max_heel_depth_m"] <= 0.03 and planned["end_blade_angle_deg"] >= 44.0
+        assert all(r["resumed"] == (attempt == 1) for r in result["rows"])
+    assert "| fixed Bezier path |" in (tmp_path / "plant_first_cycle.md").read_text()
