@@ -44,6 +44,7 @@ from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 from _machine import machine_info  # noqa: E402
+from _planner_args import add_planner_physics_arguments, planner_physics  # noqa: E402
 
 from wheelloader.provenance import commit_label  # noqa: E402
 from wheelloader.sweep import add_ray_arguments  # noqa: E402
@@ -127,12 +128,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="ours: bucket-load source of calibration and prediction (default: %(default)s)")
     parser.add_argument("--carried-load", action="store_true", help="ours: the opt-in carried-load term")
     parser.add_argument("--slip-friction", action="store_true", help="ours: the opt-in slip-mobilised friction")
-    parser.add_argument("--end-blade-angle", type=float, default=None, metavar="DEG",
-                        help="the planner's opt-in smallest blade angle at the end [deg] (default: off)")
-    parser.add_argument("--heel-clearance", type=float, default=None, metavar="M",
-                        help="the planner's opt-in heel clearance [m] (PlannerOptions.heel_clearance; default: off)")
-    parser.add_argument("--cut-angle", type=float, default=None, metavar="DEG",
-                        help="the planner's opt-in cutting cone [deg] (PlannerOptions.cut_angle; default: off)")
+    add_planner_physics_arguments(parser, "every strategy that plans (PlannerOptions)")
     parser.add_argument("--failure-angle", choices=("min_n_gamma", "min_weight_force"), default="min_n_gamma",
                         help="ours: how the model picks beta* (default: the paper's min N_gamma; "
                              "min_weight_force: the opt-in least weight force)")
@@ -159,11 +155,7 @@ def main(argv: list[str] | None = None) -> int:
                                                       "strategy": name, "cycles": cycles, "seed": seed,
                                                       "planner": planner, "rl_policy": args.rl_policy,
                                                       "ours_options": _ours_options(args),
-                                                      "cut_angle": None if args.cut_angle is None
-                                                      else math.radians(args.cut_angle),
-                                                      "heel_clearance": args.heel_clearance,
-                                                      "end_blade_angle": None if args.end_blade_angle is None
-                                                      else math.radians(args.end_blade_angle)},
+                                                      **planner_physics(args)},
                                       label=f"{soil_name:>13} | {pile_name} | seed {seed} | {name:>6}"))
     start = time.perf_counter()
     sweep = run_sweep(units, args.ray, ray_cpus=args.ray_cpus, describe=_describe, progress=_print)

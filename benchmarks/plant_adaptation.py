@@ -26,13 +26,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import statistics
 import time
 from pathlib import Path
 from typing import Any
 
 from _machine import machine_info
+from _planner_args import add_planner_physics_arguments, planner_physics
 
 from wheelloader.provenance import commit_label
 from wheelloader.ray_mode import add_ray_arguments
@@ -87,10 +87,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     fill_limit = planned_fill_limit(plant, args.fill_limit)
     args.fill_limit_used = fill_limit
     loop_kwargs = {"plant": plant, "cycles": args.cycles, "planner": not args.no_planner, "fill_limit": fill_limit,
-                   "failure_angle": args.failure_angle,
-                   "cut_angle": None if args.cut_angle is None else math.radians(args.cut_angle),
-                   "heel_clearance": args.heel_clearance,
-                   "end_blade_angle": None if args.end_blade_angle is None else math.radians(args.end_blade_angle)}
+                   "failure_angle": args.failure_angle, **planner_physics(args)}
     learning = [s for s in args.strategies if s != "oracle"]
     keys = [(soil, seed, name) for soil in args.soils for seed in range(args.seeds) for name in learning]
     units = [Unit(plant_loop_unit, {**loop_kwargs, "strategy": name, "soil": soil, "seed": seed,
@@ -215,12 +212,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fill-limit", default="default", metavar="SHARE",
                         help="largest planned fill, share of the nominal capacity: 'default' (the planner's 0.95), "
                              "'struck' (95 %% of the plant's struck capacity where it has one: MPM 0.64) or a number")
-    parser.add_argument("--end-blade-angle", type=float, default=None, metavar="DEG",
-                        help="the planner's opt-in smallest blade angle at the end [deg] (default: off)")
-    parser.add_argument("--heel-clearance", type=float, default=None, metavar="M",
-                        help="the planner's opt-in heel clearance [m] for every strategy that plans (default: off)")
-    parser.add_argument("--cut-angle", type=float, default=None, metavar="DEG",
-                        help="the planner's opt-in cutting cone [deg] for every strategy that plans (default: off)")
+    add_planner_physics_arguments(parser, "for every strategy that plans")
     add_ray_arguments(parser)
     parser.add_argument("--report", action="store_true",
                         help="only rewrite the Markdown and the figure from OUT/plant_adaptation.json")

@@ -1,0 +1,26 @@
+"""The planner's opt-in physics on the command line, shared by the adaptation benchmarks
+(``benchmarks/adaptation.py`` and its ``--plant`` variant ``benchmarks/plant_adaptation.py``)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import Any
+
+
+def add_planner_physics_arguments(parser: argparse.ArgumentParser, scope: str) -> None:
+    """``--end-blade-angle DEG``, ``--heel-clearance M`` and ``--cut-angle DEG`` (all off by default);
+    ``scope`` says which strategies plan with them (help text)."""
+    parser.add_argument("--end-blade-angle", type=float, default=None, metavar="DEG",
+                        help=f"the planner's opt-in smallest blade angle at the end [deg], {scope} (default: off)")
+    parser.add_argument("--heel-clearance", type=float, default=None, metavar="M",
+                        help=f"the planner's opt-in heel clearance [m], {scope} (default: off)")
+    parser.add_argument("--cut-angle", type=float, default=None, metavar="DEG",
+                        help=f"the planner's opt-in cutting cone [deg], {scope} (default: off)")
+
+
+def planner_physics(args: argparse.Namespace) -> dict[str, Any]:
+    """Those settings as ``PlannerOptions`` keywords (angles in radians; None: off)."""
+    radians = (lambda deg: None if deg is None else math.radians(deg))  # noqa: E731
+    return {"cut_angle": radians(args.cut_angle), "heel_clearance": args.heel_clearance,
+            "end_blade_angle": radians(args.end_blade_angle)}
