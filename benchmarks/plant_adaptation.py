@@ -86,11 +86,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     started = time.perf_counter()
     fill_limit = planned_fill_limit(plant, args.fill_limit)
     args.fill_limit_used = fill_limit
+    stale = getattr(args, "stale", "error")
     loop_kwargs = {"plant": plant, "cycles": args.cycles, "planner": not args.no_planner, "fill_limit": fill_limit,
                    "failure_angle": args.failure_angle, **planner_physics(args)}
     learning = [s for s in args.strategies if s != "oracle"]
     keys = [(soil, seed, name) for soil in args.soils for seed in range(args.seeds) for name in learning]
-    units = [Unit(plant_loop_unit, {**loop_kwargs, "strategy": name, "soil": soil, "seed": seed,
+    units = [Unit(plant_loop_unit, {**loop_kwargs, "strategy": name, "soil": soil, "seed": seed, "stale": stale,
                                     "cache": out / "cycles" / soil / f"seed{seed}" / name},
                   label=f"{soil} | seed {seed} | {name}", num_cpus=args.threads) for soil, seed, name in keys]
     # phase 1: every loop that learns (or does not) from its own cycles, as sweep units (Ray tasks when present)
@@ -112,7 +113,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             for seed in range(args.seeds):
                 oracle_keys.append((soil, seed, "oracle"))
                 oracle_units.append(Unit(plant_loop_unit, {**loop_kwargs, "strategy": "oracle", "soil": soil,
-                                                           "seed": seed, "oracle_params": params, "stale": "redig",
+                                                           "seed": seed, "oracle_params": params,
+                                                           "stale": "keep" if stale == "keep" else "redig",
                                                            "cache": out / "cycles" / soil / f"seed{seed}" / "oracle"},
                                          label=f"{soil} | seed {seed} | oracle", num_cpus=args.threads))
         if oracle_units:
@@ -130,6 +132,16 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                         "fill": "plant's soil inside the bucket at the end",
                         "prediction": "F_R RMSE of the parameters planned with vs the plant's force filtered "
                                       "(sigma 0.1 s), % of mean |F_R| in soil"}}
+
+
+def _kept_note(rows: list[dict[str, Any]]) -> str:
+    """What the table says about saved cycles kept although the plan made now differs (``--stale keep``)."""
+    kept = [r for r in rows if str(r.get("end", "")).startswith("kept saved cycle")]
+    if not kept:
+        return ""
+    return (f" {len(kept)} of {len(rows)} cycles were kept from an earlier invocation although the plan made now "
+            "differs (`--stale keep`: calibrations agree to the last bits, the planner's choice does not); "
+            "each record's `end` gives the distance.")
 
 
 def _print(line: str) -> None:
@@ -191,7 +203,7 @@ def markdown(result: dict[str, Any]) -> str:
               f"saved by earlier ones are read, not dug again), load average at its end {load}. Energy = plant-"
               "measured work / plant-measured fill over all cycles; fill in % of the nominal 0.2 m³; fixed paths "
               "are Bézier paths (not checked); a plan that fails the check falls back to the Bézier path placed "
-              "by the model.*"]
+              "by the model." + _kept_note(result["rows"]) + "*"]
     return "\n".join(lines) + "\n"
 
 
@@ -213,6 +225,11 @@ def main(argv: list[str] | None = None) -> int:
                         help="largest planned fill, share of the nominal capacity: 'default' (the planner's 0.95), "
                              "'struck' (95 %% of the plant's struck capacity where it has one: MPM 0.64) or a number")
     add_planner_physics_arguments(parser, "for every strategy that plans")
+    parser.add_argument("--stale", choices=("error", "redig", "keep"), default="error",
+                        help="a saved cycle dug along another path than the one planned now (other code, settings "
+                             "or machine: plans can change with the last bits of the calibrated parameters): stop "
+                             "(default), dig it again, or keep it as the cycle dug (its distance to the plan made "
+                             "now is recorded); the oracle's loops dig again unless 'keep'")
     add_ray_arguments(parser)
     parser.add_argument("--report", action="store_true",
                         help="only rewrite the Markdown and the figure from OUT/plant_adaptation.json")

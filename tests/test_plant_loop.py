@@ -10,7 +10,7 @@ import pytest
 
 from wheelloader.adaptation import NOMINAL_SOIL, Calibrating, FixedBezier
 from wheelloader.estimator import Bucket, BucketPath, CycleLog, Pile, WheelloaderError, preset
-from wheelloader.plant_loop import Hindsight, hindsight_parameters, path_digest, run_plant_loop
+from wheelloader.plant_loop import Hindsight, hindsight_parameters, path_digest, path_distance, run_plant_loop
 from wheelloader.references import Plant
 from wheelloader.references.fee_env import FEEEnvPlant
 from wheelloader.references.metrics import cycle_work, world_force
@@ -74,6 +74,30 @@ def test_loop_on_the_fee_env_plant_resumes_from_its_cache(tmp_path):
     with pytest.raises(WheelloaderError, match="another path"):
         run_plant_loop(plant, FixedBezier(preset(NOMINAL_SOIL), rate=30.0), Pile.trapezoid(), "gravel", cycles=1,
                        cache=tmp_path)
+    # ... unless asked to keep it (resuming on another machine): the saved cycle is the one dug, its plan's
+    # record is read from the log, and the record says how far the plan made now lies from it
+    assert meta["plan"]["ok"] == records[0].plan_ok and meta["plan"]["params"] == records[0].params
+    kept_lines: list[str] = []
+    kept, _ = run_plant_loop(plant, FixedBezier(preset(NOMINAL_SOIL), rate=30.0), Pile.trapezoid(), "gravel",
+                             cycles=2, cache=tmp_path, stale="keep", progress=kept_lines.append)
+    assert all("kept saved cycle" in line for line in kept_lines)
+    for a, b in zip(records, kept, strict=True):
+        assert b.end.startswith("kept saved cycle (path planned now differs by ")
+        assert a.energy_J == pytest.approx(b.energy_J, rel=1e-9) and a.plan_message == b.plan_message
+        assert a.prediction_rmse_percent == pytest.approx(b.prediction_rmse_percent, rel=1e-9)
+    with pytest.raises(WheelloaderError, match="stale"):
+        run_plant_loop(plant, FixedBezier(preset(NOMINAL_SOIL)), Pile.trapezoid(), "gravel", cache=tmp_path,
+                       stale="ignore")
+
+
+def test_path_distance_known_answers():
+    path = FixedBezier(preset(NOMINAL_SOIL)).plan(Pile.trapezoid()).path
+    assert path_distance(path, path) == 0.0
+    shifted = path.shifted(dx=0.01, dz=-0.01)
+    assert path_distance(path, shifted) == pytest.approx(0.01 * math.sqrt(2), rel=1e-12)
+    shorter = type(path)(t=path.t[: len(path.t) // 2], x=path.x[: len(path.t) // 2], z=path.z[: len(path.t) // 2],
+                         blade_angle=path.blade_angle[: len(path.t) // 2])
+    assert path_distance(path, shorter) == math.inf
 
 
 def test_loop_rejects_bad_input():

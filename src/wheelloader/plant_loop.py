@@ -57,6 +57,21 @@ def _cached(cache: Path | None, key: str) -> CycleLog | None:
     return CycleLog.load(csv)
 
 
+def path_distance(a: Any, b: Any) -> float:
+    """Largest distance [m] between the tip positions of two paths, each resampled at the other's times
+    (over the shorter duration); inf when their durations differ by more than one sample."""
+    ta, tb = np.asarray(a.t, dtype=float), np.asarray(b.t, dtype=float)
+    step = max(float(np.median(np.diff(ta))) if ta.size > 1 else 0.0,
+               float(np.median(np.diff(tb))) if tb.size > 1 else 0.0)
+    if abs(ta[-1] - tb[-1]) > step + 1e-12:
+        return math.inf
+    t = np.union1d(ta, tb)
+    t = t[t <= min(ta[-1], tb[-1])]
+    dx = np.interp(t, ta, a.x) - np.interp(t, tb, b.x)
+    dz = np.interp(t, ta, a.z) - np.interp(t, tb, b.z)
+    return float(np.max(np.hypot(dx, dz)))
+
+
 def path_digest(path: Any) -> str:
     """SHA-256 of a path's samples (t, x, z, blade angle): which plan a saved cycle was dug for."""
     h = hashlib.sha256()
@@ -93,9 +108,13 @@ def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParam
         Gaussian filter of the plant's force before calibration and for the prediction error [s].
     progress : callable, optional
         Called with one line per cycle.
-    stale : {"error", "redig"}
+    stale : {"error", "redig", "keep"}
         What to do with a saved cycle dug along another path than the one planned now (other settings or
-        code): raise (default), or dig again and replace it (said in the progress line).
+        code, or another machine: the planner's choice can change with the last bits of the calibrated
+        parameters): raise (default), dig again and replace it, or keep the saved cycle as the one that was
+        dug (its plan's success, message, time and parameters are read from the log where it recorded
+        them; the record's ``end`` says how far the plan made now lies from the path dug). Each is said in
+        the progress line.
 
     Returns
     -------
@@ -106,8 +125,8 @@ def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParam
         raise WheelloaderError(f"cycles must be a positive integer, got {cycles!r}")
     if not isinstance(pile, Pile):
         raise WheelloaderError(f"pile must be a Pile, got {type(pile).__name__}")
-    if stale not in ("error", "redig"):
-        raise WheelloaderError(f"stale must be 'error' or 'redig', got {stale!r}")
+    if stale not in ("error", "redig", "keep"):
+        raise WheelloaderError(f"stale must be 'error', 'redig' or 'keep', got {stale!r}")
     if not callable(getattr(plant, "dig", None)):
         raise WheelloaderError(f"plant must have a dig(path, pile, soil, seed=...) method, got {type(plant).__name__}")
     folder = None if cache is None else Path(cache)
@@ -122,20 +141,38 @@ def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParam
             raise WheelloaderError(f"strategy {strategy.name!r} gives a controller, not a path: it needs the env's "
                                    "observations and cannot dig in a reference plant")
         params_used = strategy.params
+        plan_ok, plan_message, plan_seconds = plan.success, plan.message, plan.seconds
         log = _cached(folder, f"cycle{k}")
         digest = path_digest(plan.path)
-        replaced = False
+        replaced = kept = False
+        end = "path end"
         if log is not None and log.metadata.get("planned_path_sha256") != digest:
-            if stale != "redig":
+            if stale == "error":
                 raise WheelloaderError(f"{folder}/cycle{k}.csv was dug along another path than the one planned "
-                                       "now (other settings or code); use another cache folder or remove it")
-            log, replaced = None, True
+                                       "now (other settings, code or machine); use another cache folder, remove "
+                                       "it, or resume with stale='keep' or 'redig'")
+            if stale == "redig":
+                log, replaced = None, True
+            else:
+                kept = True
+                end = f"kept saved cycle (path planned now differs by {path_distance(plan.path, log.path):.3g} m)"
+                saved = log.metadata.get("plan")
+                if isinstance(saved, dict):
+                    plan_ok, plan_message = bool(saved["ok"]), str(saved["message"])
+                    plan_seconds = float(saved["seconds"])
+                    params_used = SoilParams.from_dict(saved["params"])
+                else:
+                    end += "; its plan's success, message and time are those of the plan made now"
         resumed = log is not None
+        if resumed and not kept:
+            end = "resumed from cache"
         if log is None:
             start = time.perf_counter()
             log = plant.dig(plan.path, pile, soil, seed=seed)
             log.metadata.setdefault("plant_wall_s", time.perf_counter() - start)
             log.metadata["planned_path_sha256"] = digest
+            log.metadata["plan"] = {"ok": bool(plan_ok), "message": str(plan_message), "seconds": float(plan_seconds),
+                                    "params": params_used.to_dict()}
             if folder is not None:
                 log.save(folder / f"cycle{k}.csv", overwrite=True)
         if log.pile_after is None:
@@ -150,19 +187,20 @@ def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParam
         fill = float(log.fill_volume[-1]) if log.fill_volume is not None else math.nan
         energy = cycle_work(log)
         records.append(CycleRecord(
-            cycle=k, strategy=strategy.name, path=plan.path.name, calibration_s=calib[0], planning_s=plan.seconds,
+            cycle=k, strategy=strategy.name, path=plan.path.name, calibration_s=calib[0], planning_s=plan_seconds,
             prediction_rmse_N=quality.rmse_r if quality else math.nan,
             prediction_rmse_percent=quality.percent_r if quality else math.nan,
             fill_m3=fill, fill_fraction=fill / log.bucket.capacity, energy_J=energy,
             energy_per_m3=energy / fill if fill > 0 else math.inf, stalled=False,
-            validity_violations=violations, end="resumed from cache" if resumed else "path end",
-            calibration_ok=calib[1], calibration_message=calib[2], plan_ok=plan.success, plan_message=plan.message,
+            validity_violations=violations, end=end,
+            calibration_ok=calib[1], calibration_message=calib[2], plan_ok=plan_ok, plan_message=plan_message,
             params=params_used.to_dict()))
         if progress is not None:
             r = records[-1]
             progress(f"  {r.strategy:>7} cycle {k}: fill {r.fill_fraction:5.0%}, energy {r.energy_J / 1e3:6.2f} kJ, "
                      f"{r.energy_per_m3 / 1e3:6.1f} kJ/m^3, prediction F_R RMSE {r.prediction_rmse_percent:5.1f} %"
-                     + (" (resumed)" if resumed else "")
+                     + (" (resumed)" if resumed and not kept else "")
+                     + (f" ({end})" if kept else "")
                      + (" (saved cycle of another plan dug again)" if replaced else ""))
         pile = log.pile_after
         if k < cycles:
