@@ -113,8 +113,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             for seed in range(args.seeds):
                 oracle_keys.append((soil, seed, "oracle"))
                 oracle_units.append(Unit(plant_loop_unit, {**loop_kwargs, "strategy": "oracle", "soil": soil,
-                                                           "seed": seed, "oracle_params": params,
-                                                           "stale": "keep" if stale == "keep" else "redig",
+                                                           "seed": seed, "oracle_params": params, "stale": "redig",
                                                            "cache": out / "cycles" / soil / f"seed{seed}" / "oracle"},
                                          label=f"{soil} | seed {seed} | oracle", num_cpus=args.threads))
         if oracle_units:
@@ -229,7 +228,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="a saved cycle dug along another path than the one planned now (other code, settings "
                              "or machine: plans can change with the last bits of the calibrated parameters): stop "
                              "(default), dig it again, or keep it as the cycle dug (its distance to the plan made "
-                             "now is recorded); the oracle's loops dig again unless 'keep'")
+                             "now is recorded); the oracle's loops always dig such a cycle again (its parameters "
+                             "are fitted anew to the soil's cycles: a saved cycle may have been planned with others)")
     add_ray_arguments(parser)
     parser.add_argument("--report", action="store_true",
                         help="only rewrite the Markdown and the figure from OUT/plant_adaptation.json")

@@ -11,14 +11,14 @@
 """
 
 from .cycle import cautious_options, cycle_duration, default_start, optimizer_for
-from .fallback import LOOP_EXIT_MIN_FILL, bezier_on_face, model_bezier_on_face
+from .fallback import LOOP_EXIT_MIN_FILL, MODEL_FALLBACK_NAME, bezier_on_face, model_bezier_on_face
 from .mpc import MPCController, make_env_policy
 from .next_cycle import PlanOutcome, plan_next_cycle
 from .pareto import DEFAULT_WEIGHTS, ParetoPoint, mark_pareto_optimal, pareto_sweep
 from .trajectory import Plan, PlannerOptions, StartState, TrajectoryOptimizer
 from .verify import PlanCheck, path_energy, verify_plan
 
-__all__ = ["DEFAULT_WEIGHTS", "LOOP_EXIT_MIN_FILL", "MPCController", "ParetoPoint", "Plan", "PlanCheck",
-           "PlanOutcome", "PlannerOptions", "StartState", "TrajectoryOptimizer", "bezier_on_face", "cautious_options",
-           "cycle_duration", "default_start", "make_env_policy", "mark_pareto_optimal", "model_bezier_on_face",
-           "optimizer_for", "pareto_sweep", "path_energy", "plan_next_cycle", "verify_plan"]
+__all__ = ["DEFAULT_WEIGHTS", "LOOP_EXIT_MIN_FILL", "MODEL_FALLBACK_NAME", "MPCController", "ParetoPoint", "Plan",
+           "PlanCheck", "PlanOutcome", "PlannerOptions", "StartState", "TrajectoryOptimizer", "bezier_on_face",
+           "cautious_options", "cycle_duration", "default_start", "make_env_policy", "mark_pareto_optimal",
+           "model_bezier_on_face", "optimizer_for", "pareto_sweep", "path_energy", "plan_next_cycle", "verify_plan"]

@@ -27,6 +27,8 @@ from .verify import cycle_end_index, path_energy
 #: The end-of-cycle rule these placements assume: the cycle ends on the first exit after loading 5 % of
 #: the bucket (the env's ``exit_min_fill`` as the cycle-to-cycle loop sets it).
 LOOP_EXIT_MIN_FILL = 0.05
+MODEL_FALLBACK_NAME = "Bezier, model-placed"
+"""Name of the path :func:`model_bezier_on_face` returns: the loop digs it where a plan fails its check."""
 
 
 def bezier_on_face(pile: Pile, rate: float = 60.0, bucket: Bucket | None = None, step: float = 0.02,
@@ -109,4 +111,4 @@ def model_bezier_on_face(soil: SoilParams, pile: Pile, rate: float = 60.0, bucke
             cost = sim["energy"] / fill
             if cost < best_cost:
                 best, best_cost = path, cost
-    return best.shifted(name="Bezier, model-placed")
+    return best.shifted(name=MODEL_FALLBACK_NAME)

@@ -85,6 +85,13 @@ def test_loop_on_the_fee_env_plant_resumes_from_its_cache(tmp_path):
         assert b.end.startswith("kept saved cycle (path planned now differs by ")
         assert a.energy_J == pytest.approx(b.energy_J, rel=1e-9) and a.plan_message == b.plan_message
         assert a.prediction_rmse_percent == pytest.approx(b.prediction_rmse_percent, rel=1e-9)
+    # a log saved before plans were recorded: the record says so
+    old_log = CycleLog.load(tmp_path / "cycle1.csv")
+    del old_log.metadata["plan"]
+    old_log.save(tmp_path / "cycle1.csv", overwrite=True)
+    older, _ = run_plant_loop(plant, FixedBezier(preset(NOMINAL_SOIL), rate=30.0), Pile.trapezoid(), "gravel",
+                              cycles=1, cache=tmp_path, stale="keep")
+    assert older[0].end.endswith("its plan's record is that of the plan made now")
     with pytest.raises(WheelloaderError, match="stale"):
         run_plant_loop(plant, FixedBezier(preset(NOMINAL_SOIL)), Pile.trapezoid(), "gravel", cache=tmp_path,
                        stale="ignore")

@@ -43,6 +43,7 @@ from wheelloader.estimator import (
     calibrate,
     predict,
 )
+from wheelloader.planner import MODEL_FALLBACK_NAME
 from wheelloader.references.filtering import DEFAULT_FILTER, filtered
 from wheelloader.references.metrics import cycle_work
 from wheelloader.references.plant import Plant
@@ -157,12 +158,17 @@ def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParam
                 kept = True
                 end = f"kept saved cycle (path planned now differs by {path_distance(plan.path, log.path):.3g} m)"
                 saved = log.metadata.get("plan")
+                dug_name = log.metadata.get("path_name")
                 if isinstance(saved, dict):
                     plan_ok, plan_message = bool(saved["ok"]), str(saved["message"])
                     plan_seconds = float(saved["seconds"])
                     params_used = SoilParams.from_dict(saved["params"])
+                elif dug_name is not None and dug_name != plan.path.name:
+                    # the log predates plan records: what was dug tells whether its plan passed the check
+                    plan_ok = dug_name != MODEL_FALLBACK_NAME
+                    plan_message = f"kept cycle dug along the {dug_name!r} path (its plan's record not saved)"
                 else:
-                    end += "; its plan's success, message and time are those of the plan made now"
+                    end += "; its plan's record is that of the plan made now"
         resumed = log is not None
         if resumed and not kept:
             end = "resumed from cache"
@@ -187,7 +193,9 @@ def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParam
         fill = float(log.fill_volume[-1]) if log.fill_volume is not None else math.nan
         energy = cycle_work(log)
         records.append(CycleRecord(
-            cycle=k, strategy=strategy.name, path=plan.path.name, calibration_s=calib[0], planning_s=plan_seconds,
+            cycle=k, strategy=strategy.name, calibration_s=calib[0],
+            path=str(log.metadata.get("path_name", plan.path.name)) if kept else plan.path.name,
+            planning_s=plan_seconds,
             prediction_rmse_N=quality.rmse_r if quality else math.nan,
             prediction_rmse_percent=quality.percent_r if quality else math.nan,
             fill_m3=fill, fill_fraction=fill / log.bucket.capacity, energy_J=energy,
