@@ -9,10 +9,15 @@ from typing import Any
 
 
 def add_planner_physics_arguments(parser: argparse.ArgumentParser, scope: str) -> None:
-    """``--end-blade-angle DEG``, ``--heel-clearance M`` and ``--cut-angle DEG`` (all off by default);
+    """``--end-blade-angle DEG`` (with ``--curl-out-intervals K``), ``--heel-clearance M`` and ``--cut-angle DEG``
+    (all off by default);
     ``scope`` says which strategies plan with them (help text)."""
     parser.add_argument("--end-blade-angle", type=float, default=None, metavar="DEG",
                         help=f"the planner's opt-in smallest blade angle at the end [deg], {scope} (default: off)")
+    parser.add_argument("--curl-out-intervals", type=int, default=0, metavar="K",
+                        help="with --end-blade-angle: the plan's last K of its 40 intervals, in which the bucket "
+                             "curls out of the pile (the tip may leave the soil, the heel clearance is off; "
+                             "default 0)")
     parser.add_argument("--heel-clearance", type=float, default=None, metavar="M",
                         help=f"the planner's opt-in heel clearance [m], {scope} (default: off)")
     parser.add_argument("--cut-angle", type=float, default=None, metavar="DEG",
@@ -23,4 +28,4 @@ def planner_physics(args: argparse.Namespace) -> dict[str, Any]:
     """Those settings as ``PlannerOptions`` keywords (angles in radians; None: off)."""
     radians = (lambda deg: None if deg is None else math.radians(deg))  # noqa: E731
     return {"cut_angle": radians(args.cut_angle), "heel_clearance": args.heel_clearance,
-            "end_blade_angle": radians(args.end_blade_angle)}
+            "end_blade_angle": radians(args.end_blade_angle), "curl_out_intervals": args.curl_out_intervals}

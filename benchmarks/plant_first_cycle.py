@@ -42,6 +42,10 @@ VARIANTS: dict[str, dict[str, Any] | None] = {
     "+ heel clearance, end curled, cutting cone 55°": {"failure_angle": "min_weight_force", "heel_clearance": 0.0,
                                                        "end_blade_angle": 45.0, "cut_angle": 55.0},
     "paper model + heel clearance, end curled": {"heel_clearance": 0.0, "end_blade_angle": 45.0},
+    "+ heel clearance, end curled 45° in a curl-out (last 8 intervals)": {
+        "failure_angle": "min_weight_force", "heel_clearance": 0.0, "end_blade_angle": 45.0, "curl_out_intervals": 8},
+    "paper model + heel clearance, end curled in a curl-out": {"heel_clearance": 0.0, "end_blade_angle": 45.0,
+                                                               "curl_out_intervals": 8},
 }
 QUICK = ("fixed Bezier path", "+ heel clearance, end curled 45°")
 

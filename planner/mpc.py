@@ -122,7 +122,11 @@ class MPCController:
         base = options or PlannerOptions()
         self.optimizer = TrajectoryOptimizer(self.bucket, self.loader,
                                              replace(base, intervals=intervals, ipopt_warm_start=True,
-                                                     max_iter=min(base.max_iter, max_iter)))
+                                                     max_iter=min(base.max_iter, max_iter),
+                                                     # the same share of the horizon curls out
+                                                     curl_out_intervals=min(
+                                                         round(base.curl_out_intervals * intervals / base.intervals),
+                                                         (intervals - 1) // 2)))
         self.initial_plan = initial_plan
         self.reference_weight = float(reference_weight)
         self.feasible_tolerance = float(feasible_tolerance)

@@ -86,6 +86,13 @@ class PlannerOptions:
         Opt-in: the smallest blade angle at the end of the plan [rad] (default None: off). A bucket carries
         its load curled; the model's fill is the soil carved, whatever the bucket's tilt, so without it a
         plan may end tilted forward and, in a plant, lose what it carved (the fixed Bezier path ends at 45 deg).
+    curl_out_intervals : int
+        With ``end_blade_angle``: the last intervals, in which the bucket curls out of the pile: there the tip
+        may leave the soil (``stay_clearance`` does not bind) and the heel clearance is off (default 0: the
+        tip stays in or just above the soil until the last interval). With a heel kept out of the soil a
+        bucket cannot curl to ``end_blade_angle`` in one interval while its tip is at the surface (at 45 deg
+        its heel lies 0.32 m below the tip), so without them the NLP is infeasible on any pile; the env ends
+        a cycle once the tip has left the soil, so there the curl-out is not tracked.
     tolerance : float
         IPOPT tolerance (default 1e-4; the objective is O(1)).
     surface : SurfaceGrid
@@ -115,6 +122,13 @@ class PlannerOptions:
     cut_depth: float = 0.05
     heel_clearance: float | None = None
     end_blade_angle: float | None = None
+    curl_out_intervals: int = 0
+
+    @property
+    def curl_out(self) -> int:
+        """Intervals of the curl-out phase at the end of a plan (``curl_out_intervals`` where an
+        ``end_blade_angle`` is set, else 0)."""
+        return self.curl_out_intervals if self.end_blade_angle is not None else 0
 
     @property
     def model_options(self) -> ModelOptions:
@@ -143,6 +157,10 @@ class PlannerOptions:
                                 f"{self.blade_angle_limits!r} rad, got {self.end_blade_angle!r}")
         if not (isinstance(self.intervals, int) and 4 <= self.intervals <= 400):
             raise PlanningError(f"PlannerOptions.intervals must be an integer in [4, 400], got {self.intervals!r}")
+        if not (isinstance(self.curl_out_intervals, int) and not isinstance(self.curl_out_intervals, bool)
+                and 0 <= self.curl_out_intervals < self.intervals // 2):
+            raise PlanningError(f"PlannerOptions.curl_out_intervals must be an integer in [0, intervals / 2), "
+                                f"got {self.curl_out_intervals!r}")
         for name in ("energy_weight", "smoothing_weight", "rho_margin", "end_clearance", "lift_headroom",
                      "validity_band"):
             value = getattr(self, name)

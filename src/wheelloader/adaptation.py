@@ -346,18 +346,18 @@ def make_strategy(name: str, planner: Any = None, rl_policy: str | None = None,
 
 @functools.lru_cache(maxsize=4)
 def _process_planner(mpc: bool, cut_angle: float | None = None, failure_angle: str = "min_n_gamma",
-                     heel_clearance: float | None = None,
-                     end_blade_angle: float | None = None) -> Callable[[SoilParams, Pile], PlanOutcome]:
+                     heel_clearance: float | None = None, end_blade_angle: float | None = None,
+                     curl_out_intervals: int = 0) -> Callable[[SoilParams, Pile], PlanOutcome]:
     """:func:`default_planner`, built once per process (the NLPs are cached per process anyway)."""
     return default_planner(mpc=mpc, cut_angle=cut_angle, failure_angle=failure_angle, heel_clearance=heel_clearance,
-                           end_blade_angle=end_blade_angle)
+                           end_blade_angle=end_blade_angle, curl_out_intervals=curl_out_intervals)
 
 
 def strategy_loop(*, soil: SoilParams, pile: Mapping[str, Any] | Pile, truth: Mapping[str, float],
                   strategy: str, cycles: int, seed: int, planner: str | None = "plan",
                   rl_policy: str | None = None, ours_options: Mapping[str, Any] | None = None,
                   cut_angle: float | None = None, heel_clearance: float | None = None,
-                  end_blade_angle: float | None = None) -> list[dict[str, Any]]:
+                  end_blade_angle: float | None = None, curl_out_intervals: int = 0) -> list[dict[str, Any]]:
     """One loop of the adaptation benchmark, self-contained so that it can run in another process (a
     :class:`wheelloader.sweep.Unit`): build the plant env and a fresh strategy, run :func:`run_loop`.
 
@@ -379,6 +379,9 @@ def strategy_loop(*, soil: SoilParams, pile: Mapping[str, Any] | Pile, truth: Ma
     cut_angle, heel_clearance, end_blade_angle : float, optional
         The planner's opt-in cutting cone [rad], heel clearance [m] and end blade angle [rad]
         (:class:`~wheelloader.planner.PlannerOptions`).
+    curl_out_intervals : int
+        With ``end_blade_angle``: the plan's last intervals in which the bucket curls out of the pile
+        (:class:`~wheelloader.planner.PlannerOptions`; default 0).
 
     Returns
     -------
@@ -395,7 +398,7 @@ def strategy_loop(*, soil: SoilParams, pile: Mapping[str, Any] | Pile, truth: Ma
     model = (ours_options or {}).get("options") if strategy == "ours" else None
     rule = model.failure_angle if model is not None else "min_n_gamma"
     plan_fn = None if planner is None else _process_planner(planner == "mpc", cut_angle, rule, heel_clearance,
-                                                            end_blade_angle)
+                                                            end_blade_angle, curl_out_intervals)
     env = gym.make("wheelloader/BucketLoading-v0", soil=soil, pile=pile, truth=dict(truth), **LOOP_ENV_KWARGS)
     try:
         records, _ = run_loop(env, make_strategy(strategy, plan_fn, rl_policy, ours_options), cycles=cycles,
@@ -449,7 +452,8 @@ BETWEEN_CYCLES_MAX_ITER = 130
 
 def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_angle: float | None = None,
                     fill_limit: float | None = None, heel_clearance: float | None = None,
-                    end_blade_angle: float | None = None) -> Callable[[SoilParams, Pile], PlanOutcome]:
+                    end_blade_angle: float | None = None,
+                    curl_out_intervals: int = 0) -> Callable[[SoilParams, Pile], PlanOutcome]:
     """The planner used between cycles.
 
     A full-cycle CasADi plan within :data:`BETWEEN_CYCLES_MAX_ITER` IPOPT
@@ -459,12 +463,14 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
     force-model rule for beta*; ``cut_angle``: its opt-in cutting cone [rad]; ``fill_limit``: the largest
     planned fill as a share of the bucket's nominal capacity (None: the planner's default);
     ``heel_clearance``: the opt-in height of the bucket's heel above the surface [m];
-    ``end_blade_angle``: the opt-in smallest blade angle at the end [rad]
+    ``end_blade_angle``: the opt-in smallest blade angle at the end [rad], ``curl_out_intervals`` the last
+    intervals in which the bucket then curls out of the pile
     (:class:`~wheelloader.planner.PlannerOptions`).
     """
     extra = {} if fill_limit is None else {"fill_limit": fill_limit}
     options = PlannerOptions(max_iter=BETWEEN_CYCLES_MAX_ITER, failure_angle=failure_angle, cut_angle=cut_angle,
-                             heel_clearance=heel_clearance, end_blade_angle=end_blade_angle, **extra)
+                             heel_clearance=heel_clearance, end_blade_angle=end_blade_angle,
+                             curl_out_intervals=curl_out_intervals, **extra)
     # build the NLPs once (the plan and its two wider-margin re-plans), before the loop's timings start
     for level in (0, 1, 2):
         optimizer_for(options=cautious_options(options, level))

@@ -231,7 +231,7 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
                     stale: str = "error", sigma_s: float = DEFAULT_FILTER["sigma_s"],
                     failure_angle: str = "min_n_gamma", cut_angle: float | None = None,
                     fill_limit: float | None = None, heel_clearance: float | None = None,
-                    end_blade_angle: float | None = None) -> dict[str, Any]:
+                    end_blade_angle: float | None = None, curl_out_intervals: int = 0) -> dict[str, Any]:
     """One loop of :func:`run_plant_loop` as a unit of :mod:`wheelloader.sweep` (picklable arguments only).
 
     Builds the strategy by name in the process that runs it (``fixed``, ``ours``, ``paper``, or ``oracle``
@@ -241,7 +241,8 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
     calibration, predictions and planner; :class:`~wheelloader.estimator.ModelOptions`); ``paper`` keeps the
     paper's model, ``fixed`` uses none. ``cut_angle``: the planner's opt-in cutting cone [rad], for every
     strategy that plans, ``fill_limit`` its largest planned fill as a share of the nominal capacity and
-    ``heel_clearance`` its opt-in heel clearance [m] and ``end_blade_angle`` its opt-in end blade angle [rad]
+    ``heel_clearance`` its opt-in heel clearance [m] and ``end_blade_angle`` its opt-in end blade angle [rad],
+    ``curl_out_intervals`` the plan's last intervals in which the bucket then curls out of the pile
     (:class:`~wheelloader.planner.PlannerOptions`).
     """
     from wheelloader.adaptation import default_planner, make_strategy
@@ -250,7 +251,8 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
     learning = strategy in ("ours", "oracle")
     plan = (default_planner(failure_angle=failure_angle if learning else "min_n_gamma", cut_angle=cut_angle,
                             fill_limit=fill_limit, heel_clearance=heel_clearance,
-                            end_blade_angle=end_blade_angle) if planner else None)
+                            end_blade_angle=end_blade_angle, curl_out_intervals=curl_out_intervals)
+            if planner else None)
     if strategy == "oracle":
         if oracle_params is None:
             raise WheelloaderError("plant_loop_unit: the oracle needs oracle_params (hindsight_parameters)")
