@@ -213,3 +213,32 @@ def test_first_cycle_benchmark_smoke(tmp_path):
         assert planned["max_heel_depth_m"] <= 0.03 and planned["end_blade_angle_deg"] >= 44.0
         assert all(r["resumed"] == (attempt == 1) for r in result["rows"])
     assert "| fixed Bezier path |" in (tmp_path / "plant_first_cycle.md").read_text()
+
+
+def test_replay_benchmark_reproduces_the_loops_own_predictions(tmp_path):
+    """``benchmarks/plant_replay.py``: its loop-default variant (last cycle, varpro, paper's model) calibrates as
+    the loop's ``ours`` does, so on a saved loop of ``ours`` it gives the loop's own next-cycle errors."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    plant = FEEEnvPlant(sensor_noise=0.0)
+    ours = Calibrating(preset(NOMINAL_SOIL), "default", None)
+    records, _ = run_plant_loop(plant, ours, Pile.trapezoid(), "gravel", cycles=3,
+                                cache=tmp_path / "cycles" / "gravel" / "seed0" / "ours")
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "plant_replay.py"
+    done = subprocess.run([sys.executable, str(script), "--cycles", str(tmp_path / "cycles"), "--out",
+                           str(tmp_path / "out"), "--variants", "ours, last cycle (loop default)"],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    result = json.loads((tmp_path / "out" / "plant_replay.json").read_text())
+    replayed = {r["cycle"]: r["rmse_percent"] for r in result["rows"]}
+    assert sorted(replayed) == [2, 3]
+    for r in records[1:]:
+        assert replayed[r.cycle] == pytest.approx(r.prediction_rmse_percent, rel=1e-6)
+    assert "| ours, last cycle (loop default) |" in (tmp_path / "out" / "plant_replay.md").read_text()
+    # a folder without loops is refused with a clear message
+    empty = subprocess.run([sys.executable, str(script), "--cycles", str(tmp_path / "none")], capture_output=True,
+                           text=True, timeout=600)
+    assert empty.returncode != 0 and "no such folder" in empty.stderr

@@ -1,0 +1,173 @@
+"""Next-cycle prediction on a plant's saved loops, replayed: which calibration predicts the next cycle best.
+
+The adaptation loop on a plant (``benchmarks/adaptation.py --plant mpm``) saves every cycle it dug. This
+benchmark replays those cycles without digging: for every loop (soil, seed, strategy) and every cycle
+k >= 2 it calibrates on the cycles before k with each calibration variant (the last ``window`` cycles
+together, the force model's failure-angle rule, the paper's multi-stage method) and predicts cycle k on
+its own path and pile. The error is the loop's: F_R RMSE of the prediction against the plant's force
+filtered as in the loop (sigma 0.1 s), in % of the mean |F_R| in soil. Every variant sees the same cycles,
+so the table compares calibrations, not the paths they would have planned (those were planned by the
+loop's strategy). Also the calibration time per variant (median, this machine).
+
+Usage::
+
+    python benchmarks/plant_replay.py --cycles docs/results/adaptation_mpm/cycles --out docs/results/plant_replay
+    python benchmarks/plant_replay.py --quick --out /tmp/replay        # 1 loop, 2 variants
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import time
+from pathlib import Path
+from typing import Any
+
+from _machine import machine_info
+
+from wheelloader.provenance import commit_label
+
+#: name -> (method, window (None: every earlier cycle), failure-angle rule)
+VARIANTS: dict[str, tuple[str, int | None, str]] = {
+    "ours, last cycle (loop default)": ("default", 1, "min_n_gamma"),
+    "ours, last 2 cycles": ("default", 2, "min_n_gamma"),
+    "ours, all earlier cycles": ("default", None, "min_n_gamma"),
+    "ours + least weight force, last cycle": ("default", 1, "min_weight_force"),
+    "ours + least weight force, last 2 cycles": ("default", 2, "min_weight_force"),
+    "ours + least weight force, all earlier cycles": ("default", None, "min_weight_force"),
+    "paper multi-stage, last cycle": ("multi-stage", 1, "min_n_gamma"),
+}
+QUICK = ("ours, last cycle (loop default)", "ours + least weight force, all earlier cycles")
+
+
+def loops(root: Path) -> dict[tuple[str, str, str], list[Path]]:
+    """The saved loops under ``root`` (``SOIL/seedN/STRATEGY/cycleK.csv``), cycles in order."""
+    found: dict[tuple[str, str, str], list[Path]] = {}
+    for csv in sorted(root.glob("*/seed*/*/cycle*.csv")):
+        strategy, seed, soil = csv.parent.name, csv.parent.parent.name, csv.parent.parent.parent.name
+        found.setdefault((soil, seed, strategy), []).append(csv)
+    for key, files in found.items():
+        files.sort(key=lambda p: int(p.stem.removeprefix("cycle")))
+        numbers = [int(p.stem.removeprefix("cycle")) for p in files]
+        if numbers != list(range(1, len(numbers) + 1)):
+            raise SystemExit(f"{root}: loop {'/'.join(key)} has cycles {numbers}, not 1..{len(numbers)}")
+    return found
+
+
+def replay(files: list[Path], variant: str, sigma_s: float) -> list[dict[str, Any]]:
+    """Calibrate on the cycles before each k (per the variant) and predict cycle k."""
+    from wheelloader.estimator import CycleLog, ModelOptions, calibrate, predict
+    from wheelloader.references.filtering import filtered
+
+    method, window, rule = VARIANTS[variant]
+    options = ModelOptions(failure_angle=rule)
+    logs = [filtered(CycleLog.load(f), sigma_s) for f in files]
+    rows = []
+    previous = None
+    for k in range(2, len(logs) + 1):
+        earlier = logs[:k - 1] if window is None else logs[max(0, k - 1 - window):k - 1]
+        start = time.perf_counter()
+        result = calibrate(earlier if len(earlier) > 1 else earlier[0], method=method, initial=previous,
+                           options=options)
+        seconds = time.perf_counter() - start
+        if result.success:
+            previous = result
+        params = (result if result.success else previous).params if (result.success or previous) else None
+        pred = predict(params, logs[k - 1], options=options) if params is not None else None
+        quality = pred.quality if pred is not None else None
+        rows.append({"variant": variant, "cycle": k, "calibrated_on": len(earlier), "seconds": seconds,
+                     "converged": bool(result.success),
+                     "rmse_percent": quality.percent_r if quality is not None else math.nan,
+                     "params": params.to_dict() if params is not None else None})
+    return rows
+
+
+def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    out: dict[str, dict[str, Any]] = {}
+    for variant in dict.fromkeys(r["variant"] for r in rows):
+        sel = [r for r in rows if r["variant"] == variant]
+        per_soil = {}
+        for soil in dict.fromkeys(r["soil"] for r in sel):
+            from3 = [r["rmse_percent"] for r in sel if r["soil"] == soil and r["cycle"] >= 3]
+            per_soil[soil] = statistics.median(from3) if from3 else math.nan
+        single = [r["seconds"] for r in sel if r["calibrated_on"] == 1]
+        multi = [r["seconds"] for r in sel if r["calibrated_on"] >= 2]
+        out[variant] = {
+            "median_rmse_percent": statistics.median(r["rmse_percent"] for r in sel),
+            "median_rmse_percent_from_cycle3": statistics.median(r["rmse_percent"] for r in sel if r["cycle"] >= 3),
+            "median_from_cycle3_per_soil": per_soil,
+            "median_seconds_one_cycle": statistics.median(single) if single else math.nan,
+            "median_seconds_several": statistics.median(multi) if multi else math.nan,
+            "predictions": len(sel)}
+    return out
+
+
+def markdown(result: dict[str, Any]) -> str:
+    summary = result["summary"]
+    soils = list(dict.fromkeys(r["soil"] for r in result["rows"]))
+    lines = ["| calibration (replayed on the plant's saved loops) | next-cycle F_R error, median "
+             "(all / from cycle 3) | " + " | ".join(f"{s}, from cycle 3" for s in soils)
+             + " | calibration time (1 cycle / several) |",
+             "|---|---|" + "---|" * len(soils) + "---|"]
+    for variant, m in summary.items():
+        several = m["median_seconds_several"]
+        lines.append(f"| {variant} | {m['median_rmse_percent']:.1f} / {m['median_rmse_percent_from_cycle3']:.1f} % | "
+                     + " | ".join(f"{m['median_from_cycle3_per_soil'].get(s, math.nan):.1f} %" for s in soils)
+                     + f" | {m['median_seconds_one_cycle']:.2f} s / "
+                     + ("–" if math.isnan(several) else f"{several:.2f} s") + " |")
+    s = result["settings"]
+    n_loops = len({(r["soil"], r["seed"], r["strategy"]) for r in result["rows"]})
+    load = "/".join(f"{v:.1f}" for v in result["machine"].get("loadavg_1_5_15min") or [])
+    lines += ["", f"*`python benchmarks/plant_replay.py --cycles {s['cycles']}` at {commit_label(result['machine'])}: "
+              f"{n_loops} saved loops ({', '.join(soils)}; strategies {', '.join(s['strategies'])}), each cycle "
+              f"k >= 2 predicted from the cycles before it; {result['wall_s'] / 60:.0f} min, load average at the "
+              f"end {load}. Error: F_R RMSE against the plant's force filtered (sigma {s['sigma_s']} s), % of the "
+              "mean |F_R| in soil, as in the loop.*"]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cycles", default="docs/results/adaptation_mpm/cycles",
+                        help="folder of the saved loops (SOIL/seedN/STRATEGY/cycleK.csv)")
+    parser.add_argument("--out", default="results/plant_replay", help="output directory")
+    parser.add_argument("--strategies", nargs="+", default=["fixed", "ours", "paper"],
+                        help="whose saved loops to replay (default: the learning loops' and the fixed path's)")
+    parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS), metavar="NAME",
+                        help="calibration variants (default all)")
+    parser.add_argument("--sigma-s", type=float, default=0.1, help="Gaussian filter of the plant's force [s]")
+    parser.add_argument("--quick", action="store_true", help="smoke run: one loop, two variants")
+    args = parser.parse_args(argv)
+    root = Path(args.cycles)
+    if not root.is_dir():
+        raise SystemExit(f"--cycles {root}: no such folder (run benchmarks/adaptation.py --plant mpm first)")
+    found = {k: v for k, v in loops(root).items() if k[2] in args.strategies and len(v) >= 2}
+    if not found:
+        raise SystemExit(f"--cycles {root}: no saved loop of {args.strategies} with 2 or more cycles")
+    variants = list(QUICK) if args.quick else args.variants
+    if args.quick:
+        found = dict(list(found.items())[:1])
+    started = time.perf_counter()
+    rows: list[dict[str, Any]] = []
+    total = len(found) * len(variants)
+    for i, ((soil, seed, strategy), files) in enumerate(found.items()):
+        for j, variant in enumerate(variants):
+            rows += [dict(r, soil=soil, seed=seed, strategy=strategy) for r in replay(files, variant, args.sigma_s)]
+            print(f"[{i * len(variants) + j + 1}/{total}] {soil} {seed} {strategy}: {variant}: "
+                  + ", ".join(f"c{r['cycle']} {r['rmse_percent']:.1f} %" for r in rows[-(len(files) - 1):]),
+                  flush=True)
+    result = {"benchmark": "plant_replay", "settings": vars(args) | {"variants": variants},
+              "machine": machine_info(), "rows": rows, "wall_s": time.perf_counter() - started}
+    result["summary"] = summarise(rows)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "plant_replay.json").write_text(json.dumps(result, indent=1, default=str))
+    (out / "plant_replay.md").write_text(markdown(result))
+    print(markdown(result))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
