@@ -46,6 +46,12 @@ VARIANTS: dict[str, dict[str, Any] | None] = {
         "failure_angle": "min_weight_force", "heel_clearance": 0.0, "end_blade_angle": 45.0, "curl_out_intervals": 8},
     "paper model + heel clearance, end curled in a curl-out": {"heel_clearance": 0.0, "end_blade_angle": 45.0,
                                                                "curl_out_intervals": 8},
+    # the plant's bucket keeps at most its struck capacity (0.135 of the nominal 0.2 m^3): plan 95 % of that
+    "+ heel clearance, curl-out, planned fill <= 64 %": {
+        "failure_angle": "min_weight_force", "heel_clearance": 0.0, "end_blade_angle": 45.0, "curl_out_intervals": 8,
+        "fill_limit": 0.64},
+    "paper model + heel clearance, curl-out, planned fill <= 64 %": {
+        "heel_clearance": 0.0, "end_blade_angle": 45.0, "curl_out_intervals": 8, "fill_limit": 0.64},
 }
 QUICK = ("fixed Bezier path", "+ heel clearance, end curled 45°")
 
