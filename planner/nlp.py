@@ -194,9 +194,8 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
             g_ineq.append(options.stay_clearance + vertical + 10.0 * (before_face + unloaded))
         g_ineq += [1.0 - f_t / f_push, 1.0 - f_n / f_lift, rho_n - rho_lo + slack, rho_hi - rho_n + slack,
                    alpha_hi - alpha_n + slack, alpha_n - alpha_lo + slack]
-        if options.heel_clearance is not None and k < n - options.curl_out:
+        if options.heel_clearance is not None:
             # opt-in: the bucket's heel (floor_length behind the tip along the blade) above the surface
-            # (not while the bucket curls out of the pile: PlannerOptions.curl_out_intervals)
             heel_x, heel_z = xn - bucket.floor_length * ca.cos(tn), zn - bucket.floor_length * ca.sin(tn)
             g_ineq.append(heel_z - grid.window_height(heel_x, p_surf[:, k + 1]) - options.heel_clearance)
         if options.cut_angle is not None:

@@ -88,11 +88,12 @@ class PlannerOptions:
         plan may end tilted forward and, in a plant, lose what it carved (the fixed Bezier path ends at 45 deg).
     curl_out_intervals : int
         With ``end_blade_angle``: the last intervals, in which the bucket curls out of the pile: there the tip
-        may leave the soil (``stay_clearance`` does not bind) and the heel clearance is off (default 0: the
-        tip stays in or just above the soil until the last interval). With a heel kept out of the soil a
-        bucket cannot curl to ``end_blade_angle`` in one interval while its tip is at the surface (at 45 deg
-        its heel lies 0.32 m below the tip), so without them the NLP is infeasible on any pile; the env ends
-        a cycle once the tip has left the soil, so there the curl-out is not tracked.
+        may leave the soil (``stay_clearance`` does not bind; default 0: the tip stays in or just above the
+        soil until the last interval). With a heel kept out of the soil a bucket cannot curl to
+        ``end_blade_angle`` in one interval while its tip is at the surface (at 45 deg its heel lies 0.32 m
+        below the tip), so without them the NLP is infeasible on any pile; in the curl-out the bucket rises
+        while it curls, its heel still above the surface. The env ends a cycle once the tip has left the
+        soil, so there the curl-out is not tracked.
     tolerance : float
         IPOPT tolerance (default 1e-4; the objective is O(1)).
     surface : SurfaceGrid

@@ -167,9 +167,8 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
     if options.heel_clearance is not None:  # the opt-in heel clearance (PlannerOptions.heel_clearance)
         heel_x = path.x - bucket.floor_length * np.cos(path.blade_angle)
         heel_z = path.z - bucket.floor_length * np.sin(path.blade_angle)
-        binds = path.t <= path.t[-1] * (1.0 - options.curl_out / options.intervals) + 1e-9  # not in the curl-out
-        heel_buried = int(np.count_nonzero(binds & (heel_z - pile.surface_height(heel_x)
-                                                    < options.heel_clearance - HEEL_TOLERANCE)))
+        heel_buried = int(np.count_nonzero(heel_z - pile.surface_height(heel_x)
+                                           < options.heel_clearance - HEEL_TOLERANCE))
     checks = {
         "tangential force above the loader's push limit": float(forces.tangential.max()) > loader.max_push_force,
         "normal force above the loader's lift limit": float(forces.normal.max()) > loader.max_lift_force,
