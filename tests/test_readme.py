@@ -131,13 +131,14 @@ def _available(requirement: str) -> bool:
 
 
 def _workspace(path: Path) -> dict[str, str]:
-    """A directory like a clone's root (data/ copied, benchmarks/ and dem/ linked) and the environment."""
+    """A directory like a clone's root (data/ copied; benchmarks/, dem/ and the shipped results docs/ linked,
+    read only by the commands) and the environment."""
     import os
     import shutil
     import sys
 
     shutil.copytree(ROOT / "data", path / "data")
-    for name in ("benchmarks", "dem"):
+    for name in ("benchmarks", "dem", "docs"):
         (path / name).symlink_to(ROOT / name, target_is_directory=True)
     env = dict(os.environ)
     env["PATH"] = str(Path(sys.executable).parent) + os.pathsep + env.get("PATH", "")
