@@ -131,14 +131,16 @@ def _available(requirement: str) -> bool:
 
 
 def _workspace(path: Path) -> dict[str, str]:
-    """A directory like a clone's root (data/ copied; benchmarks/, dem/ and the shipped results docs/ linked,
-    read only by the commands) and the environment."""
+    """A directory like a clone's root (data/ and the shipped MPM loop cycles copied, benchmarks/ and dem/
+    linked) and the environment. Nothing the commands write can reach the checkout's docs/."""
     import os
     import shutil
     import sys
 
     shutil.copytree(ROOT / "data", path / "data")
-    for name in ("benchmarks", "dem", "docs"):
+    cycles = Path("docs") / "results" / "adaptation_mpm" / "cycles"  # read by benchmarks/plant_replay.py
+    shutil.copytree(ROOT / cycles, path / cycles)
+    for name in ("benchmarks", "dem"):
         (path / name).symlink_to(ROOT / name, target_is_directory=True)
     env = dict(os.environ)
     env["PATH"] = str(Path(sys.executable).parent) + os.pathsep + env.get("PATH", "")
