@@ -448,6 +448,12 @@ def hidden_default_soil() -> SoilParams:
 #: :func:`~wheelloader.planner.model_bezier_on_face`. An iteration count, not a wall time, so that the same
 #: seed gives the same cycles on a quiet and on a busy machine.
 BETWEEN_CYCLES_MAX_ITER = 130
+#: Work budget of the plan and its re-plans with wider margins together [IPOPT iterations]: a re-plan starts
+#: only while fewer have been spent. Twice :data:`BETWEEN_CYCLES_MAX_ITER`, so that a plan the NLP finds
+#: infeasible on a carved pile can be re-planned twice (measured on the 3 plans of ours that failed in
+#: ``benchmarks/adaptation.py``, cycles 4-5: with 130 each was re-planned once and none passed; with 260 one
+#: passed, with 400 no more). Plans that pass at once spend no more.
+BETWEEN_CYCLES_REPLAN_ITER = 2 * BETWEEN_CYCLES_MAX_ITER
 #: The loop's planner constrains forces and the validity domain at every interval's midpoint too
 #: (``PlannerOptions.midpoints``). On the piles the loop carves, plans that the NLP solved at its nodes failed
 #: the NumPy check at 1-5 samples between them (blade too flat to a carved step, slope clamped). Measured on
@@ -464,7 +470,8 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
     """The planner used between cycles.
 
     A full-cycle CasADi plan within :data:`BETWEEN_CYCLES_MAX_ITER` IPOPT
-    iterations, checked with the NumPy model, tracked in the env; with
+    iterations (with its re-plans at wider margins, :data:`BETWEEN_CYCLES_REPLAN_ITER` in all),
+    checked with the NumPy model, tracked in the env; with
     ``mpc`` an MPC controller re-plans the rest of the cycle every 0.1 s
     (slower, see the planner benchmark). ``failure_angle``: the planner's
     force-model rule for beta*; ``cut_angle``: its opt-in cutting cone [rad]; ``fill_limit``: the largest
@@ -485,4 +492,4 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
     for level in (0, 1, 2):
         optimizer_for(options=cautious_options(options, level))
     return functools.partial(plan_next_cycle, mpc=mpc, options=options,
-                             replan_within_iterations=BETWEEN_CYCLES_MAX_ITER, exit_min_fill=LOOP_EXIT_MIN_FILL)
+                             replan_within_iterations=BETWEEN_CYCLES_REPLAN_ITER, exit_min_fill=LOOP_EXIT_MIN_FILL)
