@@ -676,10 +676,6 @@ def _timing_axes(ax, results: dict[str, Any]) -> None:
     ax.grid(axis="y", alpha=0.3, which="both")
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
-
-
 def summary_markdown(results: dict) -> str:
     """The README's planner table from the benchmark's results (energy per m³ from the NumPy re-simulation
     with the true soil; MPC executed in the env)."""
@@ -712,3 +708,7 @@ def summary_markdown(results: dict) -> str:
               f"{load.get('start')} / {load.get('end')}; "
               f"{results.get('wall_seconds', 0):.0f} s.*"]
     return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -110,3 +110,16 @@ def test_relative_imports_are_resolved():
     tree = ast.parse("from ..planner import x\nfrom . import y\n")
     got = imported_modules(tree, "wheelloader.envs.vector", is_package=False)
     assert got == [(1, "wheelloader.planner"), (2, "wheelloader.envs")]
+
+
+def test_benchmark_scripts_define_everything_before_running_main():
+    """A benchmark run as a script executes its ``if __name__ == "__main__":`` block where it stands: a
+    function defined after it does not exist yet when main() calls it (benchmarks/planner.py wrote its results
+    and then stopped with a NameError, while tests that import it passed)."""
+    import ast
+    from pathlib import Path
+
+    for script in sorted((Path(__file__).resolve().parents[1] / "benchmarks").glob("*.py")):
+        body = ast.parse(script.read_text(encoding="utf-8")).body
+        guards = [i for i, node in enumerate(body) if isinstance(node, ast.If) and "__main__" in ast.unparse(node.test)]
+        assert guards in ([], [len(body) - 1]), f"{script.name}: the __main__ block must be the last statement"
