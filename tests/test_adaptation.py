@@ -103,3 +103,21 @@ def test_model_placed_bezier_keeps_the_fill_and_lowers_the_predicted_energy():
 def test_bad_cycle_count():
     with pytest.raises(Exception, match="positive integer"):
         run_loop(_env(), FixedBezier(preset(NOMINAL_SOIL)), cycles=0)
+
+
+def test_the_loops_planner_checks_midpoints_and_replans_within_its_budget():
+    """The between-cycle plan constrains the interval midpoints (LOOP_PLANNER_MIDPOINTS) and may re-plan within
+    BETWEEN_CYCLES_REPLAN_ITER iterations; the MPC's 20 ms re-plans do without the midpoints."""
+    from wheelloader.adaptation import (
+        BETWEEN_CYCLES_MAX_ITER,
+        BETWEEN_CYCLES_REPLAN_ITER,
+        LOOP_PLANNER_MIDPOINTS,
+        default_planner,
+    )
+
+    plan = default_planner()
+    assert plan.keywords["options"].midpoints is LOOP_PLANNER_MIDPOINTS is True
+    assert plan.keywords["options"].max_iter == BETWEEN_CYCLES_MAX_ITER
+    assert plan.keywords["replan_within_iterations"] == BETWEEN_CYCLES_REPLAN_ITER == 2 * BETWEEN_CYCLES_MAX_ITER
+    assert default_planner(mpc=True).keywords["options"].midpoints is False
+    assert default_planner(midpoints=False).keywords["options"].midpoints is False
