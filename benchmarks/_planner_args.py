@@ -16,7 +16,7 @@ def add_planner_physics_arguments(parser: argparse.ArgumentParser, scope: str) -
                         help=f"the planner's opt-in smallest blade angle at the end [deg], {scope} (default: off)")
     parser.add_argument("--curl-out-intervals", type=int, default=0, metavar="K",
                         help="with --end-blade-angle: the plan's last K of its 40 intervals, in which the bucket "
-                             "curls out of the pile (the tip may leave the soil, the heel clearance is off; "
+                             "curls out of the pile (the tip may leave the soil; the heel clearance still holds; "
                              "default 0)")
     parser.add_argument("--heel-clearance", type=float, default=None, metavar="M",
                         help=f"the planner's opt-in heel clearance [m], {scope} (default: off)")

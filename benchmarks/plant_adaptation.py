@@ -34,7 +34,7 @@ from typing import Any
 from _machine import machine_info
 from _planner_args import add_planner_physics_arguments, planner_physics
 
-from wheelloader.provenance import commit_label
+from wheelloader.provenance import commit_label, load_label
 from wheelloader.ray_mode import add_ray_arguments
 
 PLANTS = ("mpm", "fee-env", "dem")
@@ -86,12 +86,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     started = time.perf_counter()
     fill_limit = planned_fill_limit(plant, args.fill_limit)
     args.fill_limit_used = fill_limit
-    stale = getattr(args, "stale", "error")
     loop_kwargs = {"plant": plant, "cycles": args.cycles, "planner": not args.no_planner, "fill_limit": fill_limit,
                    "failure_angle": args.failure_angle, **planner_physics(args)}
     learning = [s for s in args.strategies if s != "oracle"]
     keys = [(soil, seed, name) for soil in args.soils for seed in range(args.seeds) for name in learning]
-    units = [Unit(plant_loop_unit, {**loop_kwargs, "strategy": name, "soil": soil, "seed": seed, "stale": stale,
+    units = [Unit(plant_loop_unit, {**loop_kwargs, "strategy": name, "soil": soil, "seed": seed, "stale": args.stale,
                                     "cache": out / "cycles" / soil / f"seed{seed}" / name},
                   label=f"{soil} | seed {seed} | {name}", num_cpus=args.threads) for soil, seed, name in keys]
     # phase 1: every loop that learns (or does not) from its own cycles, as sweep units (Ray tasks when present)
@@ -187,7 +186,7 @@ def markdown(result: dict[str, Any]) -> str:
             energy, fill = sum(r["energy_J"] for r in sel), sum(r["fill_m3"] for r in sel)
             cells.append(f"{energy / fill / 1e3:.0f} ({fill / len(sel) / 0.2:.0%})" if sel and fill > 0 else "–")
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    load = "/".join(f"{v:.1f}" for v in result["machine"].get("loadavg_1_5_15min") or [])
+    load = load_label(result["machine"])
     lines += ["", f"*`python benchmarks/adaptation.py --plant {result['plant']}` ({', '.join(s['soils'])}; "
               f"{s['seeds']} seed(s); {s['cycles']} cycles; MPM dx {s['resolution']} m"
               + ("" if s.get("failure_angle", "min_n_gamma") == "min_n_gamma" else

@@ -28,7 +28,7 @@ from typing import Any
 
 from _machine import machine_info
 
-from wheelloader.provenance import commit_label
+from wheelloader.provenance import commit_label, load_label
 from wheelloader.ray_mode import add_ray_arguments
 
 #: The variants: name -> PlannerOptions keywords (angles in degrees here); None is the fixed Bezier path.
@@ -122,7 +122,7 @@ def markdown(result: dict[str, Any]) -> str:
                      f"{r['peak_F_R_N'] / 1e3:.1f} kN | {r['max_heel_depth_m']:.2f} m | "
                      f"{r['end_blade_angle_deg']:.0f}° | {pred} |")
     s = result["settings"]
-    load = "/".join(f"{v:.1f}" for v in result["machine"].get("loadavg_1_5_15min") or [])
+    load = load_label(result["machine"])
     lines += ["", f"*`python benchmarks/plant_first_cycle.py` ({s['soil']}, MPM dx {s['resolution']} m, seed "
               f"{s['seed']}) at {commit_label(result['machine'])}; {result['wall_s'] / 60:.0f} min, load average at "
               f"the end {load}. Energy = the plant's work along the path / the plant's fill (soil inside the bucket "

@@ -27,7 +27,7 @@ from typing import Any
 
 from _machine import machine_info
 
-from wheelloader.provenance import commit_label
+from wheelloader.provenance import commit_label, load_label
 
 #: name -> (method, window (None: every earlier cycle), failure-angle rule)
 VARIANTS: dict[str, tuple[str, int | None, str]] = {
@@ -74,7 +74,7 @@ def replay(files: list[Path], variant: str, sigma_s: float) -> list[dict[str, An
         seconds = time.perf_counter() - start
         if result.success:
             previous = result
-        params = (result if result.success else previous).params if (result.success or previous) else None
+        params = previous.params if previous is not None else None  # the last converged fit
         pred = predict(params, logs[k - 1], options=options) if params is not None else None
         quality = pred.quality if pred is not None else None
         rows.append({"variant": variant, "cycle": k, "calibrated_on": len(earlier), "seconds": seconds,
@@ -119,7 +119,7 @@ def markdown(result: dict[str, Any]) -> str:
                      + ("–" if math.isnan(several) else f"{several:.2f} s") + " |")
     s = result["settings"]
     n_loops = len({(r["soil"], r["seed"], r["strategy"]) for r in result["rows"]})
-    load = "/".join(f"{v:.1f}" for v in result["machine"].get("loadavg_1_5_15min") or [])
+    load = load_label(result["machine"])
     lines += ["", f"*`python benchmarks/plant_replay.py --cycles {s['cycles']}` at {commit_label(result['machine'])}: "
               f"{n_loops} saved loops ({', '.join(soils)}; strategies {', '.join(s['strategies'])}), each cycle "
               f"k >= 2 predicted from the cycles before it; {result['wall_s'] / 60:.0f} min, load average at the "

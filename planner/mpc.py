@@ -126,7 +126,7 @@ class MPCController:
                                                      # the same share of the horizon curls out
                                                      curl_out_intervals=min(
                                                          round(base.curl_out_intervals * intervals / base.intervals),
-                                                         (intervals - 1) // 2)))
+                                                         max(intervals // 2 - 1, 0))))
         self.initial_plan = initial_plan
         self.reference_weight = float(reference_weight)
         self.feasible_tolerance = float(feasible_tolerance)

@@ -165,3 +165,17 @@ def test_a_plan_with_heel_clearance_and_curl_out_ends_curled_with_the_heel_out()
     assert _heel_depth(path, pile, floor).max() <= HEEL_TOLERANCE  # in the curl-out too
     state = contact_state(path.x, path.z, path.blade_angle, pile, optimizer_for(options=options).bucket)
     assert state.fill_volume[-1] > 0.1  # the bucket fills (0.2 m^3 nominal)
+
+
+def test_the_mpc_scales_the_curl_out_to_its_horizon():
+    from wheelloader.planner import MPCController
+
+    def curl_out(intervals: int, base: int) -> int:
+        options = PlannerOptions(end_blade_angle=math.radians(45.0), curl_out_intervals=base)
+        return MPCController("gravel", Pile.trapezoid(), 4.0, intervals=intervals,
+                             options=options).optimizer.options.curl_out_intervals
+
+    assert curl_out(12, 8) == 2  # the same share of the horizon: round(8 * 12 / 40)
+    # capped below half the horizon, also for an odd number of intervals (19 of 40 -> 6 of 13 would not be)
+    assert curl_out(13, 19) == 5
+    assert curl_out(12, 19) == 5

@@ -64,6 +64,12 @@ def git_revision(where: str | Path | None = None) -> dict[str, object] | None:
     return None
 
 
+def load_label(machine: dict[str, object]) -> str:
+    """The 1/5/15-minute load averages of a :func:`machine_info` record for report lines, e.g. "2.1/2.3/2.4"
+    (empty where the platform has none)."""
+    return "/".join(f"{v:.1f}" for v in machine.get("loadavg_1_5_15min") or [])  # type: ignore[union-attr]
+
+
 def commit_label(machine: dict[str, object]) -> str:
     """The short git commit of a :func:`machine_info` record for report lines ("unknown" outside a checkout),
     with "(uncommitted changes)" when the checkout was dirty."""
