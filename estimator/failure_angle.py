@@ -134,7 +134,8 @@ def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
             a = np.where(pos, a, x)
             with np.errstate(divide="ignore", invalid="ignore"):
                 newton = x - g / dg
-            ok = (dg > 0.0) & (newton > a) & (newton < b)
+            # a Newton step onto a bracket end is kept (the root then sits within rounding of that end)
+            ok = (dg > 0.0) & (newton >= a) & (newton <= b)
             x_new = np.where(ok, newton, 0.5 * (a + b))
             going = np.abs(x_new - x) >= tol
             out[active] = x_new
@@ -180,7 +181,7 @@ def _root_in_bracket(slope_and_curvature, a: float, b: float, x: float, tol: flo
         else:
             a = x
         xn = x - g / dg if dg > 0.0 else a - 1.0
-        if not a < xn < b:
+        if not a <= xn <= b:  # a step onto a bracket end is kept (as the vectorised solvers do)
             xn = 0.5 * (a + b)
         if abs(xn - x) < tol:
             return xn
@@ -305,7 +306,9 @@ def optimal_beta_weight_force(alpha, rho, phi, delta, depth, surcharge, options:
             with np.errstate(divide="ignore", invalid="ignore"):
                 newton = x - g / dg
                 falsi = a - g_a * (b - a) / (g_b - g_a)
-            ok = (dg > 0.0) & (newton > a) & (newton < b)
+            # a Newton step onto a bracket end is kept: the root then sits within rounding of that end, and a
+            # step strictly inside only would creep towards it (measured: ~40 iterations instead of ~12)
+            ok = (dg > 0.0) & (newton >= a) & (newton <= b)
             falsi = np.where((falsi > a) & (falsi < b), falsi, 0.5 * (a + b))
             x_new = np.where(ok, newton, falsi)
             going = np.abs(x_new - x) >= tol
