@@ -195,6 +195,7 @@ def markdown(result: dict[str, Any]) -> str:
               + ("" if s.get("heel_clearance") is None else f"; `--heel-clearance {s['heel_clearance']:g}`")
               + ("" if s.get("end_blade_angle") is None else f"; `--end-blade-angle {s['end_blade_angle']:g}`")
               + ("" if not s.get("curl_out_intervals") else f" `--curl-out-intervals {s['curl_out_intervals']}`")
+              + ("" if s.get("midpoints") is None else f"; `--midpoints {s['midpoints']}`")
               + ("" if s.get("fill_limit_used") is None else f", planned fill ≤ {s['fill_limit_used']:.0%} of 0.2 m³")
               + ") at "
               f"{commit_label(result['machine'])}; loops run with `--ray {s.get('ray', 'off')}`; the last "

@@ -187,6 +187,27 @@ def test_plant_loop_unit_builds_ours_with_the_failure_angle_rule(tmp_path):
         plant_loop_unit(FEEEnvPlant(), "oracle", "gravel", cycles=1, seed=0, cache=None, planner=False)
 
 
+def test_plant_loop_unit_passes_the_planner_settings_on(monkeypatch):
+    import wheelloader.adaptation as adaptation
+    from wheelloader.plant_loop import plant_loop_unit
+
+    seen = {}
+
+    class Built(Exception):
+        pass
+
+    def fake_planner(**kwargs):
+        seen.update(kwargs)
+        raise Built
+
+    monkeypatch.setattr(adaptation, "default_planner", fake_planner)
+    with pytest.raises(Built):
+        plant_loop_unit(FEEEnvPlant(), "ours", "gravel", cycles=1, seed=0, cache=None, midpoints=False,
+                        curl_out_intervals=8, heel_clearance=0.0, failure_angle="min_weight_force")
+    assert seen["midpoints"] is False and seen["curl_out_intervals"] == 8 and seen["heel_clearance"] == 0.0
+    assert seen["failure_angle"] == "min_weight_force"
+
+
 def test_first_cycle_benchmark_smoke(tmp_path):
     """``benchmarks/plant_first_cycle.py --quick``: the fixed path and one planner variant dug at 8 cm; a second
     run reads the saved cycles instead of digging again."""

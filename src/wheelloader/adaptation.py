@@ -347,17 +347,20 @@ def make_strategy(name: str, planner: Any = None, rl_policy: str | None = None,
 @functools.lru_cache(maxsize=4)
 def _process_planner(mpc: bool, cut_angle: float | None = None, failure_angle: str = "min_n_gamma",
                      heel_clearance: float | None = None, end_blade_angle: float | None = None,
-                     curl_out_intervals: int = 0) -> Callable[[SoilParams, Pile], PlanOutcome]:
+                     curl_out_intervals: int = 0, midpoints: bool | None = None
+                     ) -> Callable[[SoilParams, Pile], PlanOutcome]:
     """:func:`default_planner`, built once per process (the NLPs are cached per process anyway)."""
     return default_planner(mpc=mpc, cut_angle=cut_angle, failure_angle=failure_angle, heel_clearance=heel_clearance,
-                           end_blade_angle=end_blade_angle, curl_out_intervals=curl_out_intervals)
+                           end_blade_angle=end_blade_angle, curl_out_intervals=curl_out_intervals,
+                           midpoints=midpoints)
 
 
 def strategy_loop(*, soil: SoilParams, pile: Mapping[str, Any] | Pile, truth: Mapping[str, float],
                   strategy: str, cycles: int, seed: int, planner: str | None = "plan",
                   rl_policy: str | None = None, ours_options: Mapping[str, Any] | None = None,
                   cut_angle: float | None = None, heel_clearance: float | None = None,
-                  end_blade_angle: float | None = None, curl_out_intervals: int = 0) -> list[dict[str, Any]]:
+                  end_blade_angle: float | None = None, curl_out_intervals: int = 0,
+                  midpoints: bool | None = None) -> list[dict[str, Any]]:
     """One loop of the adaptation benchmark, self-contained so that it can run in another process (a
     :class:`wheelloader.sweep.Unit`): build the plant env and a fresh strategy, run :func:`run_loop`.
 
@@ -382,6 +385,8 @@ def strategy_loop(*, soil: SoilParams, pile: Mapping[str, Any] | Pile, truth: Ma
     curl_out_intervals : int
         With ``end_blade_angle``: the plan's last intervals in which the bucket curls out of the pile
         (:class:`~wheelloader.planner.PlannerOptions`; default 0).
+    midpoints : bool, optional
+        The plan's forces and validity also at the intervals' midpoints (default: :func:`default_planner`'s).
 
     Returns
     -------
@@ -398,7 +403,7 @@ def strategy_loop(*, soil: SoilParams, pile: Mapping[str, Any] | Pile, truth: Ma
     model = (ours_options or {}).get("options") if strategy == "ours" else None
     rule = model.failure_angle if model is not None else "min_n_gamma"
     plan_fn = None if planner is None else _process_planner(planner == "mpc", cut_angle, rule, heel_clearance,
-                                                            end_blade_angle, curl_out_intervals)
+                                                            end_blade_angle, curl_out_intervals, midpoints)
     env = gym.make("wheelloader/BucketLoading-v0", soil=soil, pile=pile, truth=dict(truth), **LOOP_ENV_KWARGS)
     try:
         records, _ = run_loop(env, make_strategy(strategy, plan_fn, rl_policy, ours_options), cycles=cycles,

@@ -231,7 +231,8 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
                     stale: str = "error", sigma_s: float = DEFAULT_FILTER["sigma_s"],
                     failure_angle: str = "min_n_gamma", cut_angle: float | None = None,
                     fill_limit: float | None = None, heel_clearance: float | None = None,
-                    end_blade_angle: float | None = None, curl_out_intervals: int = 0) -> dict[str, Any]:
+                    end_blade_angle: float | None = None, curl_out_intervals: int = 0,
+                    midpoints: bool | None = None) -> dict[str, Any]:
     """One loop of :func:`run_plant_loop` as a unit of :mod:`wheelloader.sweep` (picklable arguments only).
 
     Builds the strategy by name in the process that runs it (``fixed``, ``ours``, ``paper``, or ``oracle``
@@ -243,7 +244,8 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
     strategy that plans, ``fill_limit`` its largest planned fill as a share of the nominal capacity and
     ``heel_clearance`` its opt-in heel clearance [m] and ``end_blade_angle`` its opt-in end blade angle [rad],
     ``curl_out_intervals`` the plan's last intervals in which the bucket then curls out of the pile
-    (:class:`~wheelloader.planner.PlannerOptions`).
+    (:class:`~wheelloader.planner.PlannerOptions`), ``midpoints`` whether the plan's forces and validity are
+    constrained at the intervals' midpoints too (default: :func:`~wheelloader.adaptation.default_planner`'s).
     """
     from wheelloader.adaptation import default_planner, make_strategy
 
@@ -251,7 +253,8 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
     learning = strategy in ("ours", "oracle")
     plan = (default_planner(failure_angle=failure_angle if learning else "min_n_gamma", cut_angle=cut_angle,
                             fill_limit=fill_limit, heel_clearance=heel_clearance,
-                            end_blade_angle=end_blade_angle, curl_out_intervals=curl_out_intervals)
+                            end_blade_angle=end_blade_angle, curl_out_intervals=curl_out_intervals,
+                            midpoints=midpoints)
             if planner else None)
     if strategy == "oracle":
         if oracle_params is None:
