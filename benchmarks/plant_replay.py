@@ -7,7 +7,9 @@ together, the force model's failure-angle rule, the paper's multi-stage method) 
 its own path and pile. The error is the loop's: F_R RMSE of the prediction against the plant's force
 filtered as in the loop (sigma 0.1 s), in % of the mean |F_R| in soil. Every variant sees the same cycles,
 so the table compares calibrations, not the paths they would have planned (those were planned by the
-loop's strategy). Also the calibration time per variant (median, this machine).
+loop's strategy). Also the calibration time per variant (median, this machine), and how much of the next
+cycle the prediction's 90 % band covers (the share of its in-soil samples inside the band, pooled per soil;
+the band of :func:`wheelloader.estimator.predict`, from the fit's covariance and residual noise model).
 
 Usage::
 
@@ -25,6 +27,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from _machine import machine_info
 
 from wheelloader.provenance import commit_label, load_label
@@ -39,6 +42,8 @@ VARIANTS: dict[str, tuple[str, int | None, str]] = {
     "ours + least weight force, all earlier cycles": ("default", None, "min_weight_force"),
     "paper multi-stage, last cycle": ("multi-stage", 1, "min_n_gamma"),
 }
+#: Level of the prediction band whose coverage of the next cycle is measured.
+BAND_LEVEL = 0.9
 QUICK = ("ours, last cycle (loop default)", "ours + least weight force, all earlier cycles")
 
 
@@ -75,29 +80,47 @@ def replay(files: list[Path], variant: str, sigma_s: float) -> list[dict[str, An
         if result.success:
             previous = result
         params = previous.params if previous is not None else None  # the last converged fit
-        pred = predict(params, logs[k - 1], options=options) if params is not None else None
+        # the prediction with its band (from the last converged fit's covariance and residual noise model)
+        pred = predict(previous, logs[k - 1], options=options, band=BAND_LEVEL) if previous is not None else None
         quality = pred.quality if pred is not None else None
+        inside = samples = 0
+        if pred is not None and pred.band is not None:
+            in_soil = pred.state.depth > 0.0
+            observed = logs[k - 1].resultant
+            samples = int(np.count_nonzero(in_soil))
+            inside = int(np.count_nonzero(((observed >= pred.band.lower_r) & (observed <= pred.band.upper_r))[in_soil]))
         rows.append({"variant": variant, "cycle": k, "calibrated_on": len(earlier), "seconds": seconds,
                      "converged": bool(result.success),
                      "rmse_percent": quality.percent_r if quality is not None else math.nan,
+                     "band_inside": inside, "band_samples": samples,
                      "params": params.to_dict() if params is not None else None})
     return rows
+
+
+def _pooled_coverage(rows: Any) -> float:
+    """Share of the in-soil samples inside the band, pooled over ``rows`` (NaN without any)."""
+    pairs = [(r.get("band_inside", 0), r.get("band_samples", 0)) for r in rows]
+    samples = sum(n for _, n in pairs)
+    return sum(i for i, _ in pairs) / samples if samples else math.nan
 
 
 def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     out: dict[str, dict[str, Any]] = {}
     for variant in dict.fromkeys(r["variant"] for r in rows):
         sel = [r for r in rows if r["variant"] == variant]
-        per_soil = {}
+        per_soil, coverage = {}, {}
         for soil in dict.fromkeys(r["soil"] for r in sel):
             from3 = [r["rmse_percent"] for r in sel if r["soil"] == soil and r["cycle"] >= 3]
             per_soil[soil] = statistics.median(from3) if from3 else math.nan
+            coverage[soil] = {"all": _pooled_coverage(r for r in sel if r["soil"] == soil),
+                              "from_cycle3": _pooled_coverage(r for r in sel if r["soil"] == soil and r["cycle"] >= 3)}
         single = [r["seconds"] for r in sel if r["calibrated_on"] == 1]
         multi = [r["seconds"] for r in sel if r["calibrated_on"] >= 2]
         out[variant] = {
             "median_rmse_percent": statistics.median(r["rmse_percent"] for r in sel),
             "median_rmse_percent_from_cycle3": statistics.median(r["rmse_percent"] for r in sel if r["cycle"] >= 3),
             "median_from_cycle3_per_soil": per_soil,
+            "band_coverage_per_soil": coverage,
             "median_seconds_one_cycle": statistics.median(single) if single else math.nan,
             "median_seconds_several": statistics.median(multi) if multi else math.nan,
             "predictions": len(sel)}
@@ -117,6 +140,14 @@ def markdown(result: dict[str, Any]) -> str:
                      + " | ".join(f"{m['median_from_cycle3_per_soil'].get(s, math.nan):.1f} %" for s in soils)
                      + f" | {m['median_seconds_one_cycle']:.2f} s / "
                      + ("–" if math.isnan(several) else f"{several:.2f} s") + " |")
+    level = result["settings"].get("band_level", BAND_LEVEL)
+    lines += ["", f"Coverage of the next cycle by the prediction's {level:.0%} band (share of the in-soil samples of "
+              "the plant's filtered F_R inside it, pooled over the loops; all cycles / from cycle 3):", "",
+              "| calibration | " + " | ".join(soils) + " |", "|---|" + "---|" * len(soils)]
+    for variant, m in summary.items():
+        cover = m.get("band_coverage_per_soil", {})
+        lines.append(f"| {variant} | " + " | ".join(
+            f"{cover[s]['all']:.0%} / {cover[s]['from_cycle3']:.0%}" if s in cover else "–" for s in soils) + " |")
     s = result["settings"]
     n_loops = len({(r["soil"], r["seed"], r["strategy"]) for r in result["rows"]})
     load = load_label(result["machine"])
@@ -158,7 +189,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"[{i * len(variants) + j + 1}/{total}] {soil} {seed} {strategy}: {variant}: "
                   + ", ".join(f"c{r['cycle']} {r['rmse_percent']:.1f} %" for r in rows[-(len(files) - 1):]),
                   flush=True)
-    result = {"benchmark": "plant_replay", "settings": vars(args) | {"variants": variants},
+    result = {"benchmark": "plant_replay", "settings": vars(args) | {"variants": variants, "band_level": BAND_LEVEL},
               "machine": machine_info(), "rows": rows, "wall_s": time.perf_counter() - started}
     result["summary"] = summarise(rows)
     out = Path(args.out)

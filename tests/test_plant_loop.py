@@ -259,6 +259,13 @@ def test_replay_benchmark_reproduces_the_loops_own_predictions(tmp_path):
     for r in records[1:]:
         assert replayed[r.cycle] == pytest.approx(r.prediction_rmse_percent, rel=1e-6)
     assert "| ours, last cycle (loop default) |" in (tmp_path / "out" / "plant_replay.md").read_text()
+    # band coverage: counts per prediction, pooled per soil in the summary
+    rows = result["rows"]
+    assert all(0 <= r["band_inside"] <= r["band_samples"] and r["band_samples"] > 0 for r in rows)
+    pooled = sum(r["band_inside"] for r in rows) / sum(r["band_samples"] for r in rows)
+    cover = result["summary"]["ours, last cycle (loop default)"]["band_coverage_per_soil"]["gravel"]
+    assert cover["all"] == pytest.approx(pooled)
+    assert cover["from_cycle3"] == pytest.approx(rows[1]["band_inside"] / rows[1]["band_samples"])
     # a folder without loops is refused with a clear message
     empty = subprocess.run([sys.executable, str(script), "--cycles", str(tmp_path / "none")], capture_output=True,
                            text=True, timeout=600)
