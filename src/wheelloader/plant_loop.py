@@ -26,6 +26,7 @@ import hashlib
 import math
 import time
 from collections.abc import Callable
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -79,6 +80,50 @@ def path_digest(path: Any) -> str:
     for arr in (path.t, path.x, path.z, path.blade_angle):
         h.update(np.ascontiguousarray(arr, dtype=np.float64).tobytes())
     return h.hexdigest()
+
+
+@dataclass(frozen=True)
+class _PlanRecord:
+    """What the loop records of the plan a cycle was dug along."""
+
+    ok: bool
+    message: str
+    seconds: float
+    params: SoilParams
+
+
+def _resolve_saved_cycle(log: CycleLog | None, digest: str, path: Any, stale: str, record: _PlanRecord,
+                         where: str) -> tuple[CycleLog | None, _PlanRecord, str, bool, bool]:
+    """What to do with a saved cycle (``log``, None when there is none) for the plan made now (``path``, its
+    ``digest``): ``(log to use or None to dig, the plan's record, the cycle record's end, kept, replaced)``.
+
+    A saved cycle of the same plan is resumed; one dug along another path is refused (``stale="error"``),
+    dug again (``"redig"``) or kept as the cycle dug (``"keep"``; the plan's record is then read from the
+    log where it recorded it, see :func:`run_plant_loop`).
+    """
+    if log is None:
+        return None, record, "path end", False, False
+    if log.metadata.get("planned_path_sha256") == digest:
+        return log, record, "resumed from cache", False, False
+    if stale == "error":
+        raise WheelloaderError(f"{where} was dug along another path than the one planned now (other settings, "
+                               "code or machine); use another cache folder, remove it, or resume with "
+                               "stale='keep' or 'redig'")
+    if stale == "redig":
+        return None, record, "path end", False, True
+    end = f"kept saved cycle (path planned now differs by {path_distance(path, log.path):.3g} m)"
+    saved = log.metadata.get("plan")
+    dug_name = log.metadata.get("path_name")
+    if isinstance(saved, dict):
+        record = _PlanRecord(bool(saved["ok"]), str(saved["message"]), float(saved["seconds"]),
+                             SoilParams.from_dict(saved["params"]))
+    elif dug_name is not None and dug_name != path.name:
+        # the log predates plan records: what was dug tells whether its plan passed the check
+        record = replace(record, ok=dug_name != MODEL_FALLBACK_NAME,
+                         message=f"kept cycle dug along the {dug_name!r} path (its plan's record not saved)")
+    else:
+        end += "; its plan's record is that of the plan made now"
+    return log, record, end, True, False
 
 
 def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParams | str, *, cycles: int = 5,
@@ -141,44 +186,19 @@ def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParam
         if plan.path is None:
             raise WheelloaderError(f"strategy {strategy.name!r} gives a controller, not a path: it needs the env's "
                                    "observations and cannot dig in a reference plant")
-        params_used = strategy.params
-        plan_ok, plan_message, plan_seconds = plan.success, plan.message, plan.seconds
-        log = _cached(folder, f"cycle{k}")
+        record = _PlanRecord(bool(plan.success), str(plan.message), float(plan.seconds), strategy.params)
         digest = path_digest(plan.path)
-        replaced = kept = False
-        end = "path end"
-        if log is not None and log.metadata.get("planned_path_sha256") != digest:
-            if stale == "error":
-                raise WheelloaderError(f"{folder}/cycle{k}.csv was dug along another path than the one planned "
-                                       "now (other settings, code or machine); use another cache folder, remove "
-                                       "it, or resume with stale='keep' or 'redig'")
-            if stale == "redig":
-                log, replaced = None, True
-            else:
-                kept = True
-                end = f"kept saved cycle (path planned now differs by {path_distance(plan.path, log.path):.3g} m)"
-                saved = log.metadata.get("plan")
-                dug_name = log.metadata.get("path_name")
-                if isinstance(saved, dict):
-                    plan_ok, plan_message = bool(saved["ok"]), str(saved["message"])
-                    plan_seconds = float(saved["seconds"])
-                    params_used = SoilParams.from_dict(saved["params"])
-                elif dug_name is not None and dug_name != plan.path.name:
-                    # the log predates plan records: what was dug tells whether its plan passed the check
-                    plan_ok = dug_name != MODEL_FALLBACK_NAME
-                    plan_message = f"kept cycle dug along the {dug_name!r} path (its plan's record not saved)"
-                else:
-                    end += "; its plan's record is that of the plan made now"
+        saved = _cached(folder, f"cycle{k}")
+        log, record, end, kept, replaced = _resolve_saved_cycle(saved, digest, plan.path, stale, record,
+                                                                f"{folder}/cycle{k}.csv")
         resumed = log is not None
-        if resumed and not kept:
-            end = "resumed from cache"
         if log is None:
             start = time.perf_counter()
             log = plant.dig(plan.path, pile, soil, seed=seed)
             log.metadata.setdefault("plant_wall_s", time.perf_counter() - start)
             log.metadata["planned_path_sha256"] = digest
-            log.metadata["plan"] = {"ok": bool(plan_ok), "message": str(plan_message), "seconds": float(plan_seconds),
-                                    "params": params_used.to_dict()}
+            log.metadata["plan"] = {"ok": record.ok, "message": record.message, "seconds": record.seconds,
+                                    "params": record.params.to_dict()}
             if folder is not None:
                 log.save(folder / f"cycle{k}.csv", overwrite=True)
         if log.pile_after is None:
@@ -186,7 +206,7 @@ def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParam
                                    "(CycleLog.pile_after)")
         logs.append(log)
         smooth = filtered(log, sigma_s)
-        pred = predict(params_used, smooth, options=strategy.model_options, fill=strategy.fill)
+        pred = predict(record.params, smooth, options=strategy.model_options, fill=strategy.fill)
         quality = pred.quality
         in_soil = pred.state.depth > 0.0
         violations = int(np.count_nonzero((pred.forces.flags & ~FLAG_OUT_OF_SOIL) & in_soil))
@@ -195,14 +215,14 @@ def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParam
         records.append(CycleRecord(
             cycle=k, strategy=strategy.name, calibration_s=calib[0],
             path=str(log.metadata.get("path_name", plan.path.name)) if kept else plan.path.name,
-            planning_s=plan_seconds,
+            planning_s=record.seconds,
             prediction_rmse_N=quality.rmse_r if quality else math.nan,
             prediction_rmse_percent=quality.percent_r if quality else math.nan,
             fill_m3=fill, fill_fraction=fill / log.bucket.capacity, energy_J=energy,
             energy_per_m3=energy / fill if fill > 0 else math.inf, stalled=False,
             validity_violations=violations, end=end,
-            calibration_ok=calib[1], calibration_message=calib[2], plan_ok=plan_ok, plan_message=plan_message,
-            params=params_used.to_dict()))
+            calibration_ok=calib[1], calibration_message=calib[2], plan_ok=record.ok,
+            plan_message=record.message, params=record.params.to_dict()))
         if progress is not None:
             r = records[-1]
             progress(f"  {r.strategy:>7} cycle {k}: fill {r.fill_fraction:5.0%}, energy {r.energy_J / 1e3:6.2f} kJ, "
