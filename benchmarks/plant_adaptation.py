@@ -1,4 +1,4 @@
-"""The adaptation loop closed on a plant that is not the model (``benchmarks/adaptation.py --plant mpm``).
+"""The adaptation loop closed on a plant that is not the model (``benchmarks/adaptation.py --plant mpm|dem``).
 
 For each soil x seed, in one run: (a) ``fixed`` Bezier path with nominal parameters, (b) ``ours``
 (calibrate on the cycle just dug, warm start; plan), (d) ``paper`` (the multi-stage calibrator in the same
@@ -19,7 +19,12 @@ Usage::
 
     python benchmarks/adaptation.py --plant mpm --out docs/results/adaptation_mpm      # 2 soils x 2 seeds x 5
     python benchmarks/adaptation.py --plant mpm --quick --out /tmp/plant_quick          # 1 cycle, coarse grid
+    python benchmarks/adaptation.py --plant dem --quick --out /tmp/plant_dem_quick      # Yade, CI's coarse spheres
     python benchmarks/adaptation.py --plant fee-env --out /tmp/plant_fee               # the same loop in the env
+
+The DEM plant (:class:`wheelloader.references.dem.DEMPlant`, Yade from ``bash dem/install_yade.sh``) settles a
+packing carved to each cycle's pile and scales its slab to the loop's bucket by geometric similarity
+(cohesionless soils); ``--quick`` uses the CI scenario's coarse spheres.
 """
 
 from __future__ import annotations
@@ -41,7 +46,8 @@ PLANTS = ("mpm", "fee-env", "dem")
 STRATEGIES = ("fixed", "ours", "paper", "oracle")
 
 
-def make_plant(name: str, resolution: float, threads: int) -> Any:
+def make_plant(name: str, resolution: float, threads: int, coarse: bool = False) -> Any:
+    """The plant by name; ``coarse``: the DEM's CI scenario (``--quick``)."""
     if name == "mpm":
         from wheelloader.references.mpm import MPMPlant
 
@@ -50,8 +56,12 @@ def make_plant(name: str, resolution: float, threads: int) -> Any:
         from wheelloader.references.fee_env import FEEEnvPlant
 
         return FEEEnvPlant()
-    raise SystemExit("adaptation --plant dem: not available: the Yade runner digs only the piles of its own "
-                     "scenario (dem/README.md) and cannot yet start a cycle on a carved pile; use --plant mpm")
+    if name == "dem":
+        from wheelloader.references.dem import DemConfig, DEMPlant, tiny_config
+
+        config = tiny_config(threads=threads) if coarse else DemConfig(threads=threads)
+        return DEMPlant(config, progress=lambda line: None)
+    raise SystemExit(f"--plant {name}: unknown plant")
 
 
 def planned_fill_limit(plant: Any, setting: str) -> float | None:
@@ -81,7 +91,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     from wheelloader.plant_loop import hindsight_parameters, plant_loop_unit
     from wheelloader.sweep import Unit, run_sweep
 
-    plant = make_plant(args.plant, args.resolution, args.threads)
+    plant = make_plant(args.plant, args.resolution, args.threads, coarse=args.quick)
     out = Path(args.out)
     started = time.perf_counter()
     fill_limit = planned_fill_limit(plant, args.fill_limit)
@@ -188,7 +198,10 @@ def markdown(result: dict[str, Any]) -> str:
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     load = load_label(result["machine"])
     lines += ["", f"*`python benchmarks/adaptation.py --plant {result['plant']}` ({', '.join(s['soils'])}; "
-              f"{s['seeds']} seed(s); {s['cycles']} cycles; MPM dx {s['resolution']} m"
+              f"{s['seeds']} seed(s); {s['cycles']} cycles; "
+              + (f"MPM dx {s['resolution']} m" if result["plant"] == "mpm" else
+                 "DEM " + ("CI scenario's coarse spheres" if s.get("quick") else "default scenario")
+                 if result["plant"] == "dem" else "FEE env")
               + ("" if s.get("failure_angle", "min_n_gamma") == "min_n_gamma" else
                  f"; ours and oracle with `--failure-angle {s['failure_angle']}`")
               + ("" if s.get("cut_angle") is None else f"; planner with `--cut-angle {s['cut_angle']:g}`")
@@ -235,7 +248,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--report", action="store_true",
                         help="only rewrite the Markdown and the figure from OUT/plant_adaptation.json")
     parser.add_argument("--quick", action="store_true",
-                        help="smoke run: gravel, 1 seed, 1 cycle, fixed and ours, MPM dx 6 cm")
+                        help="smoke run: gravel, 1 seed, 1 cycle, fixed and ours, MPM dx 6 cm (DEM: the CI "
+                             "scenario's coarse spheres)")
     args = parser.parse_args(argv)
     if args.quick:
         args.soils, args.seeds, args.cycles, args.strategies, args.resolution = (["gravel"], 1, 1,

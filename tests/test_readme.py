@@ -95,6 +95,7 @@ NEEDS = {
     "python benchmarks/mpm_verification.py": ("taichi", 'pip install -e ".[mpm]"'),
     "wheelloader dem reference": ("yade", "bash dem/install_yade.sh"),
     "python benchmarks/adaptation.py --plant mpm": ("taichi", 'pip install -e ".[mpm]"'),
+    "python benchmarks/adaptation.py --plant dem": ("yade", "bash dem/install_yade.sh"),
     "python benchmarks/plant_first_cycle.py": ("taichi", 'pip install -e ".[mpm]"'),
     "wheelloader demo --plant mpm": ("taichi", 'pip install -e ".[mpm]"'),
 }

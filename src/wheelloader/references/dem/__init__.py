@@ -6,6 +6,7 @@ Yade is a system package (``bash dem/install_yade.sh``); without it :func:`run_s
 
 * :mod:`.config`: :class:`DemConfig`, the scaled paths, the tiny CI scenario;
 * :mod:`.runner`: :func:`run_scenario` (Yade as a subprocess) and the conversion to cycle logs;
+* :mod:`.plant`: :class:`DEMPlant`, the scenario as a plant of the adaptation loop (any carved pile);
 * :mod:`.reference_set`: the shipped reference set (cases, generation, manifest, loading, sanity).
 """
 
@@ -24,6 +25,7 @@ from .config import (
     tiny_path,
     write_path_csv,
 )
+from .plant import DEMPlant
 from .reference_set import (
     MASS_TOLERANCE,
     REFERENCE_DIR,
@@ -43,7 +45,8 @@ from .runner import DEFAULT_CACHE, DemRun, find_yade, read_raw, read_raw_cycle, 
 
 __all__ = [
     "BACK_HEIGHT", "DEFAULT_CACHE", "DEFAULT_FILTER", "MASS_TOLERANCE", "REFERENCE_DIR", "SOILS", "TOP_PLATE",
-    "YADE_INSTALL", "DemConfig", "DemRun", "DemRunError", "ReferenceCase", "ReferenceRun", "YadeNotFoundError",
+    "YADE_INSTALL", "DEMPlant", "DemConfig", "DemRun", "DemRunError", "ReferenceCase", "ReferenceRun",
+    "YadeNotFoundError",
     "dual_cycle_paths", "filtered", "find_yade", "generate_reference", "load_reference", "moving_average",
     "read_raw", "read_raw_cycle", "reference_cases", "regenerate_command", "relative_noise", "run_reference",
     "run_scenario", "sanity_figures", "sanity_report", "scenario_paths", "scenario_script", "smooth", "tiny_config",

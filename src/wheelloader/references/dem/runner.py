@@ -75,6 +75,7 @@ def run_scenario(
     progress: Callable[[str], None] | None = None,
     timeout: float | None = None,
     names: Sequence[str] | None = None,
+    extra_args: Sequence[str] = (),
 ) -> DemRun:
     """Run the scenario for ``paths`` (one Yade run, cycles in sequence on the same pile).
 
@@ -96,6 +97,8 @@ def run_scenario(
         Wall-clock limit [s].
     names : sequence of str, optional
         Path names for the logs (default: the paths' names).
+    extra_args : sequence of str
+        More scenario options (e.g. ``--surface FILE --x-back X``: a deposit carved to a given surface).
 
     Returns
     -------
@@ -110,7 +113,7 @@ def run_scenario(
     raw.mkdir(parents=True, exist_ok=True)
     cache = Path(cache_dir) if cache_dir is not None else DEFAULT_CACHE
     cmd = [exe, "-n", f"-j{config.threads}", "-x", str(script), "--out", str(raw), "--cache-dir", str(cache),
-           *config.yade_args()]
+           *config.yade_args(), *extra_args]
     for i, path in enumerate(paths):
         fname = work / f"path{i + 1}.csv"
         write_path_csv(path, fname)

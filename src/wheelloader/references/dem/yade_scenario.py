@@ -134,6 +134,11 @@ def parse_args(argv):
     g.add_argument("--toe-x", type=float, default=0.0, help="x of the pile toe [m]")
     g.add_argument("--bed", type=float, default=0.2, help="soil bed depth below z=0 [m]")
     g.add_argument("--front", type=float, default=0.15, help="bed length in front of the toe [m]")
+    g.add_argument("--surface", default=None,
+                   help="CSV (columns x,z) of the surface to carve the deposit to, instead of the trapezoid "
+                        "(e.g. a pile carved by earlier cycles); needs --x-back")
+    g.add_argument("--x-back", type=float, default=None,
+                   help="x of the back wall [m] (default: the trapezoid's, toe + height / tan(slope) + top length)")
     g = p.add_argument_group("bucket")
     g.add_argument("--floor-length", type=float, default=0.27, help="floor, back edge to tip [m]")
     g.add_argument("--back-height", type=float, default=0.27, help="back plate, normal to the floor [m]")
@@ -142,6 +147,10 @@ def parse_args(argv):
     g = p.add_argument_group("run")
     g.add_argument("--hold", type=float, default=0.4, help="hold at the end pose after each path [s]")
     g.add_argument("--between", type=float, default=0.3, help="settling between cycles (after dumping) [s]")
+    g.add_argument("--settle-after", type=float, default=0.0,
+                   help="after the last cycle: take the load and the bucket away, let the pile settle this long [s] "
+                        "and report that surface as the last cycle's pile_after (default 0: measured with the "
+                        "bucket in place, its load excluded)")
     g.add_argument("--damping", type=float, default=0.0, help="Newton (local) damping during cycles")
     g.add_argument("--dt-factor", type=float, default=1.0, help="time step / PWaveTimeStep")
     g.add_argument("--max-settle", type=float, default=4.0, help="longest settling phase [s]")
@@ -152,18 +161,34 @@ def parse_args(argv):
             raise SystemExit(f"--bulk-density must be > 0, got {a.bulk_density}")
         material["bulk_density"] = a.bulk_density
     a.material = material
+    a.surface_x = a.surface_z = None
+    if a.surface is not None:
+        if a.x_back is None:
+            raise SystemExit("--surface needs --x-back (where the simulated pile ends)")
+        data = np.genfromtxt(a.surface, delimiter=",", names=True)
+        a.surface_x, a.surface_z = np.asarray(data["x"], float), np.asarray(data["z"], float)
+        if a.surface_x.size < 2 or np.any(np.diff(a.surface_x) <= 0) or not np.all(np.isfinite(a.surface_z)):
+            raise SystemExit(f"--surface {a.surface}: x must increase and z be finite (at least 2 points)")
+        if np.any(a.surface_z < -a.bed):
+            raise SystemExit(f"--surface {a.surface}: z below the floor (-{a.bed} m)")
+    if a.x_back is not None and not a.x_back > a.toe_x - a.front:
+        raise SystemExit(f"--x-back {a.x_back} must lie behind the front of the bed ({a.toe_x - a.front} m)")
     return a
 
 
 # --------------------------------------------------------------------------- geometry
 def pile_profile(x, a):
-    """Target surface of the pile z_s(x) [m] (bed surface 0 in front of the toe)."""
+    """Target surface of the pile z_s(x) [m] (bed surface 0 in front of the toe; ``--surface`` if given)."""
+    if a.surface_x is not None:
+        return np.interp(np.asarray(x, dtype=float), a.surface_x, a.surface_z)
     tan = math.tan(math.radians(a.slope_deg))
     return np.clip((np.asarray(x, dtype=float) - a.toe_x) * tan, 0.0, a.pile_height)
 
 
 def domain(a):
     x_front = a.toe_x - a.front
+    if a.x_back is not None:
+        return x_front, a.x_back
     x_back = a.toe_x + a.pile_height / math.tan(math.radians(a.slope_deg)) + a.top_length
     return x_front, x_back
 
@@ -172,6 +197,10 @@ def settle_key(a):
     keys = ["soil", "bulk_density", "radius", "radius_spread", "young", "poisson", "restitution", "seed", "slab_width",
             "pile_height", "slope_deg", "top_length", "toe_x", "bed", "front", "dt_factor", "max_settle"]
     data = {k: getattr(a, k) for k in keys}
+    if a.x_back is not None or a.surface_x is not None:  # (absent from the keys of the trapezoid's cached piles)
+        data["x_back"] = a.x_back
+        data["surface"] = None if a.surface_x is None else hashlib.sha256(
+            np.ascontiguousarray(np.concatenate([a.surface_x, a.surface_z])).tobytes()).hexdigest()
     data["material"] = a.material
     data["version"] = SCENARIO_VERSION
     data["yade"] = yade_version()
@@ -317,7 +346,8 @@ def build_pile(a):
     nx = int((x_back - x_front) / cell)
     ny = int(a.slab_width / cell)
     lattice_fraction = 4.0 / 3.0 * math.pi * a.radius ** 3 * (1 + a.radius_spread ** 2) / cell ** 3
-    needed = a.pile_height + a.bed + 2 * r_max
+    top = float(np.max(pile_profile(np.linspace(x_front, x_back, 401), a)))  # the trapezoid's: pile_height
+    needed = top + a.bed + 2 * r_max
     nz = int(math.ceil(needed * ASSUMED_SOLID_FRACTION / lattice_fraction / cell * 1.08))
     ox = x_front + 0.5 * ((x_back - x_front) - nx * cell)
     oy = 0.5 * (a.slab_width - ny * cell)
@@ -656,7 +686,7 @@ def main(argv):
         "scenario_version": SCENARIO_VERSION,
         "yade_version": yade_version(),
         "argv": argv,
-        "params": vars(a),
+        "params": {k: v for k, v in vars(a).items() if k not in ("surface_x", "surface_z")},
         "material": a.material,
         "settle": info,
         "particles": len(ids),
@@ -709,6 +739,16 @@ def main(argv):
             "pile_mass_before": float(mass.sum()),
             "pile_mass_after": float(mass_run[~carried].sum()),
         })
+        if c + 1 == len(paths) and a.settle_after > 0.0:
+            # the pile as the next cycle finds it: the load carried away, the bucket gone, the soil at rest
+            for k in np.flatnonzero(carried):
+                O.bodies.erase(ids_run[int(k)])
+            for i in bucket.ids:
+                O.bodies.erase(i)
+            O.run(max(1, int(a.settle_after / O.dt)), True)
+            xs, za = measure_surface(a, sphere_ids())
+            cinfo["pile_after"] = {"x": xs.tolist(), "z": za.tolist()}
+            cinfo["pile_after_settled_s"] = a.settle_after
         summary["cycles"].append(cinfo)
         log(f"cycle {c + 1}: {cinfo['wall_s']:.1f} s wall, carried {cinfo['carried_mass_geometric']:.2f} kg "
             f"(load {cinfo['carried_mass_load']:.2f} kg, carved volume x bulk density "
