@@ -17,8 +17,8 @@ cohesionless soil only (cohesion would scale with the length): a cohesive soil i
 radius ``radius / scale`` (5 cm at the defaults), coarse beside the MPM plant (``dem/README.md``: the same
 path on another packing differs from itself by 33-109 %).
 
-A cycle costs one settling and one dig (minutes on this machine: about 2000-3000 spheres for the piles the
-loop carves at the defaults); each settled deposit is cached under its surface's digest.
+A cycle costs one settling and one dig (the deposit grows with how far the path reaches); each settled
+deposit is cached under its surface's digest.
 """
 
 from __future__ import annotations
