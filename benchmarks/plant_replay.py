@@ -3,8 +3,8 @@
 The adaptation loop on a plant (``benchmarks/adaptation.py --plant mpm``) saves every cycle it dug. This
 benchmark replays those cycles without digging: for every loop (soil, seed, strategy) and every cycle
 k >= 2 it calibrates on the cycles before k with each calibration variant (the last ``window`` cycles
-together, the force model's failure-angle rule, the paper's multi-stage method) and predicts cycle k on
-its own path and pile. The error is the loop's: F_R RMSE of the prediction against the plant's force
+together, the force model's failure-angle rule, the opt-in carried-load term, the paper's multi-stage
+method) and predicts cycle k on its own path and pile. The error is the loop's: F_R RMSE of the prediction against the plant's force
 filtered as in the loop (sigma 0.1 s), in % of the mean |F_R| in soil. Every variant sees the same cycles,
 so the table compares calibrations, not the paths they would have planned (those were planned by the
 loop's strategy). Also the calibration time per variant (median, this machine), and how much of the next
@@ -32,14 +32,15 @@ from _machine import machine_info
 
 from wheelloader.provenance import commit_label, load_label
 
-#: name -> (method, window (None: every earlier cycle), failure-angle rule)
-VARIANTS: dict[str, tuple[str, int | None, str]] = {
+#: name -> (method, window (None: every earlier cycle), failure-angle rule[, opt-in carried-load term])
+VARIANTS: dict[str, tuple[Any, ...]] = {
     "ours, last cycle (loop default)": ("default", 1, "min_n_gamma"),
     "ours, last 2 cycles": ("default", 2, "min_n_gamma"),
     "ours, all earlier cycles": ("default", None, "min_n_gamma"),
     "ours + least weight force, last cycle": ("default", 1, "min_weight_force"),
     "ours + least weight force, last 2 cycles": ("default", 2, "min_weight_force"),
     "ours + least weight force, all earlier cycles": ("default", None, "min_weight_force"),
+    "ours + least weight force + carried load, last cycle": ("default", 1, "min_weight_force", True),
     "paper multi-stage, last cycle": ("multi-stage", 1, "min_n_gamma"),
 }
 #: Level of the prediction band whose coverage of the next cycle is measured.
@@ -66,8 +67,8 @@ def replay(files: list[Path], variant: str, sigma_s: float) -> list[dict[str, An
     from wheelloader.estimator import CycleLog, ModelOptions, calibrate, predict
     from wheelloader.references.filtering import filtered
 
-    method, window, rule = VARIANTS[variant]
-    options = ModelOptions(failure_angle=rule)
+    method, window, rule, *carried = VARIANTS[variant]
+    options = ModelOptions(failure_angle=rule, carried_load=bool(carried and carried[0]))
     logs = [filtered(CycleLog.load(f), sigma_s) for f in files]
     rows = []
     previous = None
