@@ -1,15 +1,15 @@
 """Next-cycle prediction on a plant's saved loops, replayed: which calibration predicts the next cycle best.
 
 The adaptation loop on a plant (``benchmarks/adaptation.py --plant mpm``) saves every cycle it dug. This
-benchmark replays those cycles without digging: for every loop (soil, seed, strategy) and every cycle
-k >= 2 it calibrates on the cycles before k with each calibration variant (the last ``window`` cycles
-together, the force model's failure-angle rule, the opt-in carried-load term, the paper's multi-stage
-method) and predicts cycle k on its own path and pile. The error is the loop's: F_R RMSE of the prediction against the plant's force
-filtered as in the loop (sigma 0.1 s), in % of the mean |F_R| in soil. Every variant sees the same cycles,
-so the table compares calibrations, not the paths they would have planned (those were planned by the
-loop's strategy). Also the calibration time per variant (median, this machine), and how much of the next
-cycle the prediction's 90 % band covers (the share of its in-soil samples inside the band, pooled per soil;
-the band of :func:`wheelloader.estimator.predict`, from the fit's covariance and residual noise model).
+benchmark replays those cycles without digging: for every loop (soil, seed, strategy) and every cycle k >= 2
+it calibrates on the cycles before k with each calibration variant (the last ``window`` cycles together, the
+force model's failure-angle rule, the opt-in carried-load term, the paper's multi-stage method) and predicts
+cycle k on its own path and pile. The error is the loop's: F_R RMSE of the prediction against the plant's
+force filtered as in the loop (sigma 0.1 s), in % of the mean |F_R| in soil. Every variant sees the same
+cycles, so the table compares calibrations, not the paths they would have planned (those were planned by the
+loop's strategy). Also the calibration time per variant (median, this machine), and how much of the next cycle
+the prediction's 90 % band covers (the share of its in-soil samples inside the band, pooled per soil; the band
+of :func:`wheelloader.estimator.predict`, from the fit's covariance and residual noise model).
 
 Usage::
 
