@@ -89,7 +89,7 @@ def replay(files: list[Path], variant: str, sigma_s: float) -> list[dict[str, An
             in_soil = pred.state.depth > 0.0
             observed = logs[k - 1].resultant
             samples = int(np.count_nonzero(in_soil))
-            inside = int(np.count_nonzero(((observed >= pred.band.lower_r) & (observed <= pred.band.upper_r))[in_soil]))
+            inside = round(pred.band.coverage(observed, in_soil) * samples)  # a share of samples: an exact count
         rows.append({"variant": variant, "cycle": k, "calibrated_on": len(earlier), "seconds": seconds,
                      "converged": bool(result.success),
                      "rmse_percent": quality.percent_r if quality is not None else math.nan,

@@ -4,8 +4,8 @@
 (``yade_scenario.py``, one Yade run per cycle). Each cycle deposits a packing of the soil's spheres, carves
 it to the pile it is given (``--surface``: the fresh trapezoid or the surface an earlier cycle left), lets it
 settle, and digs the path with the scenario's rigid bucket. The carved pile is read back from the particles
-(the upper envelope of the resting ones, smoothed over one particle diameter and, for a cohesionless soil,
-relaxed to its friction angle, as the MPM plant hands its piles on).
+(the upper envelope of the resting ones, smoothed by a running mean two particle diameters wide and, for a
+cohesionless soil, relaxed to its friction angle, as the MPM plant hands its piles on).
 
 Scale. The scenario is a geometrically scaled slab (:class:`DemConfig`, ``scale`` 0.6 and a 0.35 m slab by
 default, the reference set's; time is not scaled). Paths and piles are scaled into it about x = 0 (the toe of
@@ -33,6 +33,7 @@ import numpy as np
 
 from wheelloader.estimator import Bucket, BucketPath, CycleLog, ParameterError, Pile, SoilParams, preset
 
+from ..filtering import moving_average
 from .config import SOILS, DemConfig
 from .runner import DEFAULT_CACHE, run_scenario
 
@@ -139,9 +140,9 @@ class DEMPlant:
 
 def _carved(pile: Pile, scene_after: Pile | None, s: float, x_front: float, x_back: float, radius: float,
             material: dict[str, float] | None) -> Pile:
-    """The loop's pile after a cycle: ``pile`` with the scenario's resting surface (scaled back, smoothed over
-    one particle diameter, relaxed to the friction angle for a cohesionless soil) between the scenario's
-    front and one bucket length before its back wall."""
+    """The loop's pile after a cycle: ``pile`` with the scenario's resting surface (scaled back, smoothed by a
+    running mean two particle diameters wide, relaxed to the friction angle for a cohesionless soil) between the
+    scenario's front and one bucket length before its back wall."""
     if scene_after is None:
         raise ParameterError("the DEM scenario did not report the carved surface")
     x = np.asarray(pile.x, dtype=float)
@@ -149,10 +150,8 @@ def _carved(pile: Pile, scene_after: Pile | None, s: float, x_front: float, x_ba
     inside = (x >= x_front) & (x <= x_back - BACK_MARGIN)
     sx, sz = np.asarray(scene_after.x, float) / s, np.asarray(scene_after.heights, float) / s
     diameter = 2.0 * radius / s
-    step = float(np.median(np.diff(sx)))
-    width = max(1, int(round(diameter / step)))
-    smooth = np.convolve(np.pad(sz, width, mode="edge"), np.ones(2 * width + 1) / (2 * width + 1), mode="same")
-    heights[inside] = np.interp(x[inside], sx, smooth[width:-width])
+    smooth = moving_average(sz, rate=1.0 / float(np.median(np.diff(sx))), window_s=2.0 * diameter)
+    heights[inside] = np.interp(x[inside], sx, smooth)
     after = pile.with_heights(heights)
     if material is not None and material.get("cohesion", 0.0) == 0.0 and material.get("friction", 0.0) > 0.0:
         after = after.relaxed(float(material["friction"]))

@@ -739,10 +739,12 @@ def main(argv):
             "pile_mass_before": float(mass.sum()),
             "pile_mass_after": float(mass_run[~carried].sum()),
         })
-        if c + 1 == len(paths) and a.settle_after > 0.0:
-            # the pile as the next cycle finds it: the load carried away, the bucket gone, the soil at rest
+        last = c + 1 == len(paths)
+        if not last or a.settle_after > 0.0:  # dump the bucket's contents
             for k in np.flatnonzero(carried):
                 O.bodies.erase(ids_run[int(k)])
+        if last and a.settle_after > 0.0:
+            # the pile as the next cycle finds it: the load carried away, the bucket gone, the soil at rest
             for i in bucket.ids:
                 O.bodies.erase(i)
             O.run(max(1, int(a.settle_after / O.dt)), True)
@@ -753,9 +755,6 @@ def main(argv):
         log(f"cycle {c + 1}: {cinfo['wall_s']:.1f} s wall, carried {cinfo['carried_mass_geometric']:.2f} kg "
             f"(load {cinfo['carried_mass_load']:.2f} kg, carved volume x bulk density "
             f"{cinfo['removed_volume_mass']:.2f} kg)")
-        if c + 1 < len(paths):  # dump the bucket's contents
-            for k in np.flatnonzero(carried):
-                O.bodies.erase(ids_run[int(k)])
     summary["wall_s"] = time.time() - wall0
     with open(os.path.join(a.out, "summary.json"), "w") as fh:
         json.dump(summary, fh, indent=1)
