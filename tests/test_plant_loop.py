@@ -250,17 +250,33 @@ def test_replay_benchmark_reproduces_the_loops_own_predictions(tmp_path):
                                 cache=tmp_path / "cycles" / "gravel" / "seed0" / "ours")
     script = Path(__file__).resolve().parents[1] / "benchmarks" / "plant_replay.py"
     done = subprocess.run([sys.executable, str(script), "--cycles", str(tmp_path / "cycles"), "--out",
-                           str(tmp_path / "out"), "--variants", "ours, last cycle (loop default)"],
+                           str(tmp_path / "out"), "--variants", "ours, last cycle (loop default)",
+                           "floor: cycle k fitted to itself (paper's model)"],
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     result = json.loads((tmp_path / "out" / "plant_replay.json").read_text())
-    replayed = {r["cycle"]: r["rmse_percent"] for r in result["rows"]}
+    rows = [r for r in result["rows"] if r["variant"] == "ours, last cycle (loop default)"]
+    replayed = {r["cycle"]: r["rmse_percent"] for r in rows}
     assert sorted(replayed) == [2, 3]
     for r in records[1:]:
         assert replayed[r.cycle] == pytest.approx(r.prediction_rmse_percent, rel=1e-6)
-    assert "| ours, last cycle (loop default) |" in (tmp_path / "out" / "plant_replay.md").read_text()
+    markdown = (tmp_path / "out" / "plant_replay.md").read_text()
+    assert "| ours, last cycle (loop default) |" in markdown
+    # the floor (each cycle fitted to itself) is never worse than that cycle's prediction from the one before
+    floor = {r["cycle"]: r["rmse_percent"] for r in result["rows"] if r["variant"].startswith("floor:")}
+    assert sorted(floor) == [2, 3]
+    assert all(0.0 <= floor[k] <= replayed[k] + 1e-9 for k in floor)
+    assert "| floor: cycle k fitted to itself (paper's model) |" in markdown
+    # known answer: unfiltered (sigma 1 ms at 60 Hz), a noiseless plant that is the paper's model is fitted by it
+    # all but exactly (with the loop's 0.1 s filter not: the filter smooths the plant's force, not the model's)
+    raw = subprocess.run([sys.executable, str(script), "--cycles", str(tmp_path / "cycles"), "--out",
+                          str(tmp_path / "raw"), "--sigma-s", "0.001", "--variants",
+                          "floor: cycle k fitted to itself (paper's model)"],
+                         capture_output=True, text=True, timeout=600)
+    assert raw.returncode == 0, raw.stderr[-2000:]
+    raw_rows = json.loads((tmp_path / "raw" / "plant_replay.json").read_text())["rows"]
+    assert len(raw_rows) == 2 and all(r["rmse_percent"] < 1.0 for r in raw_rows)
     # band coverage: counts per prediction, pooled per soil in the summary
-    rows = result["rows"]
     assert all(0 <= r["band_inside"] <= r["band_samples"] and r["band_samples"] > 0 for r in rows)
     pooled = sum(r["band_inside"] for r in rows) / sum(r["band_samples"] for r in rows)
     cover = result["summary"]["ours, last cycle (loop default)"]["band_coverage_per_soil"]["gravel"]
