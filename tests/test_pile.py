@@ -2,7 +2,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from wheelloader.estimator import ParameterError, Pile, default_path
@@ -48,13 +48,17 @@ def test_carving_balances_volume_to_1e_9():
 @settings(max_examples=40, deadline=None)
 @given(depth=st.floats(0.0, 0.5), x_end=st.floats(0.5, 2.5), initial=st.floats(0.0, 0.1),
        capacity=st.floats(0.05, 0.5))
+@example(depth=1.192092896e-07, x_end=0.5, initial=0.0, capacity=0.5)  # found by hypothesis: cancellation
 def test_carving_balance_property(depth, x_end, initial, capacity):
     pile = Pile.ideal_slope(math.radians(30.0))
     xs = np.linspace(-0.2, x_end, 50)
     zs = np.maximum(0.0, pile.surface_height(xs) - depth) + 0.0 * xs
     result = pile.carve(xs, zs, 1.0, capacity, initial_fill=min(initial, capacity))
     assert abs(result.balance_error) <= 1e-9 * max(result.removed, result.in_bucket)
-    assert result.removed == pytest.approx(pile.volume(1.0) - result.pile.volume(1.0), rel=1e-9, abs=1e-15)
+    # the difference of two pile volumes carries their rounding (~1e-16 of the volume per term summed): a carve
+    # of 1e-7 m depth removes ~6e-8 m^3, which two ~5 m^3 volumes give only to ~1e-15 m^3
+    assert result.removed == pytest.approx(pile.volume(1.0) - result.pile.volume(1.0), rel=1e-9,
+                                           abs=1e-12 * pile.volume(1.0))
     assert np.all(result.pile.heights <= pile.heights)
 
 
