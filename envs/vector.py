@@ -503,8 +503,10 @@ class BucketLoadingVectorEnv(VectorEnv):
         }
 
     def close_extras(self, **kwargs: Any) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
+        # getattr: a constructor that raised (bad input) leaves no renderer, and gymnasium's __del__ still closes
+        renderer = getattr(self, "_renderer", None)
+        if renderer is not None:
+            renderer.close()
             self._renderer = None
 
     # ------------------------------------------------------------------ sub-env attributes
