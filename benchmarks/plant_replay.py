@@ -128,12 +128,20 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
             per_soil[soil] = statistics.median(from3) if from3 else math.nan
             coverage[soil] = {"all": _pooled_coverage(r for r in sel if r["soil"] == soil),
                               "from_cycle3": _pooled_coverage(r for r in sel if r["soil"] == soil and r["cycle"] >= 3)}
+        by_strategy: dict[str, dict[str, float]] = {}
+        for strategy in dict.fromkeys(r.get("strategy", "?") for r in sel):
+            for soil in dict.fromkeys(r["soil"] for r in sel):
+                from3 = [r["rmse_percent"] for r in sel
+                         if r.get("strategy", "?") == strategy and r["soil"] == soil and r["cycle"] >= 3]
+                if from3:
+                    by_strategy.setdefault(strategy, {})[soil] = statistics.median(from3)
         single = [r["seconds"] for r in sel if r["calibrated_on"] == 1]
         multi = [r["seconds"] for r in sel if r["calibrated_on"] >= 2]
         out[variant] = {
             "median_rmse_percent": statistics.median(r["rmse_percent"] for r in sel),
             "median_rmse_percent_from_cycle3": statistics.median(r["rmse_percent"] for r in sel if r["cycle"] >= 3),
             "median_from_cycle3_per_soil": per_soil,
+            "median_from_cycle3_per_strategy": by_strategy,
             "band_coverage_per_soil": coverage,
             "median_seconds_one_cycle": statistics.median(single) if single else math.nan,
             "median_seconds_several": statistics.median(multi) if multi else math.nan,
@@ -164,6 +172,18 @@ def markdown(result: dict[str, Any]) -> str:
         cover = m.get("band_coverage_per_soil", {})
         lines.append(f"| {variant} | " + " | ".join(
             f"{cover[s]['all']:.0%} / {cover[s]['from_cycle3']:.0%}" if s in cover else "–" for s in soils) + " |")
+    pairs = list(dict.fromkeys((strategy, soil) for m in summary.values()
+                               for strategy, per in m.get("median_from_cycle3_per_strategy", {}).items()
+                               for soil in per))
+    if pairs:
+        lines += ["", "Split by the loops the cycles come from (the strategy that dug them: soil), from cycle 3, "
+                  "median:", "",
+                  "| calibration | " + " | ".join(f"{st}: {so}" for st, so in pairs) + " |",
+                  "|---|" + "---|" * len(pairs)]
+        for variant, m in summary.items():
+            per = m.get("median_from_cycle3_per_strategy", {})
+            lines.append(f"| {variant} | " + " | ".join(
+                f"{per[st][so]:.1f} %" if so in per.get(st, {}) else "–" for st, so in pairs) + " |")
     s = result["settings"]
     n_loops = len({(r["soil"], r["seed"], r["strategy"]) for r in result["rows"]})
     load = load_label(result["machine"])

@@ -267,6 +267,10 @@ def test_replay_benchmark_reproduces_the_loops_own_predictions(tmp_path):
     assert sorted(floor) == [2, 3]
     assert all(0.0 <= floor[k] <= replayed[k] + 1e-9 for k in floor)
     assert "| floor: cycle k fitted to itself (paper's model) |" in markdown
+    # split by the loops' strategy: one loop of ours here, so its median from cycle 3 is cycle 3's error
+    split = result["summary"]["ours, last cycle (loop default)"]["median_from_cycle3_per_strategy"]
+    assert split == {"ours": {"gravel": pytest.approx(replayed[3])}}
+    assert "| calibration | ours: gravel |" in markdown
     # known answer: unfiltered (sigma 1 ms at 60 Hz), a noiseless plant that is the paper's model is fitted by it
     # all but exactly (with the loop's 0.1 s filter not: the filter smooths the plant's force, not the model's)
     raw = subprocess.run([sys.executable, str(script), "--cycles", str(tmp_path / "cycles"), "--out",
