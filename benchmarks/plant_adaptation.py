@@ -176,15 +176,59 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
     return out
 
 
-def markdown(result: dict[str, Any]) -> str:
+def lifted_to_common_height(rows: list[dict[str, Any]], cycles: Path | None) -> dict[str, Any] | None:
+    """Energy per m³ of each strategy with its kept load lifted to the fixed Bézier path's end height.
+
+    A plan may end lower than the fixed path (its tip just clear of the carved surface), so the plant's work
+    along it lifts the load less; the loader lifts the rest afterwards. Here every cycle's energy gets the work
+    of lifting what it kept from its end height to ``z_ref``, the highest end of the fixed path's cycles (a
+    cycle ending above it is credited the difference): ``rho g V_kept (z_ref - z_end)``, with ``rho`` the
+    continuum's density where the log has one, else the soil preset's. Read from the saved cycles
+    (``cycles/SOIL/seedN/STRATEGY/cycleK.csv``); None without fixed-path cycles or when a cycle is missing.
+    """
+    from wheelloader.estimator import CycleLog, preset
+    from wheelloader.estimator.force_model import GRAVITY
+
+    if cycles is None or not any(r["strategy"] == "fixed" for r in rows):
+        return None
+    ends = []
+    for r in rows:
+        csv = Path(cycles) / r["soil"] / f"seed{r['seed']}" / r["strategy"] / f"cycle{r['cycle']}.csv"
+        if not csv.exists():
+            return None
+        log = CycleLog.load(csv)
+        density = (log.metadata.get("continuum") or {}).get("density") or preset(r["soil"]).gamma
+        ends.append((float(log.path.z[-1]), float(density)))
+    z_ref = max(z for (z, _), r in zip(ends, rows, strict=True) if r["strategy"] == "fixed")
+    per: dict[str, list[float]] = {}
+    for (z_end, density), r in zip(ends, rows, strict=True):
+        lift = density * GRAVITY * r["fill_m3"] * (z_ref - z_end)
+        acc = per.setdefault(r["strategy"], [0.0, 0.0, 0.0])
+        acc[0] += r["energy_J"] + lift
+        acc[1] += r["fill_m3"]
+        acc[2] += z_end
+    counts = {name: sum(1 for r in rows if r["strategy"] == name) for name in per}
+    return {"z_ref_m": z_ref,
+            "energy_per_m3_kJ": {n: a[0] / a[1] / 1e3 if a[1] > 0 else float("inf") for n, a in per.items()},
+            "mean_end_height_m": {n: a[2] / counts[n] for n, a in per.items()}}
+
+
+def markdown(result: dict[str, Any], cycles: Path | None = None) -> str:
+    """The run's tables; with ``cycles`` (the saved cycles' folder) also the energy with the kept load lifted
+    to the fixed path's end height (:func:`lifted_to_common_height`)."""
     summary = summarise(result["rows"])
     s = result["settings"]
-    lines = [f"| strategy ({result['plant']} plant) | cycles | energy per m³ | mean fill | next-cycle F_R error "
-             "(median, cycles ≥ 2 / ≥ 3) | plans passing the check | between cycles (median) |",
-             "|---|---|---|---|---|---|---|"]
+    common = lifted_to_common_height(result["rows"], cycles)
+    lifted = (" energy per m³, load lifted to the fixed path's end |" if common else "")
+    lines = [f"| strategy ({result['plant']} plant) | cycles | energy per m³ |{lifted} mean fill | next-cycle F_R "
+             "error (median, cycles ≥ 2 / ≥ 3) | plans passing the check | between cycles (median) |",
+             "|---|---|---|---|---|---|---|" + ("---|" if common else "")]
     for name, m in summary.items():
         passing = "– (Bézier)" if name == "fixed" else f"{m['plans_passing']}/{m['cycles']}"
-        lines.append(f"| {name} | {m['cycles']} | {m['energy_per_m3_kJ']:.1f} kJ/m³ | {m['mean_fill_fraction']:.0%} | "
+        cell = (f" {common['energy_per_m3_kJ'][name]:.1f} kJ/m³ (ends at {common['mean_end_height_m'][name]:.2f} m) |"
+                if common else "")
+        lines.append(f"| {name} | {m['cycles']} | {m['energy_per_m3_kJ']:.1f} kJ/m³ |{cell} "
+                     f"{m['mean_fill_fraction']:.0%} | "
                      f"{m['next_cycle_rmse_percent']:.1f} / {m['next_cycle_rmse_percent_from_cycle3']:.1f} % | "
                      f"{passing} | {m['median_between_cycles_s']:.2f} s |")
     lines += ["", "| per cycle: kJ/m³ (fill) | " + " | ".join(f"cycle {k}" for k in range(1, s["cycles"] + 1)) + " |",
@@ -216,7 +260,13 @@ def markdown(result: dict[str, Any]) -> str:
               f"saved by earlier ones are read, not dug again), load average at its end {load}. Energy = plant-"
               "measured work / plant-measured fill over all cycles; fill in % of the nominal 0.2 m³; fixed paths "
               "are Bézier paths (not checked); a plan that fails the check falls back to the Bézier path placed "
-              "by the model." + _kept_note(result["rows"]) + "*"]
+              "by the model."
+              + ("" if not common else
+                 f" 'Load lifted to the fixed path's end': each cycle's energy plus the work of lifting what it kept "
+                 f"from its end height to {common['z_ref_m']:.2f} m, where the fixed path ends (a plan that ends "
+                 "lower lifts its load less along the path; the loader lifts the rest afterwards; density the "
+                 "continuum's, else the soil preset's).")
+              + _kept_note(result["rows"]) + "*"]
     return "\n".join(lines) + "\n"
 
 
@@ -259,17 +309,17 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     if args.report:
         result = json.loads((out / "plant_adaptation.json").read_text())
-        (out / "plant_adaptation.md").write_text(markdown(result))
+        (out / "plant_adaptation.md").write_text(markdown(result, out / "cycles"))
         plot(result, out / "plant_adaptation.png")
-        print(markdown(result))
+        print(markdown(result, out / "cycles"))
         return 0
     out.mkdir(parents=True, exist_ok=True)
     result = run(args)
     result["summary"] = summarise(result["rows"])
     (out / "plant_adaptation.json").write_text(json.dumps(result, indent=1, default=str))
-    (out / "plant_adaptation.md").write_text(markdown(result))
+    (out / "plant_adaptation.md").write_text(markdown(result, out / "cycles"))
     plot(result, out / "plant_adaptation.png")
-    print(markdown(result))
+    print(markdown(result, out / "cycles"))
     return 0
 
 

@@ -290,3 +290,46 @@ def test_replay_benchmark_reproduces_the_loops_own_predictions(tmp_path):
     empty = subprocess.run([sys.executable, str(script), "--cycles", str(tmp_path / "none")], capture_output=True,
                            text=True, timeout=600)
     assert empty.returncode != 0 and "no such folder" in empty.stderr
+
+
+def test_plant_report_lifts_every_kept_load_to_the_fixed_paths_end_height(tmp_path):
+    """``benchmarks/adaptation.py --plant ... --report``: beside the plant's energy per m³, each strategy's energy
+    with the load it kept lifted from its end height to the fixed path's (known answer from the saved cycles)."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    plant = FEEEnvPlant(sensor_noise=0.0)
+    rows, ends = [], {}
+    for name, strategy in (("fixed", FixedBezier(preset(NOMINAL_SOIL))),
+                           ("ours", Calibrating(preset(NOMINAL_SOIL), "default", None))):
+        records, logs = run_plant_loop(plant, strategy, Pile.trapezoid(), "gravel", cycles=2,
+                                       cache=tmp_path / "cycles" / "gravel" / "seed0" / name)
+        rows += [dict(r.to_dict(), soil="gravel", seed=0) for r in records]
+        ends[name] = [float(log.path.z[-1]) for log in logs]
+    settings = {"soils": ["gravel"], "seeds": 1, "cycles": 2, "resolution": 0.02, "ray": "off"}
+    result = {"plant": "fee-env", "settings": settings, "rows": rows, "machine": {}, "wall_s": 1.0}
+    (tmp_path / "plant_adaptation.json").write_text(json.dumps(result, default=str))
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "adaptation.py"
+    done = subprocess.run([sys.executable, str(script), "--plant", "fee-env", "--report", "--out", str(tmp_path)],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    z_ref = max(ends["fixed"])
+    gamma = preset("gravel").gamma  # the FEE env's logs carry no continuum density: the preset's
+    table = (tmp_path / "plant_adaptation.md").read_text()
+    for name in ("fixed", "ours"):
+        sel = [r for r in rows if r["strategy"] == name]
+        lifted = sum(r["energy_J"] + gamma * 9.81 * r["fill_m3"] * (z_ref - z)
+                     for r, z in zip(sel, ends[name], strict=True))
+        expected = lifted / sum(r["fill_m3"] for r in sel) / 1e3
+        raw = sum(r["energy_J"] for r in sel) / sum(r["fill_m3"] for r in sel) / 1e3
+        assert expected > raw + 0.1  # cycle 1 ends 0.17 m below cycle 2 (z_ref): a real lift, not a no-op
+        mean_end = sum(ends[name]) / len(ends[name])
+        assert f"| {expected:.1f} kJ/m³ (ends at {mean_end:.2f} m) |" in table, table
+    # without the saved cycles the column is left out, not guessed
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "elsewhere" / "plant_adaptation.json").write_text(json.dumps(result, default=str))
+    again = subprocess.run([sys.executable, str(script), "--plant", "fee-env", "--report", "--out",
+                            str(tmp_path / "elsewhere")], capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0 and "load lifted" not in (tmp_path / "elsewhere" / "plant_adaptation.md").read_text()
