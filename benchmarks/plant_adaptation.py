@@ -200,17 +200,17 @@ def lifted_to_common_height(rows: list[dict[str, Any]], cycles: Path | None) -> 
         density = (log.metadata.get("continuum") or {}).get("density") or preset(r["soil"]).gamma
         ends.append((float(log.path.z[-1]), float(density)))
     z_ref = max(z for (z, _), r in zip(ends, rows, strict=True) if r["strategy"] == "fixed")
-    per: dict[str, list[float]] = {}
+    per: dict[str, list[float]] = {}  # strategy -> [lifted energy, kept volume, sum of end heights, cycles]
     for (z_end, density), r in zip(ends, rows, strict=True):
         lift = density * GRAVITY * r["fill_m3"] * (z_ref - z_end)
-        acc = per.setdefault(r["strategy"], [0.0, 0.0, 0.0])
+        acc = per.setdefault(r["strategy"], [0.0, 0.0, 0.0, 0])
         acc[0] += r["energy_J"] + lift
         acc[1] += r["fill_m3"]
         acc[2] += z_end
-    counts = {name: sum(1 for r in rows if r["strategy"] == name) for name in per}
+        acc[3] += 1
     return {"z_ref_m": z_ref,
             "energy_per_m3_kJ": {n: a[0] / a[1] / 1e3 if a[1] > 0 else float("inf") for n, a in per.items()},
-            "mean_end_height_m": {n: a[2] / counts[n] for n, a in per.items()}}
+            "mean_end_height_m": {n: a[2] / a[3] for n, a in per.items()}}
 
 
 def markdown(result: dict[str, Any], cycles: Path | None = None) -> str:
@@ -309,17 +309,15 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     if args.report:
         result = json.loads((out / "plant_adaptation.json").read_text())
-        (out / "plant_adaptation.md").write_text(markdown(result, out / "cycles"))
-        plot(result, out / "plant_adaptation.png")
-        print(markdown(result, out / "cycles"))
-        return 0
-    out.mkdir(parents=True, exist_ok=True)
-    result = run(args)
-    result["summary"] = summarise(result["rows"])
-    (out / "plant_adaptation.json").write_text(json.dumps(result, indent=1, default=str))
-    (out / "plant_adaptation.md").write_text(markdown(result, out / "cycles"))
+    else:
+        out.mkdir(parents=True, exist_ok=True)
+        result = run(args)
+        result["summary"] = summarise(result["rows"])
+        (out / "plant_adaptation.json").write_text(json.dumps(result, indent=1, default=str))
+    text = markdown(result, out / "cycles")  # reads every saved cycle: once
+    (out / "plant_adaptation.md").write_text(text)
     plot(result, out / "plant_adaptation.png")
-    print(markdown(result, out / "cycles"))
+    print(text)
     return 0
 
 

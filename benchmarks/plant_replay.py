@@ -81,9 +81,9 @@ def replay(files: list[Path], variant: str, sigma_s: float) -> list[dict[str, An
             start = time.perf_counter()
             result = calibrate(logs[k - 1], method=method, options=options)
             seconds = time.perf_counter() - start
-            rmse = predict(result, logs[k - 1], options=options).quality.percent_r
             rows.append({"variant": variant, "cycle": k, "calibrated_on": 1, "seconds": seconds,
-                         "converged": bool(result.success), "rmse_percent": rmse, "band_inside": 0,
+                         "converged": bool(result.success), "rmse_percent": result.quality.percent_r,
+                         "band_inside": 0,
                          "band_samples": 0, "floor": True, "params": result.params.to_dict()})
             continue
         earlier = logs[:k - 1] if window is None else logs[max(0, k - 1 - window):k - 1]
