@@ -567,18 +567,19 @@ def estimator_study(load, names, args) -> dict:
                 print(f"study {label:40s} {set_name:24s} train {train_name:9s}: unseen "
                       + " ".join(f"{k} {v['filtered']:.1f}" for k, v in unseen.items()) + " %", flush=True)
         out["variants"][label] = per
-        # the floor: each path fitted to itself (what no calibration on other paths can beat)
+        # each path fitted alone: the floor (its fit to itself, which no calibration on other paths can beat)
+        # and, below, the next path's prediction from it
+        alone = {set_name: {k: calibrate(logs[k][1], options=options, fill=spec["fill"], prior=spec.get("prior"))
+                            for k in sorted(logs)} for set_name, logs in sets.items()}
         out.setdefault("own_fit", {})[label] = {
-            set_name: {f"path{k}": calibrate(logs[k][1], options=options, fill=spec["fill"],
-                                             prior=spec.get("prior")).quality.percent_r for k in sorted(logs)}
-            for set_name, logs in sets.items()}
+            set_name: {f"path{k}": cal.quality.percent_r for k, cal in cals.items()}
+            for set_name, cals in alone.items()}
         # the next cycle: calibrate on path k alone, predict path k + 1 (error and band coverage)
         nxt: dict = {}
         for set_name, logs in sets.items():
             nxt[set_name] = {}
             for k in range(1, 4):
-                cal = calibrate(logs[k][1], options=options, fill=spec["fill"], prior=spec.get("prior"))
-                pf = predict(cal, logs[k + 1][1], band=BAND_LEVEL)
+                pf = predict(alone[set_name][k], logs[k + 1][1], band=BAND_LEVEL)
                 nxt[set_name][f"path{k}->path{k + 1}"] = {
                     "filtered": pf.quality.percent_r,
                     "band_coverage": pf.band.coverage(logs[k + 1][1].resultant, pf.state.depth > 0.0)}
