@@ -1,0 +1,185 @@
+"""The fixed Bezier path dug on the very piles a strategy's plant loop dug: a paired comparison.
+
+In ``benchmarks/adaptation.py --plant mpm`` every strategy carves its own pile cycle after cycle, so from
+cycle 2 on the fixed path and a planned path dig different piles. This benchmark takes a run's saved cycles
+and, for every cycle of the chosen strategies (default ``ours``), digs the fixed path (the default Bezier path
+placed on that cycle's start pile as the loop's ``fixed`` strategy places it,
+:func:`wheelloader.planner.bezier_on_face`) in the same plant, soil and seed. Each pair then differs only in
+the path: energy (work of the plant's bucket force along the path, :func:`wheelloader.references.metrics.cycle_work`)
+and fill (the plant's soil inside the bucket at the end) are measured the same way for both. The cycles it
+digs are saved beside the run's (``fixed_on_STRATEGY/cycleK.csv`` in each loop's folder of ``--out``); a
+second invocation reads them instead of digging again.
+
+Usage::
+
+    python benchmarks/plant_paired.py --cycles docs/results/adaptation_mpm_end55/cycles \\
+        --out docs/results/paired_mpm_end55 --ray local --ray-cpus 2
+    python benchmarks/plant_paired.py --plant fee-env --cycles RUN/cycles --out /tmp/paired   # FEE env plant
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from pathlib import Path
+from typing import Any
+
+from _machine import machine_info
+from plant_adaptation import make_plant
+from plant_replay import loops
+
+from wheelloader.provenance import commit_label, load_label
+from wheelloader.ray_mode import add_ray_arguments
+
+
+def dig_fixed_on_piles(plant: Any, files: list[str], soil: str, seed: int, folder: str) -> list[dict[str, Any]]:
+    """For each saved cycle (a CSV of the loop), the fixed path on its start pile: one row per cycle with both
+    paths' plant-measured energy and fill. Dug cycles are saved under ``folder`` and read back when present
+    (the fixed path's digest must match)."""
+    from wheelloader.estimator import CycleLog
+    from wheelloader.planner import bezier_on_face
+    from wheelloader.plant_loop import path_digest
+    from wheelloader.references.metrics import cycle_work
+
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for csv in files:
+        log = CycleLog.load(csv)
+        settings = getattr(plant, "settings", None)
+        if settings is not None and "settings" in log.metadata and log.metadata["settings"] != settings.to_dict():
+            raise ValueError(f"{csv} was dug with plant settings {log.metadata['settings']}, not this plant's "
+                             f"{settings.to_dict()} (--resolution?)")
+        path = bezier_on_face(log.pile)
+        digest = path_digest(path)
+        target = out / Path(csv).name
+        fixed = CycleLog.load(target) if target.exists() else None
+        resumed = fixed is not None and fixed.metadata.get("planned_path_sha256") == digest
+        if not resumed:
+            fixed = plant.dig(path, log.pile, soil, seed=seed)
+            fixed.metadata["planned_path_sha256"] = digest
+            fixed.metadata["paired_with"] = str(csv)
+            fixed.save(target, overwrite=True)
+        pair = {"cycle": int(Path(csv).stem.removeprefix("cycle")), "resumed": resumed}
+        for name, lg in (("strategy", log), ("fixed", fixed)):
+            fill = float(lg.fill_volume[-1])
+            energy = cycle_work(lg)
+            pair[f"{name}_fill_m3"] = fill
+            pair[f"{name}_energy_J"] = energy
+            pair[f"{name}_energy_per_m3"] = energy / fill if fill > 0 else float("inf")
+        pair["capacity_m3"] = log.bucket.capacity
+        rows.append(pair)
+        print(f"[{soil}, seed {seed}] cycle {pair['cycle']}: strategy {pair['strategy_energy_per_m3'] / 1e3:.1f} "
+              f"kJ/m^3 at {pair['strategy_fill_m3']:.4f} m^3, fixed {pair['fixed_energy_per_m3'] / 1e3:.1f} kJ/m^3 "
+              f"at {pair['fixed_fill_m3']:.4f} m^3" + (" (resumed)" if resumed else ""), flush=True)
+    return rows
+
+
+def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per strategy: pooled energy per m^3 (sum of work / sum of fill) of the strategy and of the fixed path on
+    the same piles, their ratio, mean fills, and the per-cycle differences."""
+    out: dict[str, dict[str, Any]] = {}
+    for name in sorted({r["strategy"] for r in rows}):
+        sel = [r for r in rows if r["strategy"] == name]
+        pooled = {}
+        for who in ("strategy", "fixed"):
+            pooled[who] = sum(r[f"{who}_energy_J"] for r in sel) / sum(r[f"{who}_fill_m3"] for r in sel)
+        fill_diff = [100.0 * (r["strategy_fill_m3"] - r["fixed_fill_m3"]) / r["capacity_m3"] for r in sel]
+        ratio = [r["strategy_energy_per_m3"] / r["fixed_energy_per_m3"] for r in sel]
+        out[name] = {"cycles": len(sel),
+                     "energy_per_m3_kJ": pooled["strategy"] / 1e3, "fixed_energy_per_m3_kJ": pooled["fixed"] / 1e3,
+                     "energy_ratio": pooled["strategy"] / pooled["fixed"],
+                     "mean_fill_fraction": statistics.fmean(r["strategy_fill_m3"] / r["capacity_m3"] for r in sel),
+                     "fixed_mean_fill_fraction": statistics.fmean(r["fixed_fill_m3"] / r["capacity_m3"] for r in sel),
+                     "fill_difference_points_median": statistics.median(fill_diff),
+                     "fill_difference_points_range": [min(fill_diff), max(fill_diff)],
+                     "cycles_with_equal_or_better_fill": sum(1 for d in fill_diff if d >= 0.0),
+                     "energy_ratio_per_cycle_median": statistics.median(ratio),
+                     "energy_ratio_per_cycle_range": [min(ratio), max(ratio)]}
+    return out
+
+
+def markdown(result: dict[str, Any]) -> str:
+    """The paired table and its provenance line."""
+    lines = ["| strategy (" + result["plant"] + " plant) | cycles | energy per m³: strategy / fixed on the same piles "
+             "| ratio (pooled; per cycle median, range) | mean fill: strategy / fixed | fill difference, points "
+             "(median, range) | cycles with equal or better fill |", "|---|---|---|---|---|---|---|"]
+    for name, s in result["summary"].items():
+        lo, hi = s["energy_ratio_per_cycle_range"]
+        dlo, dhi = s["fill_difference_points_range"]
+        lines.append(f"| {name} | {s['cycles']} "
+                     f"| {s['energy_per_m3_kJ']:.1f} / {s['fixed_energy_per_m3_kJ']:.1f} kJ/m³ "
+                     f"| {s['energy_ratio']:.2f} ({s['energy_ratio_per_cycle_median']:.2f}, {lo:.2f}-{hi:.2f}) "
+                     f"| {s['mean_fill_fraction']:.1%} / {s['fixed_mean_fill_fraction']:.1%} "
+                     f"| {s['fill_difference_points_median']:+.1f} ({dlo:+.1f} to {dhi:+.1f}) "
+                     f"| {s['cycles_with_equal_or_better_fill']}/{s['cycles']} |")
+    m = result["machine"]
+    lines.append("")
+    lines.append(f"*`python benchmarks/plant_paired.py --plant {result['plant']} "
+                 f"--cycles {result['settings']['cycles']}`"
+                 f" at {commit_label(m)}: for every saved cycle of the strategy, the fixed Bezier path placed on that "
+                 "cycle's start pile as the loop's fixed strategy places it, dug in the same plant, soil and seed. "
+                 "Energy = plant-measured work / plant-measured fill (pooled: sums over the cycles); fill in % of the "
+                 f"nominal bucket; {result['wall_s'] / 60:.0f} min, load average at the end {load_label(m)}.*")
+    return "\n".join(lines) + "\n"
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    from wheelloader.sweep import Unit, run_sweep
+
+    root = Path(args.cycles)
+    if not root.is_dir():
+        raise SystemExit(f"--cycles {root}: no such folder (a run of benchmarks/adaptation.py --plant ... saves it)")
+    found = {k: v for k, v in loops(root).items() if k[2] in args.strategies}
+    if not found:
+        raise SystemExit(f"--cycles {root}: no saved loop of {args.strategies}")
+    if args.quick:
+        found = {k: v[:1] for k, v in list(found.items())[:1]}
+    plant = make_plant(args.plant, args.resolution, threads=1)
+    started = time.perf_counter()
+    out = Path(args.out)
+    keys = list(found)
+    units = []
+    for soil, seed, strategy in keys:
+        if not seed.startswith("seed") or not seed.removeprefix("seed").isdigit():
+            raise SystemExit(f"--cycles {root}: folder {soil}/{seed} is not SOIL/seedN")
+        units.append(Unit(dig_fixed_on_piles, {"plant": plant, "files": [str(f) for f in found[(soil, seed, strategy)]],
+                                                "soil": soil, "seed": int(seed.removeprefix("seed")),
+                                                "folder": str(out / "cycles" / soil / seed / f"fixed_on_{strategy}")},
+                          label=f"{soil} | {seed} | fixed on {strategy}'s piles", num_cpus=1))
+    print(f"{len(units)} loops' piles, fixed path dug on each ({args.plant} plant, --ray {args.ray})", flush=True)
+    values = run_sweep(units, args.ray, ray_cpus=args.ray_cpus, progress=lambda line: print(line, flush=True))
+    rows = []
+    for (soil, seed, strategy), loop_rows in zip(keys, values.values_or_raise(), strict=True):
+        rows += [dict(r, soil=soil, seed=seed, strategy=strategy) for r in loop_rows]
+    result = {"benchmark": "plant_paired", "plant": args.plant, "settings": vars(args),
+              "machine": machine_info(), "rows": rows, "wall_s": time.perf_counter() - started}
+    result["summary"] = summarise(rows)
+    return result
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cycles", required=True, help="a plant run's saved loops (SOIL/seedN/STRATEGY/cycleK.csv)")
+    parser.add_argument("--out", default="results/plant_paired", help="output directory (its cycles/ is reused)")
+    parser.add_argument("--plant", choices=("mpm", "fee-env"), default="mpm",
+                        help="the plant the run's cycles were dug in (default mpm)")
+    parser.add_argument("--resolution", type=float, default=0.02, help="MPM grid spacing [m] (the run's; default 0.02)")
+    parser.add_argument("--strategies", nargs="+", default=["ours"], help="whose piles (default ours)")
+    parser.add_argument("--quick", action="store_true", help="smoke run: the first cycle of one loop")
+    add_ray_arguments(parser)
+    args = parser.parse_args(argv)
+    result = run(args)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "plant_paired.json").write_text(json.dumps(result, indent=1, default=str))
+    text = markdown(result)
+    (out / "plant_paired.md").write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
