@@ -15,6 +15,7 @@ Usage::
     python benchmarks/plant_paired.py --cycles docs/results/adaptation_mpm_end55/cycles \\
         --out docs/results/paired_mpm_end55 --ray local --ray-cpus 2
     python benchmarks/plant_paired.py --plant fee-env --cycles RUN/cycles --out /tmp/paired   # FEE env plant
+    python benchmarks/plant_paired.py --report --cycles RUN/cycles --out docs/results/paired_mpm_end55  # table only
 """
 
 from __future__ import annotations
@@ -129,6 +130,8 @@ def markdown(result: dict[str, Any]) -> str:
 def run(args: argparse.Namespace) -> dict[str, Any]:
     from wheelloader.sweep import Unit, run_sweep
 
+    if args.cycles is None:
+        raise SystemExit("--cycles is needed: the folder of a plant run's saved loops")
     root = Path(args.cycles)
     if not root.is_dir():
         raise SystemExit(f"--cycles {root}: no such folder (a run of benchmarks/adaptation.py --plant ... saves it)")
@@ -162,19 +165,28 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--cycles", required=True, help="a plant run's saved loops (SOIL/seedN/STRATEGY/cycleK.csv)")
+    parser.add_argument("--cycles", default=None,
+                        help="a plant run's saved loops (SOIL/seedN/STRATEGY/cycleK.csv); needed unless --report")
     parser.add_argument("--out", default="results/plant_paired", help="output directory (its cycles/ is reused)")
     parser.add_argument("--plant", choices=("mpm", "fee-env"), default="mpm",
                         help="the plant the run's cycles were dug in (default mpm)")
     parser.add_argument("--resolution", type=float, default=0.02, help="MPM grid spacing [m] (the run's; default 0.02)")
     parser.add_argument("--strategies", nargs="+", default=["ours"], help="whose piles (default ours)")
     parser.add_argument("--quick", action="store_true", help="smoke run: the first cycle of one loop")
+    parser.add_argument("--report", action="store_true",
+                        help="only regenerate plant_paired.md from the plant_paired.json in --out")
     add_ray_arguments(parser)
     args = parser.parse_args(argv)
-    result = run(args)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "plant_paired.json").write_text(json.dumps(result, indent=1, default=str))
+    if args.report:
+        saved = out / "plant_paired.json"
+        if not saved.is_file():
+            raise SystemExit(f"--report: {saved} not found (run without --report first)")
+        result = json.loads(saved.read_text())
+    else:
+        result = run(args)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "plant_paired.json").write_text(json.dumps(result, indent=1, default=str))
     text = markdown(result)
     (out / "plant_paired.md").write_text(text)
     print(text)

@@ -10,6 +10,7 @@ import pytest
 
 from wheelloader.adaptation import NOMINAL_SOIL, Calibrating, FixedBezier
 from wheelloader.estimator import Bucket, BucketPath, CycleLog, Pile, WheelloaderError, preset
+from wheelloader.planner import PlanOutcome
 from wheelloader.plant_loop import Hindsight, hindsight_parameters, path_digest, path_distance, run_plant_loop
 from wheelloader.references import Plant
 from wheelloader.references.fee_env import FEEEnvPlant
@@ -333,3 +334,59 @@ def test_plant_report_lifts_every_kept_load_to_the_fixed_paths_end_height(tmp_pa
     again = subprocess.run([sys.executable, str(script), "--plant", "fee-env", "--report", "--out",
                             str(tmp_path / "elsewhere")], capture_output=True, text=True, timeout=600)
     assert again.returncode == 0 and "load lifted" not in (tmp_path / "elsewhere" / "plant_adaptation.md").read_text()
+
+
+class _DeeperBezier(FixedBezier):
+    """A strategy that digs the fixed path 5 cm deeper (another path, so another carved pile)."""
+
+    name = "deeper"
+
+    def plan(self, pile):
+        outcome = super().plan(pile)
+        return PlanOutcome(outcome.path.shifted(dz=-0.05, name="deeper"), True, "deeper Bezier", 0.0)
+
+
+def test_plant_paired_digs_the_fixed_path_on_each_saved_pile_and_resumes(tmp_path):
+    """``benchmarks/plant_paired.py``: it digs the fixed path on the pile each saved cycle started from, in the
+    same plant, soil and seed. Known answers: a loop that digs the fixed path itself pairs with its own cycles
+    (ratio 1, equal fill); on another strategy's first pile (the fresh pile every loop starts from) the paired dig
+    is the fixed loop's first cycle, on its later, differently carved piles it is not; the strategy's side is its
+    saved cycles' own measurement; a second invocation reads the dug cycles back."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    plant = FEEEnvPlant()  # the benchmark's --plant fee-env
+    measured = {}
+    for strategy in (FixedBezier(preset(NOMINAL_SOIL)), _DeeperBezier(preset(NOMINAL_SOIL))):
+        records, _ = run_plant_loop(plant, strategy, Pile.trapezoid(), "gravel", cycles=2, seed=1,
+                                    cache=tmp_path / "run" / "gravel" / "seed1" / strategy.name)
+        measured[strategy.name] = records
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "plant_paired.py"
+    command = [sys.executable, str(script), "--plant", "fee-env", "--cycles", str(tmp_path / "run"), "--out",
+               str(tmp_path / "out"), "--ray", "off", "--strategies", "fixed", "deeper"]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    result = json.loads((tmp_path / "out" / "plant_paired.json").read_text())
+    rows = {(r["strategy"], r["cycle"]): r for r in result["rows"]}
+    assert sorted(rows) == [("deeper", 1), ("deeper", 2), ("fixed", 1), ("fixed", 2)]
+    for name in ("fixed", "deeper"):
+        for k, record in enumerate(measured[name], start=1):
+            assert rows[(name, k)]["strategy_energy_J"] == pytest.approx(record.energy_J, rel=1e-9)
+            assert rows[(name, k)]["strategy_fill_m3"] == pytest.approx(record.fill_m3, rel=1e-9)
+    for k, record in enumerate(measured["fixed"], start=1):  # the fixed loop paired with itself
+        assert rows[("fixed", k)]["fixed_energy_J"] == pytest.approx(record.energy_J, rel=1e-9)
+        assert rows[("fixed", k)]["fixed_fill_m3"] == pytest.approx(record.fill_m3, rel=1e-9)
+    assert result["summary"]["fixed"]["energy_ratio"] == pytest.approx(1.0, rel=1e-9)
+    assert result["summary"]["fixed"]["fill_difference_points_median"] == pytest.approx(0.0, abs=1e-9)
+    assert rows[("deeper", 1)]["fixed_energy_J"] == pytest.approx(measured["fixed"][0].energy_J, rel=1e-9)
+    assert rows[("deeper", 2)]["fixed_energy_J"] != pytest.approx(measured["fixed"][1].energy_J, rel=1e-3)
+    deeper = [rows[("deeper", k)] for k in (1, 2)]
+    pooled = (sum(r["strategy_energy_J"] for r in deeper) / sum(r["strategy_fill_m3"] for r in deeper)) / (
+        sum(r["fixed_energy_J"] for r in deeper) / sum(r["fixed_fill_m3"] for r in deeper))
+    assert result["summary"]["deeper"]["energy_ratio"] == pytest.approx(pooled, rel=1e-12)
+    assert "| deeper | 2 |" in (tmp_path / "out" / "plant_paired.md").read_text()
+    again = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0 and again.stdout.count("(resumed)") == 4, again.stdout[-2000:]
+    assert all(r["resumed"] for r in json.loads((tmp_path / "out" / "plant_paired.json").read_text())["rows"])
