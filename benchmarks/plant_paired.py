@@ -61,7 +61,7 @@ def dig_fixed_on_piles(plant: Any, files: list[str], soil: str, seed: int, folde
         if not resumed:
             fixed = plant.dig(path, log.pile, soil, seed=seed)
             fixed.metadata["planned_path_sha256"] = digest
-            fixed.metadata["paired_with"] = str(csv)
+            fixed.metadata["paired_with"] = "/".join(Path(csv).parts[-4:])  # SOIL/seedN/STRATEGY/cycleK.csv
             fixed.save(target, overwrite=True)
         pair = {"cycle": int(Path(csv).stem.removeprefix("cycle")), "resumed": resumed}
         for name, lg in (("strategy", log), ("fixed", fixed)):
