@@ -8,7 +8,7 @@ placed on that cycle's start pile as the loop's ``fixed`` strategy places it,
 the path: energy (work of the plant's bucket force along the path, :func:`wheelloader.references.metrics.cycle_work`)
 and fill (the plant's soil inside the bucket at the end) are measured the same way for both. The cycles it
 digs are saved beside the run's (``fixed_on_STRATEGY/cycleK.csv`` in each loop's folder of ``--out``); a
-second invocation reads them instead of digging again.
+second invocation reads them instead of digging again (one dug along another path is refused unless ``--force``).
 
 Usage::
 
@@ -35,10 +35,11 @@ from wheelloader.provenance import commit_label, load_label
 from wheelloader.ray_mode import add_ray_arguments
 
 
-def dig_fixed_on_piles(plant: Any, files: list[str], soil: str, seed: int, folder: str) -> list[dict[str, Any]]:
+def dig_fixed_on_piles(plant: Any, files: list[str], soil: str, seed: int, folder: str,
+                       force: bool = False) -> list[dict[str, Any]]:
     """For each saved cycle (a CSV of the loop), the fixed path on its start pile: one row per cycle with both
-    paths' plant-measured energy and fill. Dug cycles are saved under ``folder`` and read back when present
-    (the fixed path's digest must match)."""
+    paths' plant-measured energy and fill. Dug cycles are saved under ``folder`` and read back when present;
+    one saved for another path (its digest differs) is an error unless ``force``, which digs it again."""
     from wheelloader.estimator import CycleLog
     from wheelloader.planner import bezier_on_face
     from wheelloader.plant_loop import path_digest
@@ -58,6 +59,9 @@ def dig_fixed_on_piles(plant: Any, files: list[str], soil: str, seed: int, folde
         target = out / Path(csv).name
         fixed = CycleLog.load(target) if target.exists() else None
         resumed = fixed is not None and fixed.metadata.get("planned_path_sha256") == digest
+        if fixed is not None and not resumed and not force:
+            raise ValueError(f"{target} holds a cycle dug along another path than the fixed path placed on "
+                             f"{csv}'s pile now; remove it or pass --force to dig it again")
         if not resumed:
             fixed = plant.dig(path, log.pile, soil, seed=seed)
             fixed.metadata["planned_path_sha256"] = digest
@@ -150,6 +154,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             raise SystemExit(f"--cycles {root}: folder {soil}/{seed} is not SOIL/seedN")
         units.append(Unit(dig_fixed_on_piles, {"plant": plant, "files": [str(f) for f in found[(soil, seed, strategy)]],
                                                 "soil": soil, "seed": int(seed.removeprefix("seed")),
+                                                "force": args.force,
                                                 "folder": str(out / "cycles" / soil / seed / f"fixed_on_{strategy}")},
                           label=f"{soil} | {seed} | fixed on {strategy}'s piles", num_cpus=1))
     print(f"{len(units)} loops' piles, fixed path dug on each ({args.plant} plant, --ray {args.ray})", flush=True)
@@ -173,6 +178,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--resolution", type=float, default=0.02, help="MPM grid spacing [m] (the run's; default 0.02)")
     parser.add_argument("--strategies", nargs="+", default=["ours"], help="whose piles (default ours)")
     parser.add_argument("--quick", action="store_true", help="smoke run: the first cycle of one loop")
+    parser.add_argument("--force", action="store_true",
+                        help="dig again a saved fixed-path cycle that was dug along another path (default: refuse)")
     parser.add_argument("--report", action="store_true",
                         help="only regenerate plant_paired.md from the plant_paired.json in --out")
     add_ray_arguments(parser)

@@ -390,3 +390,12 @@ def test_plant_paired_digs_the_fixed_path_on_each_saved_pile_and_resumes(tmp_pat
     again = subprocess.run(command, capture_output=True, text=True, timeout=600)
     assert again.returncode == 0 and again.stdout.count("(resumed)") == 4, again.stdout[-2000:]
     assert all(r["resumed"] for r in json.loads((tmp_path / "out" / "plant_paired.json").read_text())["rows"])
+    # a saved cycle dug along another path is not overwritten without --force
+    saved = tmp_path / "out" / "cycles" / "gravel" / "seed1" / "fixed_on_deeper" / "cycle2.json"
+    text = saved.read_text()
+    assert text.count('"planned_path_sha256": "') == 1
+    saved.write_text(text.replace('"planned_path_sha256": "', '"planned_path_sha256": "0'))
+    refused = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert refused.returncode != 0 and "pass --force" in refused.stderr, refused.stderr[-2000:]
+    forced = subprocess.run(command + ["--force"], capture_output=True, text=True, timeout=600)
+    assert forced.returncode == 0 and forced.stdout.count("(resumed)") == 3, forced.stdout[-2000:]
