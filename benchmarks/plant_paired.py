@@ -7,7 +7,7 @@ placed on that cycle's start pile as the loop's ``fixed`` strategy places it,
 :func:`wheelloader.planner.bezier_on_face`) in the same plant, soil and seed. Each pair then differs only in
 the path: energy (work of the plant's bucket force along the path, :func:`wheelloader.references.metrics.cycle_work`)
 and fill (the plant's soil inside the bucket at the end) are measured the same way for both. The cycles it
-digs are saved beside the run's (``fixed_on_STRATEGY/cycleK.csv`` in each loop's folder of ``--out``); a
+digs are saved beside the run's (``fixed_on_STRATEGY/cycleK/cycle1.csv`` in each loop's folder of ``--out``); a
 second invocation reads them instead of digging again (one dug along another path is refused unless ``--force``).
 
 Usage::
@@ -38,47 +38,44 @@ from wheelloader.ray_mode import add_ray_arguments
 def dig_fixed_on_piles(plant: Any, files: list[str], soil: str, seed: int, folder: str,
                        force: bool = False) -> list[dict[str, Any]]:
     """For each saved cycle (a CSV of the loop), the fixed path on its start pile: one row per cycle with both
-    paths' plant-measured energy and fill. Dug cycles are saved under ``folder`` and read back when present;
-    one saved for another path (its digest differs) is an error unless ``force``, which digs it again."""
-    from wheelloader.estimator import CycleLog
-    from wheelloader.planner import bezier_on_face
-    from wheelloader.plant_loop import path_digest
+    paths' plant-measured energy and fill. Each fixed-path cycle is a one-cycle plant loop of the fixed strategy
+    on that pile (:func:`wheelloader.plant_loop.run_plant_loop`: the same placement, digest, saved cycle and
+    measurement as the run's), saved under ``folder/cycleK`` and read back when present; one saved for another
+    path is an error unless ``force``, which digs it again."""
+    from wheelloader.adaptation import NOMINAL_SOIL, FixedBezier
+    from wheelloader.estimator import CycleLog, WheelloaderError, preset
+    from wheelloader.plant_loop import run_plant_loop
     from wheelloader.references.metrics import cycle_work
 
-    out = Path(folder)
-    out.mkdir(parents=True, exist_ok=True)
+    settings = getattr(plant, "settings", None)
+    expected = settings.to_dict() if settings is not None else None
     rows = []
     for csv in files:
         log = CycleLog.load(csv)
-        settings = getattr(plant, "settings", None)
-        if settings is not None and "settings" in log.metadata and log.metadata["settings"] != settings.to_dict():
+        if expected is not None and "settings" in log.metadata and log.metadata["settings"] != expected:
             raise ValueError(f"{csv} was dug with plant settings {log.metadata['settings']}, not this plant's "
-                             f"{settings.to_dict()} (--resolution?)")
-        path = bezier_on_face(log.pile)
-        digest = path_digest(path)
-        target = out / Path(csv).name
-        fixed = CycleLog.load(target) if target.exists() else None
-        resumed = fixed is not None and fixed.metadata.get("planned_path_sha256") == digest
-        if fixed is not None and not resumed and not force:
-            raise ValueError(f"{target} holds a cycle dug along another path than the fixed path placed on "
-                             f"{csv}'s pile now; remove it or pass --force to dig it again")
-        if not resumed:
-            fixed = plant.dig(path, log.pile, soil, seed=seed)
-            fixed.metadata["planned_path_sha256"] = digest
-            fixed.metadata["paired_with"] = "/".join(Path(csv).parts[-4:])  # SOIL/seedN/STRATEGY/cycleK.csv
-            fixed.save(target, overwrite=True)
-        pair = {"cycle": int(Path(csv).stem.removeprefix("cycle")), "resumed": resumed}
-        for name, lg in (("strategy", log), ("fixed", fixed)):
-            fill = float(lg.fill_volume[-1])
-            energy = cycle_work(lg)
-            pair[f"{name}_fill_m3"] = fill
-            pair[f"{name}_energy_J"] = energy
-            pair[f"{name}_energy_per_m3"] = energy / fill if fill > 0 else float("inf")
-        pair["capacity_m3"] = log.bucket.capacity
+                             f"{expected} (--resolution?)")
+        k = int(Path(csv).stem.removeprefix("cycle"))
+        cache = Path(folder) / f"cycle{k}"
+        try:
+            records, _ = run_plant_loop(plant, FixedBezier(preset(NOMINAL_SOIL)), log.pile, soil, cycles=1,
+                                        seed=seed, cache=cache, stale="redig" if force else "error")
+        except WheelloaderError as exc:
+            if force or not (cache / "cycle1.csv").exists():
+                raise
+            raise WheelloaderError(f"{exc} (the fixed path on {csv}'s pile: pass --force to dig it again)") from None
+        fixed = records[0]
+        strategy_fill = float(log.fill_volume[-1])
+        strategy_energy = cycle_work(log)
+        pair = {"cycle": k, "resumed": fixed.end == "resumed from cache",
+                "strategy_fill_m3": strategy_fill, "strategy_energy_J": strategy_energy,
+                "strategy_energy_per_m3": strategy_energy / strategy_fill if strategy_fill > 0 else float("inf"),
+                "fixed_fill_m3": fixed.fill_m3, "fixed_energy_J": fixed.energy_J,
+                "fixed_energy_per_m3": fixed.energy_per_m3, "capacity_m3": log.bucket.capacity}
         rows.append(pair)
-        print(f"[{soil}, seed {seed}] cycle {pair['cycle']}: strategy {pair['strategy_energy_per_m3'] / 1e3:.1f} "
-              f"kJ/m^3 at {pair['strategy_fill_m3']:.4f} m^3, fixed {pair['fixed_energy_per_m3'] / 1e3:.1f} kJ/m^3 "
-              f"at {pair['fixed_fill_m3']:.4f} m^3" + (" (resumed)" if resumed else ""), flush=True)
+        print(f"[{soil}, seed {seed}] cycle {k}: strategy {pair['strategy_energy_per_m3'] / 1e3:.1f} "
+              f"kJ/m^3 at {strategy_fill:.4f} m^3, fixed {fixed.energy_per_m3 / 1e3:.1f} kJ/m^3 "
+              f"at {fixed.fill_m3:.4f} m^3" + (" (resumed)" if pair["resumed"] else ""), flush=True)
     return rows
 
 

@@ -391,7 +391,7 @@ def test_plant_paired_digs_the_fixed_path_on_each_saved_pile_and_resumes(tmp_pat
     assert again.returncode == 0 and again.stdout.count("(resumed)") == 4, again.stdout[-2000:]
     assert all(r["resumed"] for r in json.loads((tmp_path / "out" / "plant_paired.json").read_text())["rows"])
     # a saved cycle dug along another path is not overwritten without --force
-    saved = tmp_path / "out" / "cycles" / "gravel" / "seed1" / "fixed_on_deeper" / "cycle2.json"
+    saved = tmp_path / "out" / "cycles" / "gravel" / "seed1" / "fixed_on_deeper" / "cycle2" / "cycle1.json"
     text = saved.read_text()
     assert text.count('"planned_path_sha256": "') == 1
     saved.write_text(text.replace('"planned_path_sha256": "', '"planned_path_sha256": "0'))
