@@ -16,11 +16,13 @@ Keyword arguments of :class:`BucketLoadingEnv` pass through ``gym.make``.
 
 Modules: ``bucket_loading`` (the env), ``vector`` (the NumPy-batched env),
 ``bookkeeping`` (work, reward terms, cycle end and reset options, one copy
-for every backend), ``config`` (settings, shared random draws), ``soils``
-(hidden soil, domain randomisation), ``truth`` (effects beyond the model),
-``cycle_logs``, ``batched_surface``, ``scripted`` (path tracking),
-``rendering``, and ``sb3`` (the stable-baselines3 adapter; import it only
-with stable-baselines3 installed).
+for every backend), ``config`` (``EnvConfig``, the settings, and the shared
+random draws), ``rllib_env_config`` (construction from RLlib's ``env_config``
+mapping), ``soils`` (hidden soil, domain randomisation), ``truth`` (effects
+beyond the model), ``cycle_history`` (the finished cycles an env keeps),
+``batched_surface``, ``scripted`` (path tracking), ``rendering``, and
+``sb3`` (the stable-baselines3 adapter; import it only with
+stable-baselines3 installed).
 """
 
 from gymnasium.envs.registration import register, registry

@@ -51,8 +51,8 @@ from .config import (
     make_config,
     next_pile,
 )
-from .cycle_logs import RECORD_KEYS, CycleHistory, to_cycle_log
-from .env_config import accepts_env_config
+from .cycle_history import RECORD_KEYS, CycleHistory, to_cycle_log
+from .rllib_env_config import accepts_env_config
 from .truth import TruthOptions, as_truth, model_excess, stone_decay, stone_step
 
 __all__ = ["RESET_OPTIONS", "BucketLoadingEnv"]
@@ -593,7 +593,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
     def episode_record(self, index: int = -1, current: bool = False) -> dict[str, Any]:
         """Raw arrays of a finished cycle (``index`` into the kept cycles) or of the current one.
 
-        Keys (:data:`~wheelloader.envs.cycle_logs.RECORD_KEYS`): ``t, x, z, blade_angle`` (path),
+        Keys (:data:`~wheelloader.envs.cycle_history.RECORD_KEYS`): ``t, x, z, blade_angle`` (path),
         ``F_T, F_N`` (measured), ``fill`` [m^3], ``true_F_T, true_F_N`` (noise-free plant forces), ``flags``.
         """
         if current:

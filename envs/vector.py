@@ -63,7 +63,7 @@ from .config import (
     make_config,
     next_pile,
 )
-from .env_config import accepts_env_config
+from .rllib_env_config import accepts_env_config
 from .truth import model_excess, stone_decay, stone_step
 
 __all__ = ["STEP_INFO_KEYS", "BucketLoadingVectorEnv"]

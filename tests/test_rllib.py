@@ -111,10 +111,10 @@ def _train_modules():
     train = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "train")
     if train not in sys.path:
         sys.path.insert(0, train)
-    import evaluation
     import policies
+    import rollouts
 
-    return policies, evaluation
+    return policies, rollouts
 
 
 def test_rllib_policy_loads_a_saved_module_and_runs_the_evaluation_episode(tmp_path):
@@ -124,7 +124,7 @@ def test_rllib_policy_loads_a_saved_module_and_runs_the_evaluation_episode(tmp_p
     from ray.rllib.algorithms.ppo.ppo_catalog import PPOCatalog
     from ray.rllib.algorithms.ppo.torch.default_ppo_torch_rl_module import DefaultPPOTorchRLModule
 
-    policies, evaluation = _train_modules()
+    policies, rollouts = _train_modules()
     env = gym.make("wheelloader/BucketLoading-v0")
     module = DefaultPPOTorchRLModule(observation_space=env.observation_space, action_space=env.action_space,
                                      model_config={"fcnet_hiddens": [8]}, catalog_class=PPOCatalog,
@@ -136,7 +136,7 @@ def test_rllib_policy_loads_a_saved_module_and_runs_the_evaluation_episode(tmp_p
     first = policy.act(obs)
     assert first.shape == (3,) and first.dtype == np.float32 and np.all(np.abs(first) <= 1.0)
     np.testing.assert_array_equal(policy.act(obs), first)  # deterministic
-    episode = evaluation.run_episode(policy, "gravel", 2000, {"max_episode_steps": 40})
+    episode = rollouts.run_episode(policy, "gravel", 2000, {"max_episode_steps": 40})
     assert episode["steps"] <= 40 and set(episode) >= {"return", "fill_fraction", "energy_J", "stall"}
 
 

@@ -44,7 +44,7 @@ def common() -> SimpleNamespace:
     if str(TRAIN) not in sys.path:
         sys.path.insert(0, str(TRAIN))
     names: dict = {}
-    for module in ("common", "setups", "policies", "evaluation", "curves", "training"):
+    for module in ("common", "setups", "policies", "rollouts", "curves", "training"):
         names.update({k: v for k, v in vars(importlib.import_module(module)).items() if not k.startswith("_")})
     return SimpleNamespace(**names)
 

@@ -7,7 +7,7 @@ script's folder first on ``sys.path``; the tests add it). By role:
 * ``setups``: the training VecEnv (the packaged SB3 adapter
   :mod:`wheelloader.envs.sb3`) and the two training set-ups;
 * ``policies``: baseline policies and SB3 models behind one ``reset`` / ``act`` interface;
-* ``evaluation``: episodes, summaries, evaluation of several policies;
+* ``rollouts``: episodes, summaries, evaluation of several policies;
 * ``curves``: the learning-curve callback and plot;
 * ``training``: the shared training arguments and the training run of ``ppo.py`` / ``sac.py``.
 """

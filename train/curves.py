@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 from common import write_json
-from evaluation import run_episode, summarize
 from policies import SB3Policy
+from rollouts import run_episode, summarize
 from stable_baselines3.common.callbacks import BaseCallback
 
 

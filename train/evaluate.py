@@ -28,8 +28,8 @@ import time
 from pathlib import Path
 
 from common import int_list, machine_info, set_torch_threads, str_list, write_json
-from evaluation import evaluate, summarize
 from policies import PathPolicy, RandomPolicy, load_rllib, load_sb3, mpc_policy
+from rollouts import evaluate, summarize
 
 _COLUMNS = (("return", "return", "{:.3f}"), ("fill", "fill_fraction", "{:.3f}"), ("energy [kJ]", "energy_J", None),
             ("energy/m^3 [kJ/m^3]", "energy_per_m3_J", None), ("stall rate", "stall_rate", "{:.2f}"),
