@@ -184,6 +184,8 @@ class CycleLog:
             raise CycleLogError(f"{sidecar}: not a UTF-8 JSON file ({exc.reason} at byte {exc.start})") from None
         except IsADirectoryError:
             raise CycleLogError(f"{sidecar}: is a directory, expected the JSON sidecar") from None
+        except RecursionError:
+            raise CycleLogError(f"{sidecar}: not valid JSON (nested too deeply to read)") from None
         if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
             raise CycleLogError(f'{sidecar}: "format" must be "{FORMAT_NAME}"')
         if meta.get("version") != FORMAT_VERSION:

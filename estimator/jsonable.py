@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 from typing import Any
@@ -32,3 +33,27 @@ def to_jsonable(value: Any) -> Any:
     if hasattr(value, "to_dict") and callable(value.to_dict):
         return to_jsonable(value.to_dict())
     return value
+
+
+def read_json(path: str | Path, error: type[Exception] | None = None) -> Any:
+    """The JSON value in the file ``path``, with one clear error for a file that is not JSON.
+
+    Raises
+    ------
+    ParameterError (or ``error``)
+        Not valid JSON, not UTF-8, a directory, or nested too deeply to read (Python's recursion limit).
+    """
+    from .errors import ParameterError
+
+    error = error or ParameterError
+    path = Path(path)
+    try:
+        return json.loads(path.read_text(encoding="utf-8-sig"))
+    except json.JSONDecodeError as exc:
+        raise error(f"{path}: not a valid JSON file ({exc})") from None
+    except UnicodeDecodeError as exc:
+        raise error(f"{path}: not a valid JSON file (not UTF-8: {exc.reason} at byte {exc.start})") from None
+    except IsADirectoryError:
+        raise error(f"{path}: not a valid JSON file (a directory)") from None
+    except RecursionError:
+        raise error(f"{path}: not a valid JSON file (nested too deeply to read)") from None

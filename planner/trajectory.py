@@ -28,6 +28,7 @@ from wheelloader.estimator import (
 
 from .casadi_model import soil_vector
 from .guess import face_position, first_rise, straight_dig, surface_dig
+from .interrupt import guarded
 from .nlp import build
 from .options import PlannerOptions, StartState
 from .plan import Plan
@@ -172,7 +173,7 @@ class TrajectoryOptimizer:
                 args["p"] = p = np.concatenate([self._parameters(soil, pile, start, h, lam, windows), tail])
                 if checkpoint is not None:
                     monitor.watch = _Watch(self, checkpoint, checkpoint_every, p, h, start, face, iterations)
-                sol = self._solver(**args)
+                sol = guarded(self._solver, **args)  # Ctrl-C is re-raised, never kept as a plan
                 stats = dict(self._solver.stats())
                 if isinstance(monitor.watch, _Watch) and monitor.watch.error is not None:
                     raise monitor.watch.error

@@ -189,6 +189,7 @@ def test_dem_reference_command_runs_cases_through_the_sweep(tmp_path, monkeypatc
     from wheelloader.cli import main
 
     monkeypatch.setattr(dem, "run_reference", _fake_reference_run)
+    monkeypatch.setattr("wheelloader.references.dem.runner.find_yade", lambda: "yade")  # the fake needs no Yade
     argv = ["dem", "reference", "--out", str(tmp_path), "--ray", "off", "--only"]
     assert main([*argv, "gravel_path1", "gravel_dual"]) == 0
     manifest = json.loads((tmp_path / "manifest.json").read_text())

@@ -336,7 +336,7 @@ def load_saved_model(path: str | Path) -> SavedModel:
 
     try:
         data = json.loads(Path(path).read_text(encoding="utf-8-sig"))
-    except (OSError, json.JSONDecodeError, UnicodeDecodeError):
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError, RecursionError):
         return SavedModel()
     settings = (data.get("calibration") or {}).get("settings") or {} if isinstance(data, dict) else {}
     options = settings.get("model_options")
@@ -366,6 +366,8 @@ def load_params(source: str | Path | dict | Calibration | SoilParams) -> SoilPar
             data = json.loads(path.read_text(encoding="utf-8-sig"))
         except (json.JSONDecodeError, UnicodeDecodeError, IsADirectoryError) as exc:
             raise ParameterError(f"{path}: not a valid JSON file ({exc})") from None
+        except RecursionError:
+            raise ParameterError(f"{path}: not a valid JSON file (nested too deeply to read)") from None
         if not isinstance(data, dict):
             raise ParameterError(f"{path}: expected a JSON object with the soil parameters")
         try:

@@ -5,7 +5,8 @@ and sets ``func`` (a callable taking the parsed arguments and returning an exit 
 happen inside the handlers, so ``wheelloader --help`` stays fast. Every subcommand shares the output
 rules of :mod:`wheelloader.cli.output` (checked before work, atomic, ``--force``, never over an input).
 Exit status: 0 success, 1 ran but the result is not usable (the output says why), 2 bad input or an
-error reading or writing a file (one ``wheelloader: error:`` line, no traceback).
+error reading or writing a file (one ``wheelloader: error:`` line, no traceback), 130 interrupted (Ctrl-C:
+the line ``wheelloader: interrupted``, no output written, every earlier file as it was).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import importlib
 import logging
 import os
 import sys
+from typing import NoReturn
 
 from wheelloader import __version__
 
@@ -27,9 +29,18 @@ COMMAND_MODULES: tuple[str, ...] = (
 )
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one ``wheelloader: error:`` line (exit status 2)."""
+
+    def error(self, message: str) -> NoReturn:
+        command = self.prog.removeprefix("wheelloader").strip()
+        where = f"{command}: " if command else ""
+        self.exit(2, f"wheelloader: error: {where}{message} (see '{self.prog} --help')\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="wheelloader",
         description="Soil-force estimation, simulation and planning for wheel-loader bucket loading.",
     )
@@ -56,12 +67,16 @@ def main(argv: list[str] | None = None) -> int:
     # BLAS on a 2-core machine; default to one thread unless the user chose otherwise.
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(var, "1")
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if not hasattr(args, "func"):
-        parser.print_help()
-        return 2
-    _configure_logging(args.verbose, args.quiet)
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if not hasattr(args, "func"):
+            parser.print_help()
+            return 2
+        _configure_logging(args.verbose, args.quiet)
+    except KeyboardInterrupt:
+        print("wheelloader: interrupted", file=sys.stderr)
+        return 130
     from wheelloader.estimator.errors import WheelloaderError  # after parsing: --help imports no estimator
 
     try:
@@ -79,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
         where = f": {exc.filename}" if exc.filename else ""
         print(f"wheelloader: error: {exc.strerror or exc}{where}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:  # pragma: no cover
+    except KeyboardInterrupt:  # Ctrl-C: every output was staged and is discarded (wheelloader.cli.staging)
         print("wheelloader: interrupted", file=sys.stderr)
         return 130
 

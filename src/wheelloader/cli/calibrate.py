@@ -19,7 +19,8 @@ from pathlib import Path
 from typing import Any
 
 from .inputs import PILE_PRESETS, add_strict_flag, check_physical, is_cycle_log, load_pile, load_soil, sidecar_of
-from .output import add_force_flag, atomic_output, check_outputs, write_json
+from .output import add_force_flag, write_json
+from .staging import OutputRun, check_input_files
 
 
 def register(subparsers: Any) -> None:
@@ -88,18 +89,31 @@ def run_calibrate(args: argparse.Namespace) -> int:
     if args.forgetting is not None and not several:
         raise CalibrationError("--forgetting needs several logs")
     inputs = [*args.logs, *(sidecar_of(log) for log in args.logs), args.initial]
-    check_outputs([("-o/--output", args.output), ("--plot", args.plot)], inputs, args.force)
+    check_input_files([("log", p) for p in inputs])
+    run = OutputRun(force=args.force, inputs=inputs)
+    run.file("-o/--output", args.output)
+    run.file("--plot", args.plot)
     cycles = [CycleLog.load(log) for log in args.logs]
     cycle = cycles[0]
     _check_sigma(args.sigma, len(cycle))
     initial = check_physical(load_soil(args.initial), "--initial", args.strict) if args.initial else None
-    if several:
-        cal = calibrate(cycles, method, initial=initial, forgetting=args.forgetting)
-    else:
-        cal = calibrate(cycle, method, initial=initial, sigma=args.sigma)
-    others = []
-    if args.compare:
-        others = [calibrate(cycle, m, initial=initial, sigma=args.sigma) for m in METHODS if m != cal.method]
+    with run:
+        if several:
+            cal = calibrate(cycles, method, initial=initial, forgetting=args.forgetting)
+        else:
+            cal = calibrate(cycle, method, initial=initial, sigma=args.sigma)
+        others = []
+        if args.compare:
+            others = [calibrate(cycle, m, initial=initial, sigma=args.sigma) for m in METHODS if m != cal.method]
+        write_json(run.staged(args.output), cal.to_dict())
+        if args.plot:
+            from wheelloader.plotting import plot_calibration, plot_cycles_fit
+
+            if several:
+                plot_cycles_fit(cycles, cal, run.staged(args.plot), title=f"calibration on {len(cycles)} cycles")
+            else:
+                plot_calibration(cycle, [cal, *others], run.staged(args.plot),
+                                 title=f"calibration of {Path(args.logs[0]).name}")
     if several:
         for k, (log, c) in enumerate(zip(args.logs, cycles, strict=True)):
             print(f"{log}: {len(c)} samples, {cal.settings['cycles']['per_cycle'][k]['samples']} in soil")
@@ -110,16 +124,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
         flag = "converged" if other.success else "NOT CONVERGED"
         print(f"compare {other.method:>12}: {other.time_s * 1e3:8.1f} ms, {other.nfev:6d} evals, {flag}; "
               f"{other.quality.describe()}")
-    write_json(args.output, cal.to_dict())
     print(f"parameters written to {args.output}")
     if args.plot:
-        from wheelloader.plotting import plot_calibration, plot_cycles_fit
-
-        with atomic_output(args.plot) as tmp:
-            if several:
-                plot_cycles_fit(cycles, cal, tmp, title=f"calibration on {len(cycles)} cycles")
-            else:
-                plot_calibration(cycle, [cal, *others], tmp, title=f"calibration of {Path(args.logs[0]).name}")
         print(f"figure written to {args.plot}")
     if not cal.trustworthy:
         print("the fit is NOT trustworthy: " + "; ".join(w.message for w in cal.warnings)
@@ -135,7 +141,10 @@ def run_predict(args: argparse.Namespace) -> int:
 
     path_file = Path(args.path)
     inputs = [args.params, path_file, sidecar_of(path_file), args.pile]
-    check_outputs([("-o/--output", args.output), ("--plot", args.plot)], inputs, args.force)
+    check_input_files([("input", p) for p in inputs])
+    run = OutputRun(force=args.force, inputs=inputs)
+    run.file("-o/--output", args.output)
+    run.file("--plot", args.plot)
     from wheelloader.estimator.calibration.result import SavedModel, load_saved_model
 
     if not (0.0 <= args.band < 1.0):
@@ -152,11 +161,15 @@ def run_predict(args: argparse.Namespace) -> int:
         pile = load_pile(None) if pile is None else pile
         pile_used = pile
     band = args.band if args.band > 0.0 and saved.band_model is not None else None
-    pred = predict(soil, target, pile=pile, options=saved.options, fill=saved.fill, band=band,
-                   band_model=saved.band_model)
-    elapsed = time.perf_counter() - start
-    with atomic_output(args.output) as tmp:
-        pred.save_csv(tmp, overwrite=True)
+    with run:
+        pred = predict(soil, target, pile=pile, options=saved.options, fill=saved.fill, band=band,
+                       band_model=saved.band_model)
+        elapsed = time.perf_counter() - start
+        pred.save_csv(run.staged(args.output), overwrite=True)
+        if args.plot:
+            from wheelloader.plotting import plot_prediction
+
+            plot_prediction(pred, pile_used, run.staged(args.plot), title=f"prediction for {path_file.name}")
     f = pred.forces
     print(f"{path_file.name}: {len(pred.path)} samples, {int((pred.state.depth > 0).sum())} in soil; "
           f"predicted in {elapsed * 1e3:.1f} ms")
@@ -180,9 +193,5 @@ def run_predict(args: argparse.Namespace) -> int:
         print("no prediction band: the params file holds no band model (write it with 'wheelloader calibrate')")
     print(f"forces written to {args.output}")
     if args.plot:
-        from wheelloader.plotting import plot_prediction
-
-        with atomic_output(args.plot) as tmp:
-            plot_prediction(pred, pile_used, tmp, title=f"prediction for {path_file.name}")
         print(f"figure written to {args.plot}")
     return 0

@@ -13,7 +13,8 @@ from typing import Any
 
 from wheelloader.ray_mode import add_ray_arguments
 
-from .output import check_outputs, write_json
+from .output import write_json
+from .staging import OutputRun
 
 #: Default reference directory, relative to the working directory (the repository root).
 REFERENCE_DIR = Path("data") / "reference"
@@ -34,8 +35,10 @@ def _cmd_reference(args: Any) -> int:
     from wheelloader.estimator import ParameterError
     from wheelloader.ray_mode import OFF
     from wheelloader.references.dem import reference_cases, run_reference, write_reference
+    from wheelloader.references.dem.runner import find_yade
     from wheelloader.sweep import Unit, run_sweep
 
+    find_yade()  # before any work: no Yade, one error line naming the install command
     cases = reference_cases()
     if args.only:
         known = {c.name: c for c in cases}
@@ -44,6 +47,12 @@ def _cmd_reference(args: Any) -> int:
             raise ParameterError(f"unknown reference case(s) {unknown}; choose from {sorted(known)}")
         cases = [known[n] for n in args.only]
     out = Path(args.out)
+    # regenerating the shipped set is this command's purpose, so data/ is allowed; each finished case is
+    # written as it completes (a Ctrl-C keeps them: resume with --skip-existing); the lock keeps a second
+    # run out of the same directory
+    run = OutputRun(force=True, allow_shipped=True)
+    run.directory("--out", out, fresh=False)
+    out.mkdir(parents=True, exist_ok=True)
     todo = []
     for k, case in enumerate(cases):
         if args.skip_existing and all((out / f"{s}.csv").exists() for s in case.file_stems()):
@@ -56,9 +65,10 @@ def _cmd_reference(args: Any) -> int:
                                   "progress": _print_indented if args.ray == OFF else None},
                   label=f"{case.name} (soil={case.config.soil} paths={','.join(case.paths)})",
                   num_cpus=case.config.threads) for case in todo]
-    sweep = run_sweep(units, args.ray, ray_cpus=args.ray_cpus,
-                      on_result=lambda k, run: write_reference(run, out),
-                      progress=lambda line: print(line, flush=True))
+    with run:
+        sweep = run_sweep(units, args.ray, ray_cpus=args.ray_cpus,
+                          on_result=lambda k, result: write_reference(result, out),
+                          progress=lambda line: print(line, flush=True))
     for failure in sweep.failures:
         print(f"FAILED {failure}\n{failure.traceback}", file=sys.stderr)
     if sweep.failures:
@@ -81,20 +91,24 @@ def _cmd_cycle(args: Any) -> int:
     import numpy as np
 
     from wheelloader.references.dem import dual_cycle_paths, run_scenario, scenario_paths
+    from wheelloader.references.dem.runner import find_yade
 
+    find_yade()
     config = _config_from_args(args, args.soil)
     if args.path == "dual":
         paths = list(dual_cycle_paths(config))
     else:
         paths = [scenario_paths(config)[int(args.path) - 1]]
-    out = Path(args.out)
-    run = run_scenario(config, paths, out, cache_dir=args.cache_dir)
-    for i, log in enumerate(run.logs):
-        fname = out / f"cycle{i + 1}.csv"
-        log.save(fname, overwrite=True)
-        print(f"wrote {fname} ({len(log)} samples, {log.metadata['particles']} particles, "
+    outputs = OutputRun(force=True)
+    out = outputs.directory("--out", args.out, fresh=False)
+    with outputs:
+        result = run_scenario(config, paths, outputs.staged(out), cache_dir=args.cache_dir)
+        for i, log in enumerate(result.logs):
+            log.save(outputs.staged(out) / f"cycle{i + 1}.csv", overwrite=True)
+    for i, log in enumerate(result.logs):
+        print(f"wrote {out / f'cycle{i + 1}.csv'} ({len(log)} samples, {log.metadata['particles']} particles, "
               f"mean F_R {np.mean(log.resultant):.1f} N, carried {log.metadata['carried_mass_end_load']:.2f} kg)")
-    print(f"Yade run: {run.wall_s:.1f} s")
+    print(f"Yade run: {result.wall_s:.1f} s")
     return 0
 
 
@@ -106,13 +120,32 @@ def _cmd_sanity(args: Any) -> int:
     if not (data / "manifest.json").is_file():
         raise ParameterError(f"--data {data}: no manifest.json there (run from the repository root, or pass the "
                              "reference directory)")
-    check_outputs([("--json", args.json)], [data / "manifest.json"], args.force)
-    report = sanity_report(data)
-    write_json(args.json, report)
+    _check_dem_manifest(data / "manifest.json")
+    run = OutputRun(force=args.force, inputs=[data / "manifest.json"], input_dirs=[data])
+    run.file("--json", args.json)
+    with run:
+        report = sanity_report(data)
+        write_json(run.staged(args.json), report)
     for line in sanity_summary(report, data):
         print(line)
     print(f"full report written to {args.json}")
     return 0
+
+
+def _check_dem_manifest(path: Path) -> None:
+    """Refuse a manifest that is not a DEM reference set's (an MPM set has no raw Yade files)."""
+    from wheelloader.estimator import ParameterError
+    from wheelloader.estimator.jsonable import read_json
+
+    manifest = read_json(path)
+    kind = manifest.get("format") if isinstance(manifest, dict) else None
+    if kind != "wheelloader.dem-reference":
+        raise ParameterError(f"--data {path.parent}: {path.name} is not a DEM reference set's (format {kind!r}, "
+                             "expected 'wheelloader.dem-reference')")
+    cycles = manifest.get("cycles")
+    if not isinstance(cycles, list) or not all(isinstance(c, dict) and {"name", "csv", "raw_csv"} <= set(c)
+                                               for c in cycles):
+        raise ParameterError(f"--data {path.parent}: {path.name} must list cycles with name, csv and raw_csv")
 
 
 def sanity_summary(report: dict[str, Any], data: Path | str) -> list[str]:

@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import importlib.util
+import math
+import shutil
 from typing import Any
 
-from .output import add_force_flag, fresh_directory
+from .output import add_force_flag
+from .staging import OutputRun
 
 
 def register(subparsers: Any) -> None:
@@ -18,7 +22,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("-o", "--out", default="wheelloader-demo",
                    help="output directory (a new NAME-2, NAME-3 ... is used if it exists; default: %(default)s)")
     p.add_argument("--cycles", type=int, default=DEFAULT_CYCLES, help="digging cycles (default: %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the plant (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="random seed of the plant, 0 to 2^32 - 1 (default: %(default)s)")
     p.add_argument("--no-planner", action="store_true",
                    help="dig the Bezier path every cycle (calibration and prediction only)")
     p.add_argument("--window", type=int, default=None,
@@ -29,8 +34,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--plant", choices=("fee-env", "mpm"), default="fee-env",
                    help="where the cycles are dug: the FEE env (default, seconds) or the MPM continuum reference "
                         "(needs the mpm extra; about 3 minutes per cycle at 2 cm, 2 x CYCLES cycles; resumable)")
-    p.add_argument("--resolution", type=float, default=0.02,
-                   help="MPM grid spacing [m] with --plant mpm (default: %(default)s, the verified one)")
+    p.add_argument("--resolution", type=float, default=None,
+                   help="MPM grid spacing [m], 0.005-0.1, with --plant mpm only (default: 0.02, the verified one)")
     add_force_flag(p)
     p.set_defaults(func=run)
 
@@ -42,14 +47,28 @@ def run(args: argparse.Namespace) -> int:
 
     if args.cycles < 1 or args.cycles > 50:
         raise ParameterError(f"--cycles must be between 1 and 50, got {args.cycles}")
-    if not 0.005 <= args.resolution <= 0.1:
+    if not 0 <= args.seed < 2**32:
+        raise ParameterError(f"--seed must be between 0 and 2^32 - 1, got {args.seed}")
+    if args.resolution is not None and args.plant != "mpm":
+        raise ParameterError("--resolution sets the MPM grid and needs --plant mpm")
+    resolution = 0.02 if args.resolution is None else args.resolution
+    if not (math.isfinite(resolution) and 0.005 <= resolution <= 0.1):
         raise ParameterError(f"--resolution must be between 0.005 and 0.1 m, got {args.resolution}")
     if args.window is not None and args.window < 1:
         raise ParameterError(f"--window must be a positive number of cycles, got {args.window}")
-    out = fresh_directory(args.out, args.force)
-    summary = run_demo(out, cycles=args.cycles, seed=args.seed, use_planner=not args.no_planner,
-                       progress=lambda line: print(line, flush=True), mpc=args.mpc, plant=args.plant,
-                       resolution=args.resolution, window=args.window)
+    if args.mpc and args.plant != "fee-env":
+        raise ParameterError("--mpc needs the env's feedback and runs only with the fee-env plant")
+    if args.plant == "mpm" and importlib.util.find_spec("taichi") is None:
+        raise ParameterError("--plant mpm needs the mpm extra (Taichi): pip install 'wheelloader[mpm]'")
+    run = OutputRun(force=args.force)
+    out = run.directory("-o/--out", args.out, fresh=not args.force)
+    with run:
+        staged = run.staged(out)
+        if args.plant == "mpm" and (out / "cycles").is_dir():  # resume the cycles an earlier run saved
+            shutil.copytree(out / "cycles", staged / "cycles", dirs_exist_ok=True)
+        summary = run_demo(staged, cycles=args.cycles, seed=args.seed, use_planner=not args.no_planner,
+                           progress=lambda line: print(line, flush=True), mpc=args.mpc, plant=args.plant,
+                           resolution=resolution, window=args.window)
     print()
     print(summary["table"])
     print()

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -26,10 +25,9 @@ def load_pile(spec: str | None) -> Pile:
     path = Path(spec)
     if not path.exists():
         raise ParameterError(f"--pile {spec!r} is neither a file nor a preset ({', '.join(PILE_PRESETS)})")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8-sig"))
-    except (json.JSONDecodeError, UnicodeDecodeError, IsADirectoryError) as exc:
-        raise ParameterError(f"{path}: not a valid JSON file ({exc})") from None
+    from wheelloader.estimator.jsonable import read_json
+
+    data = read_json(path)
     if isinstance(data, dict) and isinstance(data.get("pile"), dict):
         data = data["pile"]  # a cycle-log sidecar
     try:

@@ -1,17 +1,17 @@
 """Writing what a command produces: checked before any work, written atomically, never over an input.
 
-Every subcommand declares its outputs and inputs up front with :func:`check_outputs` (before the slow
-part runs), then writes each file through :func:`atomic_output`: into a temporary file in the same
-directory, renamed over the target only when complete. A crash, a full disk or an interrupt leaves the
-old file as it was and no half-written one behind. Importing this module imports nothing heavy, so
-``wheelloader --help`` stays fast.
+Every subcommand declares its outputs and inputs up front through :class:`~wheelloader.cli.staging.OutputRun`
+(before the slow part runs; :func:`check_outputs` is its check alone), writes into a staging directory and
+moves the outputs into place when it finishes. :func:`atomic_output` writes one file the same way: into a
+temporary file in the same directory, renamed over the target only when complete. A crash, a full disk or
+an interrupt leaves the old file as it was and no half-written one behind. Importing this module imports
+nothing heavy, so ``wheelloader --help`` stays fast.
 """
 
 from __future__ import annotations
 
 import json
 import os
-import stat
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -50,31 +50,10 @@ def check_outputs(outputs: Sequence[tuple[str, str | Path | None]], inputs: Sequ
         An output is a directory or not a regular file, its directory is missing, it is one of the
         inputs, two outputs share a path, or it exists and ``force`` is false.
     """
-    from wheelloader.estimator import ParameterError
+    from .staging import OutputRun
 
-    resolved_inputs = {Path(p).resolve() for p in inputs if p is not None and Path(p).exists()}
-    seen: dict[Path, str] = {}
-    paths: list[Path] = []
-    for flag, value in outputs:
-        if value is None:
-            continue
-        path = Path(value)
-        if path.is_dir():
-            raise ParameterError(f"{flag} {path} is a directory; give a file name")
-        if path.exists() and not stat.S_ISREG(path.stat().st_mode):
-            raise ParameterError(f"{flag} {path} is not a regular file; give a file name")
-        if not path.parent.is_dir():
-            raise ParameterError(f"{flag}: output directory {path.parent} does not exist")
-        real = path.resolve()
-        if real in resolved_inputs:
-            raise ParameterError(f"{flag} {path} is one of the input files; choose another name")
-        if real in seen:
-            raise ParameterError(f"output {path} is given twice ({seen[real]} and {flag}); choose different names")
-        seen[real] = flag
-        if path.exists() and not force:
-            raise ParameterError(f"output {path} exists; pass --force to replace it")
-        paths.append(path)
-    return paths
+    run = OutputRun(force=force, inputs=inputs)
+    return [p for p in (run.file(flag, value) for flag, value in outputs) if p is not None]
 
 
 @contextmanager

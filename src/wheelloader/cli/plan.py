@@ -23,7 +23,8 @@ from pathlib import Path
 from typing import Any
 
 from .inputs import PILE_PRESETS, add_strict_flag, check_physical, load_pile, load_soil
-from .output import add_force_flag, atomic_output, check_outputs, write_json
+from .output import add_force_flag, write_json
+from .staging import OutputRun, check_input_files
 
 #: Summary file written beside the CSV: ``plan.csv`` -> ``plan.summary.json`` (not ``plan.json``, which
 #: would make the CSV look like a cycle log to ``wheelloader predict``).
@@ -124,74 +125,84 @@ def run_plan(args: argparse.Namespace) -> int:
     if output.name.lower().endswith(SUMMARY_SUFFIX) or output.suffix.lower() == ".json":
         raise ParameterError(f"output {output} should be a .csv file (the JSON summary is written beside it)")
     summary_path = output.with_name(output.stem + SUMMARY_SUFFIX)
-    check_outputs([("-o/--output", output), ("summary", summary_path), ("--plot", args.plot)],
-                  [args.params, args.pile], args.force)
+    check_input_files([("params", args.params), ("--pile", args.pile)])
+    run = OutputRun(force=args.force, inputs=[args.params, args.pile])
+    for flag, value in (("-o/--output", output), ("summary", summary_path), ("--plot", args.plot)):
+        run.file(flag, value)
 
     soil = check_physical(load_soil(args.params), args.params, args.strict)
     pile = load_pile(args.pile)
-    options = PlannerOptions(max_wall_time=args.max_time)
-    timing: dict[str, float] = {}
-    tic = time.perf_counter()
-    opt = optimizer_for(options=options)
-    timing["build_s"] = time.perf_counter() - tic
-    nlp_origin = origin(opt.bucket, opt.loader, opt.options) or "built earlier in this process"
-    lam = opt.options.energy_weight if args.energy_weight is None else float(args.energy_weight)
-    start = default_start(pile)
-    duration = cycle_duration(pile, start)
-    outcome = plan_next_cycle(soil, pile, start=start, options=options, control_rate=args.rate, mpc=False,
-                              energy_weight=lam)
-    timing["plan_s"] = outcome.seconds
-    if outcome.plan is None or outcome.check is None:
-        raise PlanningError(outcome.message)
-    plan, check = outcome.plan, outcome.check
-    path = plan.path(args.rate)
-    sim = path_energy(path, soil, pile, opt.bucket)
-    solver_ok = plan.status in ACCEPTED_STATUSES
-    ok = check.ok
-    cap = opt.bucket.capacity
-    retried = outcome.first_failures or None
-
-    baseline = bezier_on_face(pile, args.rate, opt.bucket)
-    base_check = verify_plan(baseline, soil, pile, opt.bucket, opt.loader, opt.options, rate=args.rate)
-
-    points = []
-    if args.pareto:
+    with run:
+        options = PlannerOptions(max_wall_time=args.max_time)
+        timing: dict[str, float] = {}
         tic = time.perf_counter()
-        points = pareto_sweep(soil, pile, weights, start=start, options=opt.options, duration=duration,
-                              rate=args.rate)
-        timing["pareto_s"] = time.perf_counter() - tic
+        opt = optimizer_for(options=options)
+        timing["build_s"] = time.perf_counter() - tic
+        nlp_origin = origin(opt.bucket, opt.loader, opt.options) or "built earlier in this process"
+        lam = opt.options.energy_weight if args.energy_weight is None else float(args.energy_weight)
+        start = default_start(pile)
+        duration = cycle_duration(pile, start)
+        outcome = plan_next_cycle(soil, pile, start=start, options=options, control_rate=args.rate, mpc=False,
+                                  energy_weight=lam)
+        timing["plan_s"] = outcome.seconds
+        if outcome.plan is None or outcome.check is None:
+            raise PlanningError(outcome.message)
+        plan, check = outcome.plan, outcome.check
+        path = plan.path(args.rate)
+        sim = path_energy(path, soil, pile, opt.bucket)
+        solver_ok = plan.status in ACCEPTED_STATUSES
+        ok = check.ok
+        cap = opt.bucket.capacity
+        retried = outcome.first_failures or None
 
-    state, forces = sim["state"], sim["forces"]
-    summary: dict[str, Any] = {
-        "params": str(args.params), "soil": soil.to_dict(), "pile": args.pile or "trapezoid",
-        "energy_weight_per_kJ": lam, "duration_s": duration, "max_time_s": args.max_time,
-        "start": {"x": start.x, "z": start.z, "blade_angle": start.blade_angle},
-        "ok": ok,
-        "ok_definition": "the NumPy re-simulation passed every check; solver_ok false: feasible, not proven optimal",
-        "replanned_with_wider_margins_after": retried,
-        "message": outcome.message,
-        "plan": {"status": plan.status, "solver_ok": solver_ok, "iterations": plan.iterations,
-                 "solve_time_s": plan.solve_time, "objective": plan.objective,
-                 "predicted_energy_J_casadi": plan.energy, "predicted_fill_m3_casadi": plan.final_fill,
-                 "fill_m3": check.fill, "fill_fraction": check.fill / cap, "energy_J": check.energy,
-                 "energy_per_m3_J": _per_m3(check.energy, check.fill), "check": check.to_dict()},
-        "baseline": {"name": baseline.name, "x_shift_m": float(baseline.x[0] - default_path(rate=args.rate).x[0]),
-                     "fill_m3": base_check.fill, "fill_fraction": base_check.fill / cap,
-                     "energy_J": base_check.energy, "energy_per_m3_J": _per_m3(base_check.energy, base_check.fill),
-                     "check": base_check.to_dict()},
-        "pareto": [pt.to_dict() for pt in points],
-        "timing_s": timing,
-        "nlp": nlp_origin,
-        "files": {"csv": str(output), "plot": args.plot},
-        "energy_definition": "NumPy re-simulation at the CSV rate: sum of max(0, F_T ds_t + F_N ds_n) + "
-                             "max(0, W_load dz) per step (the env's bookkeeping)",
-    }
-    with atomic_output(output) as tmp:
+        baseline = bezier_on_face(pile, args.rate, opt.bucket)
+        base_check = verify_plan(baseline, soil, pile, opt.bucket, opt.loader, opt.options, rate=args.rate)
+
+        points = []
+        if args.pareto:
+            tic = time.perf_counter()
+            points = pareto_sweep(soil, pile, weights, start=start, options=opt.options, duration=duration,
+                                  rate=args.rate)
+            timing["pareto_s"] = time.perf_counter() - tic
+
+        state, forces = sim["state"], sim["forces"]
+        summary: dict[str, Any] = {
+            "params": str(args.params), "soil": soil.to_dict(), "pile": args.pile or "trapezoid",
+            "energy_weight_per_kJ": lam, "duration_s": duration, "max_time_s": args.max_time,
+            "start": {"x": start.x, "z": start.z, "blade_angle": start.blade_angle},
+            "ok": ok,
+            "ok_definition": "the NumPy re-simulation passed every check; solver_ok false: feasible, not proven "
+                             "optimal",
+            "replanned_with_wider_margins_after": retried,
+            "message": outcome.message,
+            "plan": {"status": plan.status, "solver_ok": solver_ok, "iterations": plan.iterations,
+                     "solve_time_s": plan.solve_time, "objective": plan.objective,
+                     "predicted_energy_J_casadi": plan.energy, "predicted_fill_m3_casadi": plan.final_fill,
+                     "fill_m3": check.fill, "fill_fraction": check.fill / cap, "energy_J": check.energy,
+                     "energy_per_m3_J": _per_m3(check.energy, check.fill), "check": check.to_dict()},
+            "baseline": {"name": baseline.name, "x_shift_m": float(baseline.x[0] - default_path(rate=args.rate).x[0]),
+                         "fill_m3": base_check.fill, "fill_fraction": base_check.fill / cap,
+                         "energy_J": base_check.energy, "energy_per_m3_J": _per_m3(base_check.energy, base_check.fill),
+                         "check": base_check.to_dict()},
+            "pareto": [pt.to_dict() for pt in points],
+            "timing_s": timing,
+            "nlp": nlp_origin,
+            "files": {"csv": str(output), "plot": args.plot},
+            "energy_definition": "NumPy re-simulation at the CSV rate: sum of max(0, F_T ds_t + F_N ds_n) + "
+                                 "max(0, W_load dz) per step (the env's bookkeeping)",
+        }
         # the first four columns are save_path_csv's, so load_path_csv reads the file as a path
-        write_columns(tmp, {"t": path.t, "x": path.x, "z": path.z, "blade_angle": path.blade_angle,
-                            "depth": state.depth, "fill": state.fill_volume, "F_T": forces.tangential,
-                            "F_N": forces.normal})
-    write_json(summary_path, summary)
+        write_columns(run.staged(output), {"t": path.t, "x": path.x, "z": path.z, "blade_angle": path.blade_angle,
+                                           "depth": state.depth, "fill": state.fill_volume, "F_T": forces.tangential,
+                                           "F_N": forces.normal})
+        write_json(run.staged(summary_path), summary)
+        if args.plot:
+            from wheelloader.plotting import plot_plan
+
+            plot_plan(path, {"t": path.t, "F_T": forces.tangential, "F_N": forces.normal}, pile, opt.loader,
+                      run.staged(args.plot), baseline=baseline, pareto=points or None, chosen_weight=lam,
+                      baseline_point=(base_check.fill, base_check.energy), plan_point=(check.fill, check.energy),
+                      title=f"plan for {Path(str(args.params)).name}, λ = {lam:g}/kJ")
 
     print(f"{args.params}: planned with lambda = {lam:g}/kJ on the {args.pile or 'trapezoid'} pile, "
           f"{duration:.2f} s cycle, {opt.intervals} intervals")
@@ -225,13 +236,6 @@ def run_plan(args: argparse.Namespace) -> int:
         print("  (* = Pareto-optimal among the points that passed the check)")
     print(f"path written to {output}; summary written to {summary_path}")
     if args.plot:
-        from wheelloader.plotting import plot_plan
-
-        with atomic_output(args.plot) as tmp:
-            plot_plan(path, {"t": path.t, "F_T": forces.tangential, "F_N": forces.normal}, pile, opt.loader,
-                      tmp, baseline=baseline, pareto=points or None, chosen_weight=lam,
-                      baseline_point=(base_check.fill, base_check.energy), plan_point=(check.fill, check.energy),
-                      title=f"plan for {Path(str(args.params)).name}, λ = {lam:g}/kJ")
         print(f"figure written to {args.plot}")
     if not ok:
         print("the plan was written but is NOT usable: it fails the NumPy check (see above and the summary)")
