@@ -51,7 +51,7 @@ def run_soil(name: str, args, rng_seed: int) -> dict:
     import numpy as np
 
     from wheelloader.estimator import paper_paths, preset
-    from wheelloader.estimator.calibration import calibrate, predict
+    from wheelloader.estimator.calibration import CalibrationOptions, calibrate, predict
     from wheelloader.estimator.synthetic import synthetic_cycle
 
     soil = preset(name)
@@ -65,7 +65,7 @@ def run_soil(name: str, args, rng_seed: int) -> dict:
     for method in METHODS:
         times, cal = [], None
         for _ in range(args.repeats):
-            cal = calibrate(train, method)
+            cal = calibrate(train, options=CalibrationOptions(method=method))
             times.append(cal.time_s)
         test_q = [predict(cal, c).quality for c in tests]
         out["methods"][method] = {
@@ -91,7 +91,7 @@ def run_robustness(count: int, seed: int, args) -> dict:
     """Fraction of random cycles on which each method reaches the noise floor."""
     import numpy as np
 
-    from wheelloader.estimator.calibration import calibrate
+    from wheelloader.estimator.calibration import CalibrationOptions, calibrate
     from wheelloader.estimator.synthetic import random_bezier_path, random_soil, synthetic_cycle
 
     rng = np.random.default_rng(seed)
@@ -102,7 +102,7 @@ def run_robustness(count: int, seed: int, args) -> dict:
         floor = floor_rmse(cycle, soil)
         row = {"soil": soil.to_dict(), "floor_rmse_r": floor}
         for method in METHODS:
-            cal = calibrate(cycle, method)
+            cal = calibrate(cycle, options=CalibrationOptions(method=method))
             row[method] = {"rmse_r": cal.quality.rmse_r, "ratio": cal.quality.rmse_r / floor,
                            "time_s": cal.time_s, "success": cal.success}
         rows.append(row)
@@ -287,7 +287,7 @@ def main(argv: list[str] | None = None) -> int:
     from wheelloader.estimator.calibration import calibrate
     from wheelloader.estimator.synthetic import synthetic_cycle
 
-    calibrate(synthetic_cycle("dirt", noise=0.0), "default")  # warm-up: imports, caches
+    calibrate(synthetic_cycle("dirt", noise=0.0))  # warm-up: imports, caches
     soils = [run_soil(name, args, args.seed + 10 * i) for i, name in enumerate(args.soils)]
     per_soil = {s["soil"]: s["methods"]["multi-stage"]["median_time_s"] / s["methods"]["default"]["median_time_s"]
                 for s in soils}

@@ -93,7 +93,7 @@ def term_forces(pred, bucket, density: float, contact_depth: float) -> dict[str,
 
 def analyse(train_name: str, test_name: str, data: Path, sigma: float, method: str, curl_rho: float,
             cache: dict) -> dict:
-    from wheelloader.estimator.calibration import calibrate, predict
+    from wheelloader.estimator.calibration import CalibrationOptions, calibrate, predict
     from wheelloader.references import dem
 
     def load(name):
@@ -101,7 +101,7 @@ def analyse(train_name: str, test_name: str, data: Path, sigma: float, method: s
         return raw, dem.filtered(raw, sigma)
 
     if train_name not in cache:
-        cache[train_name] = calibrate(load(train_name)[1], method)
+        cache[train_name] = calibrate(load(train_name)[1], options=CalibrationOptions(method=method))
     cal = cache[train_name]
     raw, filt = load(test_name)
     pred = predict(cal, filt)

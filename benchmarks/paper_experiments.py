@@ -191,12 +191,12 @@ def calibrate_all(train_logs: dict, methods, ray: str, ray_cpus: int | None) -> 
     """Every (training log, method) calibration as one unit of :func:`wheelloader.sweep.run_sweep`:
     ``{(key, method): Calibration}`` and ``{(key, method): wall time [s]}``; a calibration that fails twice
     stops the run with the failures named. The soils' keys reuse gravel's calibrations."""
-    from wheelloader.estimator.calibration import calibrate
+    from wheelloader.estimator.calibration import CalibrationOptions, calibrate
     from wheelloader.sweep import Unit, run_sweep
 
     keys = [(key, method) for key in train_logs for method in methods]
-    units = [Unit(calibrate, {"cycle": train_logs[key], "method": method}, label=f"{key} {method}")
-             for key, method in keys]
+    units = [Unit(calibrate, {"cycles": train_logs[key], "options": CalibrationOptions(method=method)},
+                  label=f"{key} {method}") for key, method in keys]
     sweep = run_sweep(units, ray, ray_cpus=ray_cpus, progress=lambda line: print(line, flush=True))
     values = sweep.values_or_raise()
     return dict(zip(keys, values, strict=True)), dict(zip(keys, sweep.unit_seconds, strict=True))
@@ -534,7 +534,7 @@ def estimator_study(load, names, args) -> dict:
     import statistics
 
     from wheelloader.estimator import ModelOptions
-    from wheelloader.estimator.calibration import calibrate, predict
+    from wheelloader.estimator.calibration import CalibrationOptions, calibrate, predict
 
     sets = study_sets(load, names)
     out: dict = {"variants": {}, "train_sets": {k: list(v) for k, v in STUDY_TRAIN.items()}, "times_s": {},
@@ -551,8 +551,9 @@ def estimator_study(load, names, args) -> dict:
         for set_name, logs in sets.items():
             per[set_name] = {}
             for train_name, train in STUDY_TRAIN.items():
-                cal = calibrate([logs[k][1] for k in train], options=options, fill=spec["fill"],
-                                prior=spec.get("prior"), band_noise=spec.get("band_noise", "training"))
+                cal = calibrate([logs[k][1] for k in train], options=CalibrationOptions(
+                    model_options=options, fill=spec["fill"], prior=spec.get("prior"),
+                    band_noise=spec.get("band_noise", "training")))
                 times.setdefault(len(train), []).append(cal.time_s)
                 unseen = {}
                 for k in sorted(set(logs) - set(train)):
@@ -569,8 +570,9 @@ def estimator_study(load, names, args) -> dict:
         out["variants"][label] = per
         # each path fitted alone: the floor (its fit to itself, which no calibration on other paths can beat)
         # and, below, the next path's prediction from it
-        alone = {set_name: {k: calibrate(logs[k][1], options=options, fill=spec["fill"], prior=spec.get("prior"))
-                            for k in sorted(logs)} for set_name, logs in sets.items()}
+        alone = {set_name: {k: calibrate(logs[k][1], options=CalibrationOptions(
+                     model_options=options, fill=spec["fill"], prior=spec.get("prior"))) for k in sorted(logs)}
+                 for set_name, logs in sets.items()}
         out.setdefault("own_fit", {})[label] = {
             set_name: {f"path{k}": cal.quality.percent_r for k, cal in cals.items()}
             for set_name, cals in alone.items()}

@@ -68,7 +68,7 @@ def loops(root: Path) -> dict[tuple[str, str, str], list[Path]]:
 
 def replay(files: list[Path], variant: str, sigma_s: float) -> list[dict[str, Any]]:
     """Calibrate on the cycles before each k (per the variant) and predict cycle k."""
-    from wheelloader.estimator import CycleLog, ModelOptions, calibrate, predict
+    from wheelloader.estimator import CalibrationOptions, CycleLog, ModelOptions, calibrate, predict
     from wheelloader.references.filtering import filtered
 
     method, window, rule, *carried = VARIANTS[variant]
@@ -79,7 +79,7 @@ def replay(files: list[Path], variant: str, sigma_s: float) -> list[dict[str, An
     for k in range(2, len(logs) + 1):
         if window == 0:  # the floor: cycle k fitted to itself, cold (no warm start from another cycle)
             start = time.perf_counter()
-            result = calibrate(logs[k - 1], method=method, options=options)
+            result = calibrate(logs[k - 1], options=CalibrationOptions(method=method, model_options=options))
             seconds = time.perf_counter() - start
             rows.append({"variant": variant, "cycle": k, "calibrated_on": 1, "seconds": seconds,
                          "converged": bool(result.success), "rmse_percent": result.quality.percent_r,
@@ -88,8 +88,8 @@ def replay(files: list[Path], variant: str, sigma_s: float) -> list[dict[str, An
             continue
         earlier = logs[:k - 1] if window is None else logs[max(0, k - 1 - window):k - 1]
         start = time.perf_counter()
-        result = calibrate(earlier if len(earlier) > 1 else earlier[0], method=method, initial=previous,
-                           options=options)
+        result = calibrate(earlier if len(earlier) > 1 else earlier[0],
+                           options=CalibrationOptions(method=method, initial=previous, model_options=options))
         seconds = time.perf_counter() - start
         if result.success:
             previous = result

@@ -38,6 +38,7 @@ if TYPE_CHECKING:
         METHOD_ALIASES,
         METHODS,
         Calibration,
+        CalibrationOptions,
         FitQuality,
         FitWarning,
         Prediction,
@@ -51,8 +52,8 @@ if TYPE_CHECKING:
 
 #: Names re-exported from :mod:`.calibration`, imported on first access (PEP 562).
 _CALIBRATION_NAMES = frozenset({
-    "DEFAULT_METHOD", "METHOD_ALIASES", "METHODS", "Calibration", "FitQuality", "FitWarning", "Prediction",
-    "StageResult", "Uncertainty", "calibrate", "canonical_method", "load_params", "predict",
+    "DEFAULT_METHOD", "METHOD_ALIASES", "METHODS", "Calibration", "CalibrationOptions", "FitQuality", "FitWarning",
+    "Prediction", "StageResult", "Uncertainty", "calibrate", "canonical_method", "load_params", "predict",
 })
 
 
@@ -71,13 +72,13 @@ def __dir__() -> list[str]:
 
 
 __all__ = [
-    "Bucket", "BucketPath", "Calibration", "CalibrationError", "CarveResult", "ContactState", "CycleLog",
-    "CycleLogError", "DEFAULT_METHOD", "DEFAULT_OPTIONS", "DEFAULT_SLOPE_WINDOW", "FLAG_NAMES", "FLAG_OUT_OF_SOIL",
-    "FitQuality", "FitWarning", "GRAVITY", "Loader", "METHODS", "METHOD_ALIASES", "ModelOptions", "PAPER_BOUNDS",
-    "PARAMETER_NAMES", "PRESET_NAMES", "ParameterError", "Pile", "PlanningError", "Prediction", "SOIL_VECTOR_NAMES",
-    "SoilForces", "SoilParams", "StageResult", "SurfaceCarver", "Uncertainty", "WheelloaderError", "as_soil",
-    "bearing_factors", "bezier_path", "blade_length_in_soil", "calibrate", "canonical_method", "contact_single",
-    "contact_state", "default_path", "load_params", "load_path_csv", "optimal_beta", "paper_paths", "polyline_path",
-    "predict", "preset", "random_bezier_path", "random_soil", "save_path_csv", "soil_forces", "soil_forces_single",
-    "soil_from_vector", "soil_vector", "synthetic_cycle",
+    "Bucket", "BucketPath", "Calibration", "CalibrationError", "CalibrationOptions", "CarveResult", "ContactState",
+    "CycleLog", "CycleLogError", "DEFAULT_METHOD", "DEFAULT_OPTIONS", "DEFAULT_SLOPE_WINDOW", "FLAG_NAMES",
+    "FLAG_OUT_OF_SOIL", "FitQuality", "FitWarning", "GRAVITY", "Loader", "METHODS", "METHOD_ALIASES", "ModelOptions",
+    "PAPER_BOUNDS", "PARAMETER_NAMES", "PRESET_NAMES", "ParameterError", "Pile", "PlanningError", "Prediction",
+    "SOIL_VECTOR_NAMES", "SoilForces", "SoilParams", "StageResult", "SurfaceCarver", "Uncertainty", "WheelloaderError",
+    "as_soil", "bearing_factors", "bezier_path", "blade_length_in_soil", "calibrate", "canonical_method",
+    "contact_single", "contact_state", "default_path", "load_params", "load_path_csv", "optimal_beta", "paper_paths",
+    "polyline_path", "predict", "preset", "random_bezier_path", "random_soil", "save_path_csv", "soil_forces",
+    "soil_forces_single", "soil_from_vector", "soil_vector", "synthetic_cycle"
 ]

@@ -12,7 +12,7 @@ import pytest
 from scipy.optimize import lsq_linear, minimize_scalar
 
 from wheelloader.estimator import PAPER_BOUNDS, Bucket, Pile, bezier_path, contact_state, default_path, preset
-from wheelloader.estimator.calibration import Calibration, FitQuality, calibrate, load_params
+from wheelloader.estimator.calibration import Calibration, CalibrationOptions, FitQuality, calibrate, load_params
 from wheelloader.estimator.calibration.boxqp import solve_box_qp
 from wheelloader.estimator.calibration.fitmodel import FIT_NAMES, FitData, fit_bounds, soil_to_fit, split_sinkage
 from wheelloader.estimator.calibration.prediction import predict
@@ -150,13 +150,13 @@ def test_warm_start_and_k_split():
     first = calibrate(c1)
     path2 = bezier_path((-0.1, 0.03), (1.0, 0.05), (1.4, 1.2), name="second")
     c2 = synthetic_cycle("dirt", path2, noise=0.02, seed=2)
-    warm = calibrate(c2, initial=first)
+    warm = calibrate(c2, options=CalibrationOptions(initial=first))
     assert warm.success
     assert warm.initial == first.params
     cold = calibrate(c2)
     assert warm.cost <= cold.cost * (1 + 1e-6)
     prior = preset("dirt")
-    with_prior = calibrate(c2, initial=prior)
+    with_prior = calibrate(c2, options=CalibrationOptions(initial=prior))
     share = (prior.k_c / 0.02) / prior.sinkage_modulus(0.02)
     got = (with_prior.params.k_c / 0.02) / with_prior.sinkage_modulus
     assert got == pytest.approx(share, rel=1e-6)
@@ -164,7 +164,7 @@ def test_warm_start_and_k_split():
 
 def test_fixed_parameter_by_equal_bounds():
     cycle = synthetic_cycle("lean_clay", noise=0.0)
-    cal = calibrate(cycle, bounds={"gamma": (1360.0, 1360.0)})
+    cal = calibrate(cycle, options=CalibrationOptions(bounds={"gamma": (1360.0, 1360.0)}))
     assert cal.params.gamma == 1360.0
     assert cal.quality.percent_r < 0.1
 
@@ -228,7 +228,7 @@ def test_weak_prior_resolves_an_unidentifiable_direction(soil_name):
 @pytest.mark.parametrize("soil_name", ["gravel", "dirt", "dry_sand"])
 def test_weak_prior_leaves_identifiable_fits_unchanged(soil_name):
     cycle = synthetic_cycle(soil_name, noise=0.0)
-    exact, reg = calibrate(cycle), calibrate(cycle, regularize=True)
+    exact, reg = calibrate(cycle), calibrate(cycle, options=CalibrationOptions(regularize=True))
     errors = _relative_errors(reg, soil_name)
     assert max(errors.values()) <= 0.01, errors
     assert reg.quality.percent_r <= 0.1
@@ -240,7 +240,7 @@ def test_weak_prior_leaves_identifiable_fits_unchanged(soil_name):
 
 def test_weak_prior_noisy_fit_stays_at_the_noise_floor_and_uses_the_warm_start(tmp_path):
     cycle = synthetic_cycle("sand", noise=0.05, vibration=0.02, seed=11)
-    cal = calibrate(cycle, regularize=True)
+    cal = calibrate(cycle, options=CalibrationOptions(regularize=True))
     data = FitData.from_state(cycle.contact_state(), cycle.tangential, cycle.normal, cycle.bucket)
     f_t, f_n, _ = data.forces(soil_to_fit(preset("sand"), 0.02))
     assert cal.quality.rmse_r <= 1.02 * FitQuality.from_forces(data.y_t, data.y_n, f_t, f_n).rmse_r
@@ -249,18 +249,18 @@ def test_weak_prior_noisy_fit_stays_at_the_noise_floor_and_uses_the_warm_start(t
     assert cal.cost >= 0.5 * pr["exact_fit_cost"] * (1 - 1e-9)  # eq 19a with lambda = 0.5 vs the weighted sum
     saved = json.loads(cal.save_json(tmp_path / "params.json").read_text())
     assert saved["calibration"]["settings"]["regularize"] is True
-    warm = calibrate(cycle, initial=preset("dirt"), regularize=True)
+    warm = calibrate(cycle, options=CalibrationOptions(initial=preset("dirt"), regularize=True))
     np.testing.assert_allclose(warm.settings["prior"]["mean"], soil_to_fit(preset("dirt"), 0.02))
     assert not calibrate(cycle).settings.get("prior")
     with pytest.raises(CalibrationError):
-        calibrate(cycle, regularize="yes")
+        calibrate(cycle, options=CalibrationOptions(regularize="yes"))
 
 
 # ------------------------------------------------------------ paper methods
 @pytest.mark.parametrize("method", ["single-stage", "multi-stage"])
 def test_paper_methods_run_and_report_stages(method):
     cycle = synthetic_cycle("dirt", noise=0.03, seed=5)
-    cal = calibrate(cycle, method, max_iter=30)
+    cal = calibrate(cycle, options=CalibrationOptions(method=method, max_iter=30))
     assert cal.method == method
     assert len(cal.stages) == (1 if method == "single-stage" else 3)
     assert cal.nfev > 0 and cal.time_s > 0
@@ -277,10 +277,10 @@ def test_paper_methods_run_and_report_stages(method):
 
 def test_non_convergence_is_reported():
     cycle = synthetic_cycle("dirt", noise=0.03, seed=5)
-    cal = calibrate(cycle, "single-stage", max_iter=2)
+    cal = calibrate(cycle, options=CalibrationOptions(method="single-stage", max_iter=2))
     assert not cal.success
     assert "did not converge" in cal.message
-    cal = calibrate(cycle, "default", max_iter=2)
+    cal = calibrate(cycle, options=CalibrationOptions(method="default", max_iter=2))
     assert not cal.success
     assert "did not converge" in cal.message
 
@@ -355,17 +355,17 @@ def test_every_sample_out_of_soil():
 def test_inverted_bounds_and_unknown_method():
     cycle = synthetic_cycle("dirt", noise=0.0)
     with pytest.raises(CalibrationError, match="inverted"):
-        calibrate(cycle, bounds={"phi": (0.5, 0.2)})
+        calibrate(cycle, options=CalibrationOptions(bounds={"phi": (0.5, 0.2)}))
     with pytest.raises(CalibrationError, match="unknown calibration method"):
-        calibrate(cycle, method="newton")
+        calibrate(cycle, options=CalibrationOptions(method="newton"))
     with pytest.raises(CalibrationError, match="lam"):
-        calibrate(cycle, lam=1.5)
+        calibrate(cycle, options=CalibrationOptions(lam=1.5))
     with pytest.raises(CalibrationError, match="degrees"):
-        calibrate(cycle, bounds={"phi": (0.0, 45.0)})
+        calibrate(cycle, options=CalibrationOptions(bounds={"phi": (0.0, 45.0)}))
     with pytest.raises(CalibrationError, match="grid"):
-        calibrate(cycle, grid=(0, 9, 8))
+        calibrate(cycle, options=CalibrationOptions(grid=(0, 9, 8)))
     with pytest.raises(CalibrationError, match="n_starts"):
-        calibrate(cycle, n_starts=0)
+        calibrate(cycle, options=CalibrationOptions(n_starts=0))
 
 
 def test_factor_derivatives_finite_on_down_slopes():

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from wheelloader.estimator import PAPER_BOUNDS, Bucket, preset
-from wheelloader.estimator.calibration import calibrate
+from wheelloader.estimator.calibration import CalibrationOptions, calibrate
 from wheelloader.estimator.calibration.api import cycle_weights_for
 from wheelloader.estimator.calibration.fitmodel import FIT_NAMES, FitData, fit_bounds, soil_to_fit
 from wheelloader.estimator.errors import CalibrationError
@@ -82,7 +82,7 @@ def test_forgetting_factor_weights_the_newest_cycle_most():
     old = [synthetic_cycle("gravel", random_bezier_path(rng), noise=0.0) for _ in range(2)]
     new = synthetic_cycle("modified_sand", random_bezier_path(rng), noise=0.0)
     plain = calibrate([*old, new])
-    forget = calibrate([*old, new], forgetting=0.01)
+    forget = calibrate([*old, new], options=CalibrationOptions(forgetting=0.01))
     newest = [c["settings"]["cycles"]["per_cycle"][-1]["rmse"]["F_R"][0] for c in (plain.to_dict()["calibration"],
                                                                                forget.to_dict()["calibration"])]
     assert newest[1] < 0.5 * newest[0]
@@ -96,13 +96,13 @@ def test_bad_cycle_lists_are_rejected():
     with pytest.raises(CalibrationError, match=r"cycle\[1\]"):
         calibrate([log, "x"])
     with pytest.raises(CalibrationError, match="varpro method only"):
-        calibrate([log, log], method="multi-stage")
+        calibrate([log, log], options=CalibrationOptions(method="multi-stage"))
     with pytest.raises(CalibrationError, match="forgetting"):
-        calibrate([log, log], forgetting=1.5)
+        calibrate([log, log], options=CalibrationOptions(forgetting=1.5))
     with pytest.raises(CalibrationError, match="not both"):
-        calibrate([log, log], forgetting=0.5, cycle_weights=[1, 1])
+        calibrate([log, log], options=CalibrationOptions(forgetting=0.5, cycle_weights=[1, 1]))
     with pytest.raises(CalibrationError, match="one per cycle"):
-        calibrate([log, log], cycle_weights=[1.0])
+        calibrate([log, log], options=CalibrationOptions(cycle_weights=[1.0]))
     other = synthetic_cycle("gravel", bucket=Bucket(edge_thickness=0.03), noise=0.0)
     with pytest.raises(CalibrationError, match="another bucket"):
         calibrate([log, other])

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from wheelloader.cli import main
-from wheelloader.estimator import CalibrationError, CycleLog, calibrate, synthetic_cycle
+from wheelloader.estimator import CalibrationError, CalibrationOptions, CycleLog, calibrate, synthetic_cycle
 from wheelloader.estimator.synthetic import random_bezier_path, random_soil
 
 
@@ -33,7 +33,7 @@ def test_200_random_cycles_calibrate_and_summarise():
             cycle = _variant(cycle, cycle.normal, cycle.tangential)
         cheap = {} if i % 4 == 3 else {"grid": (5, 5, 4), "n_starts": 1}
         try:
-            cal = calibrate(cycle, **cheap)
+            cal = calibrate(cycle, options=CalibrationOptions(**cheap))
         except CalibrationError:
             continue  # a clear refusal (e.g. a path that barely enters the soil) is not a crash
         fitted += 1
@@ -95,7 +95,7 @@ def _degenerate_cycles() -> dict[str, CycleLog]:
 @pytest.mark.parametrize("method", ["default", "single-stage"])
 def test_degenerate_data_are_not_trustworthy(method):
     for kind, cycle in _degenerate_cycles().items():
-        cal = calibrate(cycle, method, min_samples=12)
+        cal = calibrate(cycle, options=CalibrationOptions(method=method, min_samples=12))
         assert not cal.trustworthy, kind
         assert cal.warnings and all(w.code and w.message for w in cal.warnings), kind
         data = cal.to_dict()["calibration"]
@@ -109,7 +109,7 @@ def test_degenerate_data_name_their_reason():
                 "x10 (parameters on bounds)": "parameters_on_bounds",
                 "too few samples in soil": "too_few_samples"}
     for kind, cycle in _degenerate_cycles().items():
-        codes = {w.code for w in calibrate(cycle, min_samples=12).warnings}
+        codes = {w.code for w in calibrate(cycle, options=CalibrationOptions(min_samples=12)).warnings}
         assert expected[kind] in codes, (kind, codes)
 
 
@@ -138,15 +138,16 @@ def test_method_names_and_aliases():
     assert METHODS == ("varpro", "single-stage", "multi-stage")
     assert canonical_method("default") == "varpro" and canonical_method(" Multi ") == "multi-stage"
     cycle = synthetic_cycle("dirt", noise=0.0)
-    assert calibrate(cycle).method == "varpro" and calibrate(cycle, "default").method == "varpro"
+    assert calibrate(cycle).method == "varpro"
+    assert calibrate(cycle, options=CalibrationOptions(method="default")).method == "varpro"
     with pytest.raises(CalibrationError, match="unknown calibration method"):
-        calibrate(cycle, "lbfgs")
+        calibrate(cycle, options=CalibrationOptions(method="lbfgs"))
 
 
 def test_huge_filter_sigma_is_refused_at_once():
     """--sigma 1e9 with the multi-stage method tried to allocate 60 GiB (issue #13, item 5)."""
     with pytest.raises(CalibrationError, match="wider than the cycle"):
-        calibrate(synthetic_cycle("dirt", noise=0.0), "multi-stage", sigma=1e9)
+        calibrate(synthetic_cycle("dirt", noise=0.0), options=CalibrationOptions(method="multi-stage", sigma=1e9))
 
 
 # ------------------------------------------------------------------ long logs (issue #13, item 4)
@@ -209,7 +210,7 @@ def test_public_imports_of_the_split_estimator():
     import wheelloader.estimator.calibration as cal
 
     for name in ("calibrate", "Calibration", "FitQuality", "StageResult", "METHODS", "load_params", "predict",
-                 "Prediction", "Uncertainty", "CalibrationError", "FitWarning"):
+                 "Prediction", "Uncertainty", "CalibrationError", "FitWarning", "CalibrationOptions"):
         assert getattr(est, name) is getattr(cal, name), name
     from wheelloader.estimator.calibration import calibrate as calibrate2
     from wheelloader.estimator.calibration.varpro import fit_varpro  # noqa: F401

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from wheelloader.estimator import Bucket, ModelOptions, Pile, default_path, preset
-from wheelloader.estimator.calibration import calibrate, predict
+from wheelloader.estimator.calibration import CalibrationOptions, calibrate, predict
 from wheelloader.estimator.calibration.fitmodel import FIT_NAMES, FitData, soil_to_fit
 from wheelloader.estimator.errors import CalibrationError, ParameterError
 from wheelloader.estimator.force_model import carried_load_factors, soil_forces, soil_forces_single
@@ -84,7 +84,7 @@ def test_fit_model_and_jacobian_with_the_term():
 def test_calibration_recovers_a_soil_with_the_carried_load(soil_name):
     log = synthetic_cycle(soil_name, noise=0.0, options=ON)
     off = calibrate(log)
-    on = calibrate(log, options=ON)
+    on = calibrate(log, options=CalibrationOptions(model_options=ON))
     assert on.quality.percent_r <= 0.1
     assert on.params.gamma == pytest.approx(preset(soil_name).gamma, rel=1e-3)
     assert off.quality.percent_r > on.quality.percent_r
@@ -98,7 +98,7 @@ def test_options_are_checked():
         ModelOptions(carried_load=1)
     log = synthetic_cycle("gravel", noise=0.0)
     with pytest.raises(CalibrationError, match="varpro"):
-        calibrate(log, method="multi-stage", options=ON)
+        calibrate(log, options=CalibrationOptions(method="multi-stage", model_options=ON))
     assert ON.extra_terms == ("carried_load",) and ModelOptions().extra_terms == ()
 
 
@@ -148,6 +148,6 @@ def test_slip_friction_everywhere_alike(assert_fit_jacobian):
 def test_calibration_recovers_a_soil_with_slip_friction():
     opts = ModelOptions(slip_friction=True)
     log = synthetic_cycle("dirt", noise=0.0, options=opts)
-    cal = calibrate(log, options=opts)
+    cal = calibrate(log, options=CalibrationOptions(model_options=opts))
     assert cal.quality.percent_r <= 0.1
     assert predict(cal, log).quality.percent_r == pytest.approx(cal.quality.percent_r, abs=1e-6)

@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from wheelloader.estimator import Bucket, ModelOptions, Pile, default_path, preset
-from wheelloader.estimator.calibration import calibrate, predict
+from wheelloader.estimator.calibration import CalibrationOptions, calibrate, predict
 from wheelloader.estimator.calibration.fitmodel import FitData, factors, soil_to_fit
 from wheelloader.estimator.errors import CalibrationError, ParameterError, PlanningError
 from wheelloader.estimator.failure_angle import (
@@ -139,7 +139,7 @@ def test_fit_model_and_jacobian_with_the_rule(assert_fit_jacobian):
 @pytest.mark.parametrize("soil_name", ["gravel", "lean_clay"])
 def test_calibration_recovers_a_soil_made_with_the_rule(soil_name):
     log = synthetic_cycle(soil_name, noise=0.0, options=WEIGHT)
-    on = calibrate(log, options=WEIGHT)
+    on = calibrate(log, options=CalibrationOptions(model_options=WEIGHT))
     off = calibrate(log)
     assert on.quality.percent_r <= 0.1 < off.quality.percent_r
     assert on.params.gamma == pytest.approx(preset(soil_name).gamma, rel=1e-3)
@@ -154,7 +154,7 @@ def test_options_are_checked():
     with pytest.raises(CalibrationError, match="depth and surcharge"):
         factors(np.array([0.3]), np.array([0.6]), 0.6, 0.3, WEIGHT)
     with pytest.raises(CalibrationError, match="varpro"):
-        calibrate(synthetic_cycle("gravel", noise=0.0), method="multi-stage", options=WEIGHT)
+        CalibrationOptions(method="multi-stage", model_options=WEIGHT)
 
 
 @pytest.mark.parametrize("name", ["gravel", "lean_clay"])

@@ -9,7 +9,7 @@ import pytest
 
 from wheelloader.cli import main
 from wheelloader.estimator import ParameterError, preset
-from wheelloader.estimator.calibration import calibrate, predict
+from wheelloader.estimator.calibration import CalibrationOptions, calibrate, predict
 from wheelloader.estimator.calibration.bands import BandModel, normal_quantile, residual_noise_model
 from wheelloader.estimator.synthetic import random_bezier_path, synthetic_cycle
 
@@ -81,11 +81,11 @@ def test_cross_cycle_band_noise_uses_held_out_residuals():
     logs = [synthetic_cycle(name, random_bezier_path(rng), noise=0.03, seed=k, force_scale=2000.0)
             for k, name in enumerate(("gravel", "gravel", "dirt"))]
     train = calibrate(logs)
-    cross = calibrate(logs, band_noise="cross-cycle")
+    cross = calibrate(logs, options=CalibrationOptions(band_noise="cross-cycle"))
     assert cross.settings["band_noise"] == "cross-cycle" and "band_noise" not in train.settings
     np.testing.assert_array_equal(cross.params.to_array(), train.params.to_array())  # the fit is the same
     f_r = np.hypot(train.predicted_tangential, train.predicted_normal)[train.in_soil]
     mean_var = lambda m: float(np.mean(m.sigma_0 ** 2 + (m.relative * f_r) ** 2))  # noqa: E731
     assert mean_var(cross.band_model) > mean_var(train.band_model)
     with pytest.raises(Exception, match="band_noise"):
-        calibrate(logs, band_noise="loo")
+        calibrate(logs, options=CalibrationOptions(band_noise="loo"))

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from wheelloader.adaptation import strategy_loop
-from wheelloader.estimator import SoilParams, calibrate, preset
+from wheelloader.estimator import CalibrationOptions, SoilParams, calibrate, preset
 from wheelloader.references.dem import filtered, load_reference
 from wheelloader.sweep import Unit, run_sweep
 
@@ -47,7 +47,7 @@ def broken(x: int) -> int:
 
 def _units() -> list[Unit]:
     logs = [filtered(load_reference(f"gravel_path{k}", DATA), 0.1) for k in (1, 2, 3, 4)]
-    cal = [Unit(calibrate, {"cycle": log, "method": method}, label=f"calibrate path {k}")
+    cal = [Unit(calibrate, {"cycles": log, "options": CalibrationOptions(method=method)}, label=f"calibrate path {k}")
            for k, (log, method) in enumerate(zip(logs, ("default", "multi-stage", "default", "single-stage"),
                                                  strict=True), start=1)]
     hidden = preset("dirt").replace(phi=preset("dirt").phi + 0.03)

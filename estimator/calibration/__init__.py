@@ -3,7 +3,8 @@
 The shared model (soil, pile, paths, kinematics, force model, cycle log) lives
 in :mod:`wheelloader.estimator`; this subpackage fits it:
 
-* :mod:`.api`: :func:`calibrate` and the method names;
+* :mod:`.api`: :func:`calibrate`, one fit function per method (:class:`~.api.MethodFit`);
+* :mod:`.options`: :class:`CalibrationOptions`, the settings of a calibration, and the method names;
 * :mod:`.result`: :class:`Calibration`, :class:`FitQuality`, :class:`StageResult`, and
   :class:`SolverResult`, the one result type of the internal solvers;
 * :mod:`.verdict`: whether the data could determine the soil (:attr:`Calibration.trustworthy`);
@@ -23,7 +24,8 @@ from typing import TYPE_CHECKING
 from ..errors import CalibrationError
 
 if TYPE_CHECKING:
-    from .api import DEFAULT_METHOD, METHOD_ALIASES, METHODS, calibrate, canonical_method
+    from .api import calibrate
+    from .options import DEFAULT_METHOD, METHOD_ALIASES, METHODS, CalibrationOptions, canonical_method
     from .prediction import Prediction, predict
     from .result import Calibration, FitQuality, SolverResult, StageResult, load_params
     from .uncertainty import Uncertainty
@@ -32,7 +34,9 @@ if TYPE_CHECKING:
 #: Where each public name lives; a submodule is imported on first access (PEP 562), so reading a
 #: params.json (:func:`load_params`) does not import the fitting methods and SciPy's filters.
 _HOMES = {
-    **dict.fromkeys(("DEFAULT_METHOD", "METHOD_ALIASES", "METHODS", "calibrate", "canonical_method"), ".api"),
+    "calibrate": ".api",
+    **dict.fromkeys(("DEFAULT_METHOD", "METHOD_ALIASES", "METHODS", "CalibrationOptions", "canonical_method"),
+                    ".options"),
     **dict.fromkeys(("Prediction", "predict"), ".prediction"),
     **dict.fromkeys(("Calibration", "FitQuality", "SolverResult", "StageResult", "load_params"), ".result"),
     "Uncertainty": ".uncertainty",
@@ -53,6 +57,7 @@ def __dir__() -> list[str]:
     return sorted(set(globals()) | set(_HOMES))
 
 
-__all__ = ["DEFAULT_METHOD", "METHODS", "METHOD_ALIASES", "Calibration", "CalibrationError", "FitQuality", "FitWarning",
+__all__ = ["DEFAULT_METHOD", "METHODS", "METHOD_ALIASES", "Calibration", "CalibrationError", "CalibrationOptions",
+           "FitQuality", "FitWarning",
            "Prediction", "SolverResult", "StageResult", "Uncertainty", "calibrate", "canonical_method",
            "load_params", "predict"]

@@ -1,4 +1,8 @@
-"""Calibrate the soil from one cycle: :func:`calibrate`, returning a :class:`~.result.Calibration`.
+"""Calibrate the soil from one cycle or several: :func:`calibrate`, returning a :class:`~.result.Calibration`.
+
+Settings: :class:`~.options.CalibrationOptions` (one frozen dataclass, validated when made). Each method
+has one fit function returning a :class:`MethodFit` (:data:`FIT_FUNCTIONS`); :func:`calibrate` runs the
+same path for one cycle and for several.
 
 Methods
 -------
@@ -23,19 +27,22 @@ import dataclasses
 import logging
 import math
 import time
+import warnings
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..cyclelog import CycleLog
-from ..errors import CalibrationError, ParameterError
+from ..errors import CalibrationError
 from ..force_model import DEFAULT_OPTIONS, FLAG_TENSION, ModelOptions, soil_forces
-from ..kinematics import DEFAULT_SLOPE_WINDOW, ContactState
-from ..soil import PARAMETER_NAMES, SoilParams, as_soil, validate_bounds
+from ..kinematics import ContactState
+from ..soil import PARAMETER_NAMES, SoilParams
 from ..soil_vector import SOIL_VECTOR_NAMES as FIT_NAMES
 from ..soil_vector import soil_from_vector, soil_vector, vector_bounds
 from .bands import BandModel, residual_noise_model
-from .fitmodel import MIN_SAMPLES, FitData
+from .fitmodel import FitData
+from .options import DEFAULT_METHOD, METHOD_ALIASES, METHODS, CalibrationOptions, canonical_method
 from .paper_methods import fit_multi_stage, fit_single_stage
 from .priors import class_prior
 from .result import Calibration, FitQuality, StageResult
@@ -43,12 +50,9 @@ from .uncertainty import analyse, integrated_autocorrelation_time
 from .varpro import fit_varpro, refine
 from .verdict import assess
 
-#: Calibration methods, by what they are.
-METHODS: tuple[str, ...] = ("varpro", "single-stage", "multi-stage")
-#: Other accepted names of the methods (case-insensitive): ``"default"`` is the varpro method.
-METHOD_ALIASES: dict[str, str] = {"default": "varpro", "single": "single-stage", "multi": "multi-stage"}
-#: The method :func:`calibrate` uses unless told otherwise.
-DEFAULT_METHOD = "varpro"
+__all__ = ["DEFAULT_METHOD", "FIT_FUNCTIONS", "METHODS", "METHOD_ALIASES", "CalibrationOptions", "MethodFit",
+           "calibrate", "canonical_method", "cycle_weights_for", "fit_paper_method", "fit_varpro_method"]
+
 #: Largest number of in-soil samples a calibration fits. A longer log (about 3 hours of digging at 60 Hz,
 #: or a log sampled far faster than the forces change) is fitted on a uniform subsample, every k-th
 #: in-soil sample, and ``settings["decimation"]`` says so; memory then stays bounded (about 1.5 kB per
@@ -56,33 +60,15 @@ DEFAULT_METHOD = "varpro"
 MAX_FIT_SAMPLES = 200_000
 #: Samples per block when the fitted model's forces are evaluated along the whole log.
 FORCE_CHUNK = 200_000
+#: The keyword arguments of the old signature ``calibrate(cycle, method, initial, bounds, *, lam, ...)``,
+#: still accepted (with a :class:`DeprecationWarning`) for one release; ``options`` was the model options.
+LEGACY_POSITIONAL = ("method", "initial", "bounds")
+LEGACY_RENAMED = {"options": "model_options"}
 
 _log = logging.getLogger(__name__)
 
 
-def canonical_method(method: str) -> str:
-    """The name in :data:`METHODS` of a method or alias; :class:`CalibrationError` if unknown."""
-    key = method.strip().lower() if isinstance(method, str) else None
-    if key in METHODS:
-        return key
-    if key in METHOD_ALIASES:
-        return METHOD_ALIASES[key]
-    raise CalibrationError(f"unknown calibration method {method!r}; choose one of {list(METHODS)} "
-                           f"(aliases {sorted(METHOD_ALIASES)})")
-
-
 # ------------------------------------------------------------ calibrate
-def _coerce_initial(initial: Any) -> SoilParams | None:
-    if initial is None:
-        return None
-    if isinstance(initial, Calibration):
-        return initial.params
-    try:
-        return as_soil(initial)
-    except ParameterError as exc:
-        raise CalibrationError(f"initial: {exc}") from None
-
-
 def _coerce_cycles(cycle: Any) -> list[CycleLog]:
     """One log or a non-empty sequence of logs, as a list (oldest first)."""
     if isinstance(cycle, CycleLog):
@@ -122,244 +108,241 @@ def cycle_weights_for(count: int, forgetting: float | None = None,
     return None
 
 
-def calibrate(
-    cycle: CycleLog | list[CycleLog],
-    method: str = DEFAULT_METHOD,
-    initial: Calibration | SoilParams | dict | str | None = None,
-    bounds: dict[str, tuple[float, float]] | None = None,
-    *,
-    lam: float = 0.5,
-    sigma: float = 3.0,
-    grid: tuple[int, int, int] = (9, 9, 8),
-    n_starts: int = 3,
-    max_iter: int | None = None,
-    options: ModelOptions = DEFAULT_OPTIONS,
-    slope_window: float = DEFAULT_SLOPE_WINDOW,
-    min_samples: int = MIN_SAMPLES,
-    regularize: bool = False,
-    forgetting: float | None = None,
-    cycle_weights: list[float] | None = None,
-    fill: str = "log",
-    prior: str | dict | None = None,
-    band_noise: str = "training",
-) -> Calibration:
+def _resolve_call(cycles: Any, options: Any, args: tuple, kwargs: dict) -> tuple[Any, CalibrationOptions]:
+    """The cycles and :class:`CalibrationOptions` of a call, from ``options=`` or (deprecated) the old arguments."""
+    if not args and not kwargs and (options is None or isinstance(options, CalibrationOptions)):
+        return cycles, CalibrationOptions() if options is None else options
+    if options is None and len(args) == 1 and isinstance(args[0], CalibrationOptions) and not kwargs:
+        return cycles, args[0]
+    if isinstance(options, CalibrationOptions) or any(isinstance(a, CalibrationOptions) for a in args):
+        raise TypeError("calibrate: give the settings either as options=CalibrationOptions(...) or as the "
+                        "deprecated keyword arguments, not both")
+    if len(args) > len(LEGACY_POSITIONAL):
+        raise TypeError(f"calibrate() takes at most {len(LEGACY_POSITIONAL) + 1} positional arguments "
+                        f"({len(args) + 1} given)")
+    legacy = dict(zip(LEGACY_POSITIONAL, args, strict=False))
+    for name, value in kwargs.items():
+        if name in legacy:
+            raise TypeError(f"calibrate() got multiple values for argument {name!r}")
+        legacy[name] = value
+    if "cycle" in legacy:  # the old name of the first argument
+        if cycles is not None:
+            raise TypeError("calibrate() got multiple values for argument 'cycles'")
+        cycles = legacy.pop("cycle")
+    if options is not None:  # the old signature's options= was the force-model options
+        legacy["options"] = options
+    fields = {f.name for f in dataclasses.fields(CalibrationOptions)}
+    mapped = {LEGACY_RENAMED.get(k, k): v for k, v in legacy.items()}
+    unknown = sorted(k for k in mapped if k not in fields)
+    if unknown:
+        raise TypeError(f"calibrate() got unexpected keyword argument(s) {unknown}")
+    warnings.warn("calibrate(cycle, method, ..., lam=..., options=ModelOptions(...)) is deprecated and will be "
+                  "removed in the next release; pass calibrate(cycles, options=CalibrationOptions(...)) "
+                  "(the model options as CalibrationOptions(model_options=...))", DeprecationWarning, stacklevel=3)
+    return cycles, CalibrationOptions(**mapped)
+
+
+@dataclass(frozen=True)
+class MethodFit:
+    """Outcome of one method's fit (:func:`fit_varpro_method`, :func:`fit_paper_method`).
+
+    Attributes
+    ----------
+    x : numpy.ndarray
+        The fit vector (:data:`FIT_NAMES`) at the solution.
+    soil : SoilParams
+        The calibrated soil.
+    success : bool
+        Whether every solver run converged.
+    status : int
+        Status of the solver run that decides ``success``.
+    message : str
+        Solver message(s).
+    nfev, njev : int
+        Model and analytic-Jacobian evaluations.
+    time_s : float
+        Wall time of the fit [s].
+    stages : list of StageResult
+        Per-stage parameters, RMSE and timings.
+    settings : dict
+        The method's settings, recorded in :attr:`Calibration.settings`.
+    """
+
+    x: np.ndarray
+    soil: SoilParams
+    success: bool
+    status: int
+    message: str
+    nfev: int
+    njev: int
+    time_s: float
+    stages: list[StageResult]
+    settings: dict[str, Any]
+
+
+def fit_varpro_method(data: FitData, cycle: CycleLog, opts: CalibrationOptions, lo: np.ndarray,
+                      hi: np.ndarray) -> MethodFit:
+    """The ``"varpro"`` method on ``data`` (:func:`~.varpro.fit_varpro`) as a :class:`MethodFit`."""
+    b = data.edge_thickness
+    settings: dict[str, Any] = {"grid": list(opts.grid), "n_starts": opts.n_starts, "max_nfev": opts.max_nfev,
+                                "regularize": opts.map_estimate}
+    if opts.prior is not None:
+        settings["literature_prior"] = (opts.prior if isinstance(opts.prior, str)
+                                        else {k: list(v) for k, v in opts.prior.items()})
+    t0 = time.perf_counter()
+    x0 = None if opts.initial is None else soil_vector(opts.initial, b)
+    moments = None if opts.prior is None else class_prior(opts.prior)
+    fit = fit_varpro(data, lo, hi, opts.lam, x0, opts.grid, opts.n_starts, opts.max_nfev,
+                     regularize=opts.map_estimate, prior_moments=moments)
+    if fit.prior is not None:
+        settings["prior"] = {"mean": fit.prior.mean, "scale": fit.prior.scale, "nu": fit.prior.nu,
+                             "autocorrelation_time": fit.tau, "exact_fit": fit.exact, "exact_fit_cost": fit.exact_cost}
+    success = fit.success and fit.status > 0
+    message = f"did not converge: {fit.message}" if fit.status == 0 else fit.message
+    points = int(np.prod(opts.grid))
+    stages = [_stage("grid", data, fit.grid_best, opts.lam, fit.grid_time, points, True,
+                     f"best of {points} grid points (projected cost {fit.grid_cost:.4g})"),
+              _stage("refine", data, fit.x, opts.lam, fit.refine_time, sum(r.nfev for r in fit.refinements),
+                     success, f"{len(fit.refinements)} start(s); best: {message}")]
+    time_s = time.perf_counter() - t0
+    return MethodFit(x=fit.x, soil=soil_from_vector(fit.x, b, opts.bounds, opts.initial), success=success,
+                     status=fit.status, message=message, nfev=fit.evaluations.nfev, njev=fit.evaluations.njev,
+                     time_s=time_s, stages=stages, settings=settings)
+
+
+def fit_paper_method(data: FitData, cycle: CycleLog, opts: CalibrationOptions, lo: np.ndarray,
+                     hi: np.ndarray) -> MethodFit:
+    """The paper's ``"single-stage"`` or ``"multi-stage"`` method (:mod:`~.paper_methods`) as a :class:`MethodFit`."""
+    settings: dict[str, Any] = {}
+    t0 = time.perf_counter()
+    if opts.method == "single-stage":
+        pf = fit_single_stage(data, opts.bounds, opts.initial, opts.maxiter)
+    else:
+        settings["sigma"] = opts.sigma
+        pf = fit_multi_stage(data, opts.bounds, opts.initial, opts.sigma, cycle.normal, opts.maxiter)
+    b = data.edge_thickness
+    failed = [s for s in pf.stages if not s.success]
+    message = "; ".join(f"{s.name}: {s.message}" for s in pf.stages)
+    settings.update(maxiter=opts.maxiter, initial_guess="given" if opts.initial is not None else "mid-range of bounds")
+    stages = [_paper_stage(s, data, b) for s in pf.stages]
+    time_s = time.perf_counter() - t0
+    # the paper's methods estimate k_c, k_phi directly (varpro splits K)
+    soil = SoilParams.from_array(np.clip(pf.theta, [opts.bounds[k][0] for k in PARAMETER_NAMES],
+                                         [opts.bounds[k][1] for k in PARAMETER_NAMES]))
+    return MethodFit(x=soil_vector(pf.theta, b), soil=soil, success=not failed,
+                     status=failed[0].status if failed else 0,
+                     message=("did not converge: " + message) if failed else message,
+                     nfev=sum(s.nfev for s in pf.stages), njev=0, time_s=time_s, stages=stages, settings=settings)
+
+
+#: The fit function of each method: ``(data, first cycle, options, lower, upper) -> MethodFit``.
+FIT_FUNCTIONS = {"varpro": fit_varpro_method, "single-stage": fit_paper_method, "multi-stage": fit_paper_method}
+
+
+def calibrate(cycles: CycleLog | list[CycleLog] | None = None, *legacy_args: Any,
+              options: CalibrationOptions | None = None, **legacy_kwargs: Any) -> Calibration:
     """Calibrate the eight soil parameters from one cycle or from several.
 
     Parameters
     ----------
-    cycle : CycleLog or list of CycleLog
-        The measured cycle (path, F_T, F_N, pile at the start, bucket), or several cycles of the
-        same soil and bucket, oldest first: one soil is fitted to all of them, each with the depth
-        measured to its own pile surface (varpro method only). A list of one log gives exactly the
-        one-log result.
-    method : str
-        ``"varpro"`` (our variable-projection method; alias ``"default"``),
-        ``"single-stage"`` or ``"multi-stage"`` (the paper's, Section III).
-    initial : Calibration, SoilParams, dict or str, optional
-        Warm start: the previous cycle's result. The varpro method refines
-        it as one more start (besides its grid search); the paper's methods
-        start from it instead of the mid-range guess. Its share of k_c/b in
-        K is kept when K is split into k_c, k_phi.
-    bounds : dict, optional
-        ``name -> (lower, upper)`` for some of the eight parameters; the
-        others keep the paper's bounds (eq 19j). Equal bounds fix a parameter.
-    lam : float
-        Weight lambda of F_T in eq 19a (default 0.5; the multi-stage method
-        uses its own stage weights).
-    sigma : float
-        Stage-2 Gaussian filter standard deviation [samples] (multi-stage).
-    grid : tuple of int
-        Grid sizes over (phi, delta, n) (varpro method).
-    n_starts : int
-        Grid local minima refined (varpro method).
-    max_iter : int, optional
-        Iteration limit: L-BFGS-B ``maxiter`` per stage for the paper's
-        methods (default 1000, as the paper); residual evaluations per
-        refinement for the varpro method (default 100).
-    options : ModelOptions
-        Force-model options.
-    slope_window : float
-        Half-width of the local slope chord [m].
-    min_samples : int
-        Smallest number of in-soil samples accepted.
-    regularize : bool
-        Varpro method only: after the exact least-squares fit, take the MAP
-        estimate under a weak prior (mean ``initial`` or the mid-range of the
-        bounds, standard deviation range / sqrt(12)) with the noise per
-        independent sample estimated from the residuals' autocorrelation
-        (:mod:`wheelloader.estimator.calibration.varpro`, step 6).
-    forgetting : float, optional
-        Several cycles: forgetting factor ``f`` in (0, 1]; cycle ``k`` of ``N`` (oldest first) weighs
-        ``f ** (N - 1 - k)`` in the cost (the newest 1). Default: every cycle weighs 1.
-    cycle_weights : list of float, optional
-        Several cycles: explicit weight of each cycle's squared residuals (instead of ``forgetting``).
-    fill : str
-        Where the bucket load ``W_load`` comes from: ``"log"`` (default) the logged fill or load
-        when the log has one, ``"model"`` the model's own bookkeeping (carving the pile along the
-        path), the quantity a prediction of a new path has (:meth:`CycleLog.contact_state`).
-    prior : str or dict, optional
-        Varpro method: the MAP estimate under a literature prior of the soil class being dug,
-        ``"granular"`` or ``"cohesive"`` (paper Tables A1, A2;
-        :mod:`wheelloader.estimator.calibration.priors`), or ``{name: (low, high)}`` ranges of
-        your own over the fit vector; it replaces the weak prior of ``regularize``.
-    band_noise : str
-        Residual noise model of the prediction band (:mod:`~.bands`): ``"training"`` (default) fits it to
-        the training residuals; ``"cross-cycle"`` (several cycles) to the residuals of each cycle
-        predicted by a fit on the others (leave one cycle out; one local refinement per cycle), the
-        residuals of a path the fit has not seen.
+    cycles : CycleLog or list of CycleLog
+        The measured cycle (path, F_T, F_N, pile at the start, bucket), or several cycles of the same soil
+        and bucket, oldest first: one soil is fitted to all of them, each with the depth measured to its own
+        pile surface (varpro method only). A list of one log gives exactly the one-log result.
+    options : CalibrationOptions, optional
+        Every setting (method, warm start, bounds, weights, ...); default ``CalibrationOptions()``: the
+        varpro method with its defaults.
+    *legacy_args, **legacy_kwargs
+        Deprecated (one release): the old signature ``calibrate(cycle, method, initial, bounds, *, lam,
+        sigma, grid, n_starts, max_iter, options, slope_window, min_samples, regularize, forgetting,
+        cycle_weights, fill, prior, band_noise)``, where ``options`` was the :class:`ModelOptions`. They
+        map one to one onto :class:`CalibrationOptions` (``options`` onto ``model_options``; ``cycle=`` onto
+        ``cycles``) with a :class:`DeprecationWarning`.
 
     Returns
     -------
     Calibration
-        With several cycles, ``quality`` covers the in-soil samples of all of them,
-        ``predicted_*`` and ``in_soil`` are the cycles' series one after another, and
-        ``settings["cycles"]`` holds each cycle's sample count, weight and F_R error, and the
-        identifiability of the first 1, 2, ... cycles (:attr:`Calibration.identifiability_by_cycles`).
+        With several cycles, ``quality`` covers the in-soil samples of all of them, ``predicted_*`` and
+        ``in_soil`` are the cycles' series one after another, and ``settings["cycles"]`` holds each cycle's
+        sample count, weight and F_R error, and the identifiability of the first 1, 2, ... cycles
+        (:attr:`Calibration.identifiability_by_cycles`).
 
     Raises
     ------
     CalibrationError
-        Unknown method, bad bounds or initial guess, NaN forces, too few
-        samples, or no sample in soil.
+        Bad settings (:class:`CalibrationOptions`), NaN forces, too few samples, or no sample in soil.
     """
-    method = canonical_method(method)
-    logs = _coerce_cycles(cycle)
-    weights_per_cycle = cycle_weights_for(len(logs), forgetting, cycle_weights)
-    if len(logs) > 1 and method != "varpro":
+    cycles, opts = _resolve_call(cycles, options, legacy_args, legacy_kwargs)
+    logs = _coerce_cycles(cycles)
+    weights = cycle_weights_for(len(logs), opts.forgetting, opts.cycle_weights)
+    if len(logs) > 1 and opts.method != "varpro":
         raise CalibrationError(f"calibration from several cycles ({len(logs)} given) is implemented for the varpro "
-                               f"method only, not {method!r}")
-    cycle = logs[0]
-    if fill not in ("log", "model"):
-        raise CalibrationError(f'fill must be "log" or "model", got {fill!r}')
-    if options.extra_terms and method != "varpro":
-        raise CalibrationError(f"the paper's methods fit the paper's model only; the opt-in term(s) "
-                               f"{list(options.extra_terms)} need the varpro method")
-    try:
-        bnds = validate_bounds({} if bounds is None else bounds)
-    except ParameterError as exc:
-        raise CalibrationError(str(exc)) from None
-    if not (isinstance(lam, (int, float)) and 0.0 <= lam <= 1.0):
-        raise CalibrationError(f"lam must be in [0, 1], got {lam!r}")
-    if not (isinstance(sigma, (int, float)) and math.isfinite(sigma) and sigma >= 0.0):
-        raise CalibrationError(f"sigma must be a finite number of samples >= 0, got {sigma!r}")
-    if max_iter is not None and not (isinstance(max_iter, int) and max_iter >= 1):
-        raise CalibrationError(f"max_iter must be a positive integer, got {max_iter!r}")
-    if not (isinstance(grid, (tuple, list)) and len(grid) == 3
-            and all(isinstance(g, (int, np.integer)) and not isinstance(g, bool) and g >= 1 for g in grid)):
-        raise CalibrationError(f"grid must be three positive integers (points over phi, delta, n), got {grid!r}")
-    if not (isinstance(n_starts, int) and not isinstance(n_starts, bool) and n_starts >= 1):
-        raise CalibrationError(f"n_starts must be a positive integer, got {n_starts!r}")
-    if not (isinstance(min_samples, int) and not isinstance(min_samples, bool) and min_samples >= 1):
-        raise CalibrationError(f"min_samples must be a positive integer, got {min_samples!r}")
-    if not isinstance(regularize, bool):
-        raise CalibrationError(f"regularize must be True or False, got {regularize!r}")
-    if band_noise not in ("training", "cross-cycle"):
-        raise CalibrationError(f'band_noise must be "training" or "cross-cycle", got {band_noise!r}')
-    literature = prior
-    prior_moments = None if literature is None else class_prior(literature)
-    if literature is not None and canonical_method(method) != "varpro":
-        raise CalibrationError("a literature prior needs the varpro method")
-    if method == "multi-stage" and sigma > len(cycle):  # (one cycle: the paper's methods take no list)
+                               f"method only, not {opts.method!r}")
+    if opts.method == "multi-stage" and opts.sigma > len(logs[0]):  # (one cycle: the paper's methods take no list)
         # gaussian_filter1d's kernel spans 8 sigma: a sigma of 1e9 samples asked for 60 GiB
-        raise CalibrationError(f"sigma = {sigma:g} samples is wider than the cycle ({len(cycle)} samples); "
+        raise CalibrationError(f"sigma = {opts.sigma:g} samples is wider than the cycle ({len(logs[0])} samples); "
                                "the stage-2 filter needs sigma <= the number of samples")
-    start = _coerce_initial(initial)
-    bucket = cycle.bucket
-    b = bucket.edge_thickness
-    states = [log.contact_state(slope_window, fill) for log in logs]
-    parts = []
-    for k, (log, st) in enumerate(zip(logs, states, strict=True)):
-        try:
-            parts.append(FitData.from_state(st, log.tangential, log.normal, log.bucket, options, min_samples))
-        except CalibrationError as exc:
-            raise CalibrationError(f"cycle {k}: {exc}" if len(logs) > 1 else str(exc)) from None
-    data = parts[0] if len(logs) == 1 else FitData.concat(parts, weights_per_cycle)
-    state = states[0]
-    lo, hi = vector_bounds(bnds, b)
-    settings: dict[str, Any] = {"lambda": lam}
-    if options != DEFAULT_OPTIONS or fill != "log":  # recorded so that predict() uses the same model
-        settings["model_options"] = dataclasses.asdict(options)
-        settings["fill"] = fill
-    stride = -(-len(data) // MAX_FIT_SAMPLES)
-    if stride > 1:
-        _log.warning("calibrate: %d in-soil samples exceed MAX_FIT_SAMPLES = %d; fitting every %d-th sample",
-                     len(data), MAX_FIT_SAMPLES, stride)
-        settings["decimation"] = {"stride": stride, "in_soil_samples": len(data), "max_fit_samples": MAX_FIT_SAMPLES}
-        data = data.every(stride)
-    _log.info("calibrate: method %s on %d in-soil samples of %d", method, len(data), len(cycle))
-
-    t0 = time.perf_counter()
-    stages: list[StageResult] = []
-    njev = 0
-    if method == "varpro":
-        settings.update(grid=list(grid), n_starts=n_starts, max_nfev=max_iter or 100,
-                        regularize=regularize or prior_moments is not None)
-        if literature is not None:
-            settings["literature_prior"] = (literature if isinstance(literature, str)
-                                            else {k: list(v) for k, v in literature.items()})
-        x0 = None if start is None else soil_vector(start, b)
-        fit = fit_varpro(data, lo, hi, lam, x0, tuple(int(g) for g in grid), n_starts, max_iter or 100,
-                         regularize=regularize or prior_moments is not None, prior_moments=prior_moments)
-        if fit.prior is not None:
-            settings["prior"] = {"mean": fit.prior.mean, "scale": fit.prior.scale, "nu": fit.prior.nu,
-                                 "autocorrelation_time": fit.tau, "exact_fit": fit.exact,
-                                 "exact_fit_cost": fit.exact_cost}
-        x = fit.x
-        nfev, njev = fit.evaluations.nfev, fit.evaluations.njev
-        success = fit.success and fit.status > 0
-        status, message = fit.status, fit.message
-        if fit.status == 0:
-            message = f"did not converge: {fit.message}"
-        stages.append(_stage("grid", data, fit.grid_best, lam, fit.grid_time, int(np.prod(grid)), True,
-                             f"best of {int(np.prod(grid))} grid points (projected cost {fit.grid_cost:.4g})"))
-        stages.append(_stage("refine", data, x, lam, fit.refine_time, sum(r.nfev for r in fit.refinements),
-                             success, f"{len(fit.refinements)} start(s); best: {message}"))
-    else:
-        maxiter = max_iter or 1000
-        if method == "single-stage":
-            pf = fit_single_stage(data, bnds, start, maxiter)
-        else:
-            settings["sigma"] = sigma
-            pf = fit_multi_stage(data, bnds, start, sigma, cycle.normal, maxiter)
-        theta = pf.theta
-        x = soil_vector(theta, b)
-        nfev = sum(s.nfev for s in pf.stages)
-        success = all(s.success for s in pf.stages)
-        failed = [s for s in pf.stages if not s.success]
-        status = failed[0].status if failed else 0
-        message = "; ".join(f"{s.name}: {s.message}" for s in pf.stages)
-        if failed:
-            message = "did not converge: " + message
-        settings.update(maxiter=maxiter, initial_guess="given" if start is not None else "mid-range of bounds")
-        for s in pf.stages:
-            stages.append(_paper_stage(s, data, b))
-    time_s = time.perf_counter() - t0
-    _log.info("calibrate: %s fit in %.2f s (%d model evaluations)", method, time_s, nfev)
-
-    # Soil parameters: the paper's methods estimate k_c, k_phi directly; varpro splits K.
-    if method == "varpro":
-        soil = soil_from_vector(x, b, bnds, start)
-    else:
-        soil = SoilParams.from_array(np.clip(pf.theta, [bnds[k][0] for k in PARAMETER_NAMES],
-                                             [bnds[k][1] for k in PARAMETER_NAMES]))
-    if len(logs) == 1:
-        pred_t, pred_n, flags = _forces_along(soil, state, bucket, options)
-        in_soil = np.zeros(len(cycle), dtype=bool)
-        in_soil[data.index] = True
-        at_t, at_n, at_flags = pred_t[data.index], pred_n[data.index], flags[data.index]
-    else:
-        along = [_forces_along(soil, st, log.bucket, options) for log, st in zip(logs, states, strict=True)]
-        masks = []
-        for k, log in enumerate(logs):
-            m = np.zeros(len(log), dtype=bool)
-            m[data.index[data.cycle == k]] = True
-            masks.append(m)
-        pred_t, pred_n, flags = (np.concatenate([a[j] for a in along]) for j in range(3))
-        in_soil = np.concatenate(masks)
-        at_t = np.concatenate([a[0][data.index[data.cycle == k]] for k, a in enumerate(along)])
-        at_n = np.concatenate([a[1][data.index[data.cycle == k]] for k, a in enumerate(along)])
-        at_flags = np.concatenate([a[2][data.index[data.cycle == k]] for k, a in enumerate(along)])
+    states = [log.contact_state(opts.slope_window, opts.fill) for log in logs]
+    parts = [_fit_data(log, st, opts, k if len(logs) > 1 else None) for k, (log, st) in enumerate(zip(logs, states,
+                                                                                                      strict=True))]
+    data = parts[0] if len(logs) == 1 else FitData.concat(parts, weights)
+    lo, hi = vector_bounds(opts.bounds, logs[0].bucket.edge_thickness)
+    settings: dict[str, Any] = {"lambda": opts.lam}
+    if opts.model_options != DEFAULT_OPTIONS or opts.fill != "log":  # recorded so that predict() uses the same model
+        settings["model_options"] = dataclasses.asdict(opts.model_options)
+        settings["fill"] = opts.fill
+    data = _decimated(data, settings)
+    _log.info("calibrate: method %s on %d in-soil samples of %d", opts.method, len(data), len(logs[0]))
+    fit = FIT_FUNCTIONS[opts.method](data, logs[0], opts, lo, hi)
+    settings.update(fit.settings)
+    _log.info("calibrate: %s fit in %.2f s (%d model evaluations)", opts.method, fit.time_s, fit.nfev)
+    pred_t, pred_n, flags, in_soil, fitted = _forces_along_cycles(fit.soil, logs, states, data, opts.model_options)
+    at_t, at_n, at_flags = pred_t[fitted], pred_n[fitted], flags[fitted]
     quality = FitQuality.from_forces(data.y_t, data.y_n, at_t, at_n)
+    cost, resid, jac = _weighted_residuals(data, fit.x, opts.lam)
+    force_scale = float(np.mean(np.hypot(data.y_t, data.y_n)))
+    unc = analyse(jac, resid, fit.x, lo, hi, force_scale)
+    obs_r, fit_r = np.hypot(data.y_t, data.y_n), np.hypot(at_t, at_n)
+    if opts.band_noise == "cross-cycle" and len(logs) > 1:
+        obs_r, fit_r = _held_out_forces(parts, weights, fit.x, lo, hi, opts.lam, opts.max_nfev)
+        settings["band_noise"] = "cross-cycle"
+    sigma_0, relative = residual_noise_model(obs_r, fit_r)
+    settings["band_model"] = BandModel(unc.covariance, integrated_autocorrelation_time(obs_r - fit_r), sigma_0,
+                                       relative).to_dict()
+    if len(logs) > 1:
+        settings["cycles"] = _cycles_report(logs, data, weights, at_t, at_n, jac, resid, fit.x, lo, hi, force_scale)
+    warns = assess(success=bool(fit.success), obs_t=data.y_t, obs_n=data.y_n, pred_t=at_t, pred_n=at_n,
+                   percent_r=quality.percent_r, names=FIT_NAMES, values=fit.x, lower=lo, upper=hi)
+    return Calibration(params=fit.soil, method=opts.method, sinkage_modulus=float(fit.x[5]), cost=cost,
+                       success=bool(fit.success), status=int(fit.status), message=fit.message, nfev=int(fit.nfev),
+                       njev=int(fit.njev), time_s=fit.time_s, quality=quality, stages=fit.stages, uncertainty=unc,
+                       initial=opts.initial, bounds=dict(opts.bounds), predicted_tangential=pred_t,
+                       predicted_normal=pred_n, in_soil=in_soil, tension_samples=int(np.count_nonzero(
+                           at_flags & FLAG_TENSION)), settings=settings, warnings=warns)
+
+
+def _fit_data(log: CycleLog, state: ContactState, opts: CalibrationOptions, k: int | None) -> FitData:
+    """The in-soil samples of one cycle (``k``: its index among several, named in an error)."""
+    try:
+        return FitData.from_state(state, log.tangential, log.normal, log.bucket, opts.model_options,
+                                  opts.min_samples)
+    except CalibrationError as exc:
+        raise CalibrationError(f"cycle {k}: {exc}" if k is not None else str(exc)) from None
+
+
+def _decimated(data: FitData, settings: dict[str, Any]) -> FitData:
+    """``data``, or every k-th sample of it when it holds more than :data:`MAX_FIT_SAMPLES` (recorded in settings)."""
+    stride = -(-len(data) // MAX_FIT_SAMPLES)
+    if stride <= 1:
+        return data
+    _log.warning("calibrate: %d in-soil samples exceed MAX_FIT_SAMPLES = %d; fitting every %d-th sample",
+                 len(data), MAX_FIT_SAMPLES, stride)
+    settings["decimation"] = {"stride": stride, "in_soil_samples": len(data), "max_fit_samples": MAX_FIT_SAMPLES}
+    return data.every(stride)
+
+
+def _weighted_residuals(data: FitData, x: np.ndarray, lam: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """Eq 19a's cost with lambda = 0.5, and the lambda-weighted residual vector and Jacobian at ``x``."""
     f_t, f_n, jt, jn = data.forces_and_jacobian(x)
     wt, wn = math.sqrt(lam), math.sqrt(1.0 - lam)
     if data.weight is None:
@@ -372,24 +355,29 @@ def calibrate(
         jac = np.vstack([rw[:, None] * wt * jt, rw[:, None] * wn * jn])
         cost = float(0.5 * np.sum(data.weight * (f_t - data.y_t) ** 2)
                      + 0.5 * np.sum(data.weight * (f_n - data.y_n) ** 2))
-    force_scale = float(np.mean(np.hypot(data.y_t, data.y_n)))
-    unc = analyse(jac, resid, x, lo, hi, force_scale)
-    obs_r, fit_r = np.hypot(data.y_t, data.y_n), np.hypot(at_t, at_n)
-    if band_noise == "cross-cycle" and len(logs) > 1:
-        obs_r, fit_r = _held_out_forces(parts, weights_per_cycle, x, lo, hi, lam, max_iter or 100)
-        settings["band_noise"] = "cross-cycle"
-    sigma_0, relative = residual_noise_model(obs_r, fit_r)
-    settings["band_model"] = BandModel(unc.covariance, integrated_autocorrelation_time(obs_r - fit_r), sigma_0,
-                                       relative).to_dict()
-    if len(logs) > 1:
-        settings["cycles"] = _cycles_report(logs, data, weights_per_cycle, at_t, at_n, jac, resid, x, lo, hi,
-                                            force_scale)
-    tension = int(np.count_nonzero(at_flags & FLAG_TENSION))
-    warnings = assess(success=bool(success), obs_t=data.y_t, obs_n=data.y_n, pred_t=at_t,
-                      pred_n=at_n, percent_r=quality.percent_r, names=FIT_NAMES, values=x,
-                      lower=lo, upper=hi)
-    return Calibration(soil, method, float(x[5]), cost, bool(success), int(status), message, int(nfev), int(njev),
-                       time_s, quality, stages, unc, start, bnds, pred_t, pred_n, in_soil, tension, settings, warnings)
+    return cost, resid, jac
+
+
+def _forces_along_cycles(soil: SoilParams, logs: list[CycleLog], states: list[ContactState], data: FitData,
+                         options: ModelOptions) -> tuple[np.ndarray, ...]:
+    """``(F_T, F_N, flags, in_soil, fitted)`` of the model along every cycle, one after another.
+
+    ``in_soil`` marks the fitted samples (:attr:`FitData.index` of each cycle), ``fitted`` their positions
+    in the joined series, in the order of ``data``'s samples.
+    """
+    along, masks, fitted, offset = [], [], [], 0
+    for k, (log, st) in enumerate(zip(logs, states, strict=True)):
+        along.append(_forces_along(soil, st, log.bucket, options))
+        index = data.index if data.cycle is None else data.index[data.cycle == k]
+        mask = np.zeros(len(log), dtype=bool)
+        mask[index] = True
+        masks.append(mask)
+        fitted.append(index + offset)
+        offset += len(log)
+    if len(logs) == 1:
+        return (*along[0], masks[0], fitted[0])
+    return (*(np.concatenate([a[j] for a in along]) for j in range(3)), np.concatenate(masks),
+            np.concatenate(fitted))
 
 
 def _held_out_forces(parts: list[FitData], weights: list[float] | None, x: np.ndarray, lo: np.ndarray,

@@ -36,6 +36,7 @@ from wheelloader.estimator import (
     DEFAULT_OPTIONS,
     FLAG_OUT_OF_SOIL,
     BucketPath,
+    CalibrationOptions,
     CycleLog,
     ModelOptions,
     Pile,
@@ -196,9 +197,9 @@ class Calibrating(Strategy):
         start = time.perf_counter()
         cycles = self.recent if len(self.recent) > 1 else log
         try:
-            result = calibrate(cycles, method=self.method, initial=self.previous,
-                               forgetting=self.forgetting if len(self.recent) > 1 else None,
-                               options=self.model_options, fill=self.fill)
+            result = calibrate(cycles, options=CalibrationOptions(
+                method=self.method, initial=self.previous, forgetting=self.forgetting if len(self.recent) > 1 else None,
+                model_options=self.model_options, fill=self.fill))
         except WheelloaderError as exc:
             return time.perf_counter() - start, False, f"calibration failed, previous parameters kept: {exc}"
         seconds = time.perf_counter() - start

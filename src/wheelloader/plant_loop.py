@@ -36,6 +36,7 @@ from wheelloader.adaptation import Calibrating, CycleRecord, Strategy
 from wheelloader.estimator import (
     DEFAULT_OPTIONS,
     FLAG_OUT_OF_SOIL,
+    CalibrationOptions,
     CycleLog,
     ModelOptions,
     Pile,
@@ -319,14 +320,14 @@ def hindsight_parameters(logs: list[CycleLog], method: str = "default",
     options = DEFAULT_OPTIONS if options is None else options
     smooth = [filtered(lg, sigma_s) for lg in logs]
     try:
-        result = calibrate(smooth, method=method, options=options)
+        result = calibrate(smooth, options=CalibrationOptions(method=method, model_options=options))
     except (TypeError, WheelloaderError) as exc:
         fallback = f"several-cycle calibration unavailable ({exc})"
     else:
         return result.params, f"one {method} fit to all {len(logs)} cycles"
     best, best_cost = None, math.inf
     for lg in smooth:
-        candidate = calibrate(lg, method=method, options=options).params
+        candidate = calibrate(lg, options=CalibrationOptions(method=method, model_options=options)).params
         cost = sum(predict(candidate, other, options=options).quality.rmse_r ** 2 for other in smooth)
         if cost < best_cost:
             best, best_cost = candidate, cost

@@ -78,7 +78,14 @@ def _check_sigma(sigma: float, samples: int) -> None:
 
 def run_calibrate(args: argparse.Namespace) -> int:
     """Handler of ``wheelloader calibrate``."""
-    from wheelloader.estimator import METHODS, CalibrationError, CycleLog, calibrate, canonical_method
+    from wheelloader.estimator import (
+        METHODS,
+        CalibrationError,
+        CalibrationOptions,
+        CycleLog,
+        calibrate,
+        canonical_method,
+    )
 
     method = canonical_method(args.method)
     several = len(args.logs) > 1
@@ -99,12 +106,14 @@ def run_calibrate(args: argparse.Namespace) -> int:
     initial = check_physical(load_soil(args.initial), "--initial", args.strict) if args.initial else None
     with run:
         if several:
-            cal = calibrate(cycles, method, initial=initial, forgetting=args.forgetting)
+            cal = calibrate(cycles, options=CalibrationOptions(method=method, initial=initial,
+                                                               forgetting=args.forgetting))
         else:
-            cal = calibrate(cycle, method, initial=initial, sigma=args.sigma)
+            cal = calibrate(cycle, options=CalibrationOptions(method=method, initial=initial, sigma=args.sigma))
         others = []
         if args.compare:
-            others = [calibrate(cycle, m, initial=initial, sigma=args.sigma) for m in METHODS if m != cal.method]
+            others = [calibrate(cycle, options=CalibrationOptions(method=m, initial=initial, sigma=args.sigma))
+                      for m in METHODS if m != cal.method]
         write_json(run.staged(args.output), cal.to_dict())
         if args.plot:
             from wheelloader.plotting import plot_calibration, plot_cycles_fit
