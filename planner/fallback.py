@@ -21,6 +21,7 @@ from wheelloader.estimator import (
     SoilParams,
     default_path,
 )
+from wheelloader.estimator.quantise import better, quantise_pile, quantise_soil
 
 from .verify import cycle_end_index, path_energy
 
@@ -42,9 +43,11 @@ def bezier_on_face(pile: Pile, rate: float = 60.0, bucket: Bucket | None = None,
     cycle (:func:`~wheelloader.planner.verify.cycle_end_index`, the loop's
     rule: the first exit 2 cm above the surface after loading ``exit_min_fill``, 5 % by default). This is how an
     operator would re-use a standard path on a carved pile: the fixed
-    baseline is positioned fairly, not left digging air or skimming a hump.
+    baseline is positioned fairly, not left digging air or skimming a hump. The search runs on the pile
+    rounded to :data:`~wheelloader.estimator.quantise.PILE_STEP` (last-bit differences do not move it).
     """
     bucket = Bucket() if bucket is None else bucket
+    pile = quantise_pile(pile)
     path = default_path(rate=rate)
     target = Pile.trapezoid().carve(path.x, path.z, bucket.width, bucket.capacity).in_bucket
     best, best_fill = 0.0, -1.0
@@ -90,9 +93,15 @@ def model_bezier_on_face(soil: SoilParams, pile: Pile, rate: float = 60.0, bucke
     parameters make this choice better) wins. The fallback of the
     calibrating strategies when a plan fails its check; up to 28 model
     evaluations. ``model_options``: the force model's (the planner's failure-angle rule).
+
+    Like the planner, it decides on ``soil`` and ``pile`` rounded to fixed grids
+    (:mod:`wheelloader.estimator.quantise`), and a later candidate wins only when it is cheaper by more
+    than :data:`~wheelloader.estimator.quantise.TIE_RELATIVE` (on a near-tie the earlier in the fixed
+    order of :data:`MODEL_SHIFTS` x :data:`MODEL_LIFTS` stays).
     """
     bucket = Bucket() if bucket is None else bucket
     loader = Loader() if loader is None else loader
+    soil, pile = quantise_soil(soil), quantise_pile(pile)
     base = bezier_on_face(pile, rate, bucket, exit_min_fill=exit_min_fill)
     need = 0.98 * _kept(pile, base.x, base.z, bucket, exit_min_fill)[0]
     best, best_cost = base, math.inf
@@ -109,6 +118,6 @@ def model_bezier_on_face(soil: SoilParams, pile: Pile, rate: float = 60.0, bucke
             if forces.tangential.max() > loader.max_push_force or forces.normal.max() > loader.max_lift_force:
                 continue
             cost = sim["energy"] / fill
-            if cost < best_cost:
+            if better(cost, best_cost):
                 best, best_cost = path, cost
     return best.shifted(name=MODEL_FALLBACK_NAME)

@@ -22,6 +22,7 @@ import numpy as np
 
 from wheelloader.estimator import Bucket, BucketPath, Loader, Pile, SoilParams, as_soil
 from wheelloader.estimator.errors import PlanningError
+from wheelloader.estimator.quantise import better, quantise_pile, quantise_soil
 
 from .cycle import cautious_options, cycle_duration, default_start, optimizer_for
 from .mpc import ACCEPTED_STATUSES, MPCController
@@ -115,9 +116,16 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     (over the air to where the slope lets the tip dig, then at a constant depth).
     ``exit_min_fill`` is the env's (passed to :func:`verify_plan` and the NLP:
     the tip may leave the soil while less is loaded).
+
+    The planner plans with ``params`` and ``pile`` rounded to fixed grids
+    (:func:`~wheelloader.estimator.quantise.quantise_soil`, :func:`~wheelloader.estimator.quantise.quantise_pile`)
+    and keeps an iterate only when it beats the kept one by more than
+    :data:`~wheelloader.estimator.quantise.TIE_RELATIVE` (the earlier stays on a near-tie): last-bit
+    differences of the calibration (another CPU's BLAS kernels) then give the same plan.
     """
     tic = time.perf_counter()
-    params = as_soil(params)
+    params = quantise_soil(as_soil(params))
+    pile = quantise_pile(pile)
     opt = optimizer_for(bucket, loader, options)
     start = start or default_start(pile)
     duration = cycle_duration(pile, start)
@@ -142,7 +150,7 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
         # iterate on the way counts only once it loads ITERATE_MIN_FILL of the bucket (not the air it starts in)
         score = -check.fill / opt.bucket.capacity + lam * check.energy / 1000.0
         useful = check.fill >= (ITERATE_MIN_FILL if iterate else MIN_FILL) * opt.bucket.capacity
-        if check.ok and useful and ("score" not in best or score < best["score"] - 1e-12):
+        if check.ok and useful and ("score" not in best or better(score, best["score"])):
             best.update(score=score, plan=plan, check=check)
 
     def checkpoint(plan) -> bool:

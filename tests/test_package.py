@@ -28,13 +28,13 @@ def test_demo_writes_figure_and_summary_without_overwriting(tmp_path, capsys):
     from wheelloader.cli import main
 
     out = tmp_path / "demo"
-    assert main(["demo", "--out", str(out), "--cycles", "2"]) == 0
+    assert main(["demo", "--out", str(out), "--cycles", "2", "--seeds", "1"]) == 0
     assert (out / "summary.json").exists()
     summary = json.loads((out / "summary.json").read_text())
     for name in summary["figures"]:
         assert (out / name).stat().st_size > 1000
     # a second run must not overwrite the first
-    assert main(["demo", "--out", str(out), "--cycles", "1", "--no-planner"]) == 0
+    assert main(["demo", "--out", str(out), "--cycles", "1", "--no-planner", "--seeds", "2"]) == 0
     assert (tmp_path / "demo-2" / "summary.json").exists()
     assert str(tmp_path / "demo-2") in capsys.readouterr().out
 

@@ -93,6 +93,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..errors import CalibrationError
+from ..quantise import better
 from .boxqp import solve_box_qp
 from .fitmodel import LINEAR_INDEX, FitData, factors
 from .result import SolverResult
@@ -205,7 +206,11 @@ def projected_grid(data: FitData, lo: np.ndarray, hi: np.ndarray, phis: np.ndarr
 
 
 def grid_local_minima(cost: np.ndarray, count: int) -> list[tuple[int, ...]]:
-    """Indices of up to ``count`` grid points that are local minima (26-neighbourhood), best first."""
+    """Indices of up to ``count`` grid points that are local minima (26-neighbourhood), best first.
+
+    Equal costs keep the grid's index order (a stable sort), so the starts do not depend on the sort's
+    implementation.
+    """
     padded = np.pad(cost, 1, mode="constant", constant_values=np.inf)
     is_min = np.ones(cost.shape, dtype=bool)
     shape = cost.shape
@@ -215,7 +220,7 @@ def grid_local_minima(cost: np.ndarray, count: int) -> list[tuple[int, ...]]:
         neigh = padded[off[0]:off[0] + shape[0], off[1]:off[1] + shape[1], off[2]:off[2] + shape[2]]
         is_min &= cost <= neigh
     idx = np.argwhere(is_min & np.isfinite(cost))
-    order = np.argsort(cost[tuple(idx.T)])
+    order = np.argsort(cost[tuple(idx.T)], kind="stable")
     return [tuple(int(v) for v in idx[i]) for i in order[:count]]
 
 
@@ -344,6 +349,19 @@ def polish_linear(data: FitData, x: np.ndarray, lo: np.ndarray, hi: np.ndarray, 
     return x_new, float(lam * np.sum((f_t - data.y_t) ** 2) + (1.0 - lam) * np.sum((f_n - data.y_n) ** 2))
 
 
+def first_best(results: list[SolverResult], key: str = "cost") -> SolverResult:
+    """The best of ``results`` by ``key``, where a later one wins only by more than the near-tie tolerance.
+
+    On a near-tie (:func:`~wheelloader.estimator.quantise.better`) the earlier result in the fixed order of
+    the starts stays, so last-bit differences between CPUs do not pick another basin.
+    """
+    best = results[0]
+    for r in results[1:]:
+        if better(getattr(r, key), getattr(best, key)):
+            best = r
+    return best
+
+
 def _starts_from_grid(cost, theta, axes, count):
     starts = []
     for ijk in grid_local_minima(cost, count):
@@ -406,7 +424,7 @@ def fit_varpro(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5, 
     _log.info("varpro: %d grid points in %.2f s; refining %d start(s) on %d samples", cost.size, t1 - t0,
               len(starts), len(data))
     results = [refine(data, x0, lo, hi, lam, counter, max_nfev=max_nfev) for x0 in starts]
-    best = min(results, key=lambda r: r.cost)
+    best = first_best(results)
     if zoom > 1:
         zaxes = []
         for k, i in enumerate(nl[:2]):
@@ -417,13 +435,13 @@ def fit_varpro(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5, 
         zcost, ztheta = projected_grid(grid_data, lo, hi, zaxes[0], zaxes[1], zaxes[2], lam)
         counter.nfev += zcost.size
         for c, x0 in _starts_from_grid(zcost, ztheta, zaxes, 2):
-            if c < best.cost:
+            if better(c, best.cost):
                 r = refine(data, x0, lo, hi, lam, counter, max_nfev=max_nfev)
                 results.append(r)
-                if r.cost < best.cost:
+                if better(r.cost, best.cost):
                     best = r
     polished = polish_linear(data, best.x, lo, hi, lam, counter)
-    if polished is not None and polished[1] < best.cost:
+    if polished is not None and better(polished[1], best.cost):
         best = SolverResult(polished[0], polished[1], best.success, best.status,
                             best.message + " (linear parameters polished by the exact bounded solve)",
                             best.nfev, best.njev, start=best.start, objective=polished[1])
@@ -446,7 +464,7 @@ def fit_varpro(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5, 
                 from_mean[scale > 0] = np.clip(mean, lo, hi)[scale > 0]
                 runs = [refine(data, x0, lo, hi, lam, counter, max_nfev=max_nfev, prior=prior)
                         for x0 in (best.x, from_mean)]
-                r = min(runs, key=lambda v: v.objective)
+                r = first_best(runs, "objective")
             results.append(r)
             best = SolverResult(r.x, r.cost, r.success, r.status,
                                 f"{r.message} (MAP under the weak prior, nu {nu:.4g} N^2, tau {tau:.3g})",

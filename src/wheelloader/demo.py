@@ -18,6 +18,13 @@ from wheelloader.cli.output import write_json
 from wheelloader.provenance import machine_info
 
 DEFAULT_CYCLES = 5
+#: Plant seeds of ``wheelloader demo`` (the table's median and min-max are over them) and the most it accepts.
+DEFAULT_SEEDS = 3
+MAX_SEEDS = 20
+#: The tolerance within which another CPU reproduces each column of the demo table (and of a cycle record),
+#: half a unit of the table's last printed digit: prediction F_R RMSE [%], fill [fraction of the bucket],
+#: energy per m^3 [J/m^3]. docs/reproducibility.md says what was measured against it.
+REPRODUCE_TOLERANCE = {"prediction_rmse_percent": 0.05, "fill_fraction": 0.005, "energy_per_m3": 50.0}
 
 
 #: Plants the demo can dig in: the FEE env (the model's own world, fast) and the MPM continuum reference.
@@ -26,36 +33,27 @@ DEMO_PLANTS = ("fee-env", "mpm")
 
 def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner: bool = True,
              progress: Any = None, mpc: bool = False, plant: str = "fee-env",
-             resolution: float = 0.02, window: int | None = None) -> dict[str, Any]:
+             resolution: float = 0.02, window: int | None = None, seeds: int = 1) -> dict[str, Any]:
     """Run the loop (ours and the fixed baseline), write figures and ``summary.json`` into ``out``.
 
-    ``plant="mpm"`` digs every cycle in the plane-strain MPM continuum (grid ``resolution`` [m]; about 3
+    ``seeds`` runs of both strategies, with plant seeds ``seed, seed + 1, ...``: ``table.md`` gives each
+    cycle's median over them with the min-max beside it (:func:`markdown_table`); the figures show the first
+    seed. ``plant="mpm"`` digs every cycle in the plane-strain MPM continuum (grid ``resolution`` [m]; about 3
     minutes per cycle at 2 cm) with the same hidden soil, through :func:`wheelloader.plant_loop.run_plant_loop`
-    (each cycle saved under ``out/cycles/`` as it finishes; a second run into the same folder resumes).
+    (each cycle saved under ``out/cycles/`` as it finishes, ``out/cycles/seedS/`` with several seeds; a second
+    run into the same folder resumes).
     ``window``: ours calibrates on the last ``window`` cycles together (default
     :data:`wheelloader.adaptation.DEFAULT_WINDOW`).
     """
     from wheelloader.estimator import ParameterError
+    from wheelloader.estimator.checks import check_int
 
     if plant not in DEMO_PLANTS:
         raise ParameterError(f"plant must be one of {DEMO_PLANTS}, got {plant!r}")
     if plant != "fee-env" and mpc:
         raise ParameterError("--mpc needs the env's feedback and runs only with the fee-env plant")
-    import gymnasium as gym
-
-    import wheelloader.envs  # noqa: F401  (registers the env ids)
-    from wheelloader.adaptation import (
-        DEFAULT_WINDOW,
-        LOOP_ENV_KWARGS,
-        NOMINAL_SOIL,
-        Calibrating,
-        FixedBezier,
-        default_planner,
-        format_table,
-        hidden_default_soil,
-        run_loop,
-    )
-    from wheelloader.estimator import preset
+    seeds = check_int("seeds", seeds, minimum=1, maximum=MAX_SEEDS)
+    from wheelloader.adaptation import DEFAULT_WINDOW, NOMINAL_SOIL, default_planner, hidden_default_soil
 
     say = progress or (lambda line: None)
     start = time.perf_counter()
@@ -63,6 +61,52 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     if use_planner:
         say("building the planner's CasADi NLPs (once, ~10 s) ...")
     planner = default_planner(mpc=mpc) if use_planner else None
+    runs = {}
+    for s in range(seed, seed + seeds):
+        if seeds > 1:
+            say(f"seed {s} ({s - seed + 1} of {seeds}):")
+        cache = out / "cycles" if seeds == 1 else out / "cycles" / f"seed{s}"
+        runs[s] = _run_seed(cache, cycles, s, planner, plant, hidden, resolution, window, say)
+    results = runs[seed]
+    results_window = DEFAULT_WINDOW if window is None else window
+    files = write_figures(out, results)
+    table = markdown_table({s: (r["ours"][0], r["fixed"][0]) for s, r in runs.items()})
+    (out / "table.md").write_text(table + "\n", encoding="utf-8")
+    summary = {
+        "plant": ({"kind": "fee-env", "soil": hidden.to_dict(), "sensor_noise_N": 150.0,
+                   "pile": "trapezoid 30 deg, 1 m high"} if plant == "fee-env" else
+                  {"kind": "mpm", "soil": hidden.to_dict(), "resolution_m": resolution,
+                   "pile": "trapezoid 30 deg, 1 m high", "metrics": "energy and fill measured by the plant"}),
+        "nominal_soil": NOMINAL_SOIL,
+        "calibration_window": results_window,
+        "planner": ("none (Bezier path every cycle)" if planner is None
+                    else "CasADi plan + MPC" if mpc else "CasADi plan, tracked"),
+        "seeds": list(runs),
+        "cycles": {name: [r.to_dict() for r in recs] for name, (recs, _) in results.items()},
+        "runs": {str(s): {name: [r.to_dict() for r in recs] for name, (recs, _) in res.items()}
+                 for s, res in runs.items()},
+        "final_parameters_ours": results["ours"][0][-1].params,
+        "reproduce_tolerance": REPRODUCE_TOLERANCE,
+        "wall_time_s": time.perf_counter() - start,
+        "machine": machine_info(),
+        "figures": files,
+        "table_markdown": "table.md",
+        "table": table,
+    }
+    write_json(out / "summary.json", summary)
+    return summary
+
+
+def _run_seed(cache: Path, cycles: int, seed: int, planner: Any, plant: str, hidden: Any, resolution: float,
+              window: int | None, say: Any) -> dict[str, Any]:
+    """Both strategies' loops with one plant seed: ``{name: (records, logs)}`` (MPM cycles saved under
+    ``cache / name``)."""
+    import gymnasium as gym
+
+    import wheelloader.envs  # noqa: F401  (registers the env ids)
+    from wheelloader.adaptation import LOOP_ENV_KWARGS, NOMINAL_SOIL, Calibrating, FixedBezier, run_loop
+    from wheelloader.estimator import preset
+
     results = {}
     for strategy in (Calibrating(preset(NOMINAL_SOIL), planner=planner, window=window),
                      FixedBezier(preset(NOMINAL_SOIL))):
@@ -77,44 +121,58 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
             from wheelloader.references.mpm import MPMPlant
 
             records, logs = run_plant_loop(MPMPlant(resolution=resolution), strategy, Pile.trapezoid(), hidden,
-                                           cycles=cycles, seed=seed, cache=out / "cycles" / strategy.name,
+                                           cycles=cycles, seed=seed, cache=cache / strategy.name,
                                            progress=say)
         results[strategy.name] = (records, logs)
-    results_window = DEFAULT_WINDOW if window is None else window
-    files = write_figures(out, results)
-    (out / "table.md").write_text(markdown_table(results["ours"][0], results["fixed"][0]) + "\n", encoding="utf-8")
-    ours = results["ours"][0]
-    table = format_table(ours + results["fixed"][0])
-    summary = {
-        "plant": ({"kind": "fee-env", "soil": hidden.to_dict(), "sensor_noise_N": 150.0,
-                   "pile": "trapezoid 30 deg, 1 m high"} if plant == "fee-env" else
-                  {"kind": "mpm", "soil": hidden.to_dict(), "resolution_m": resolution,
-                   "pile": "trapezoid 30 deg, 1 m high", "metrics": "energy and fill measured by the plant"}),
-        "nominal_soil": NOMINAL_SOIL,
-        "calibration_window": results_window,
-        "planner": ("none (Bezier path every cycle)" if planner is None
-                    else "CasADi plan + MPC" if mpc else "CasADi plan, tracked"),
-        "cycles": {name: [r.to_dict() for r in recs] for name, (recs, _) in results.items()},
-        "final_parameters_ours": ours[-1].params,
-        "wall_time_s": time.perf_counter() - start,
-        "machine": machine_info(),
-        "figures": files,
-        "table_markdown": "table.md",
-        "table": table,
-    }
-    write_json(out / "summary.json", summary)
-    return summary
+    return results
 
 
-def markdown_table(ours: list[Any], fixed: list[Any]) -> str:
-    """The README's demo table: per cycle, ours beside the fixed Bezier path (from the cycle records)."""
-    lines = ["| cycle | ours: prediction F_R RMSE | ours: fill | ours: kJ/m³ | ours: path | "
+def _spread(values: list[float], fmt: str) -> str:
+    """``median (min–max)`` of ``values`` formatted with ``fmt`` (just the value for one seed)."""
+    import numpy as np
+
+    med = fmt.format(float(np.median(values)))
+    if len(values) == 1:
+        return med
+    return f"{med} ({fmt.format(min(values))}–{fmt.format(max(values))})"
+
+
+def markdown_table(runs: dict[int, tuple[list[Any], list[Any]]]) -> str:
+    """The README's demo table from ``{seed: (ours' records, fixed's records)}``.
+
+    Per cycle, ours beside the fixed Bézier path: the median over the seeds with the min–max beside it; the
+    last row is each seed's mean over cycles 2 to N (after the first calibration), again as median (min–max).
+    """
+    seeds = list(runs)
+    n = len(runs[seeds[0]][0])
+    cols = (("prediction_rmse_percent", "{:.1f}", " %"), ("fill_fraction", "{:.0%}", ""),
+            ("energy_per_m3", "{:.1f}", ""))
+
+    def value(rec: Any, column: str) -> float:
+        v = getattr(rec, column)
+        return v / 1e3 if column == "energy_per_m3" else v
+
+    def cells(rows: list[list[Any]]) -> list[str]:
+        # rows[seed] = the records to average (one cycle, or cycles 2..N)
+        return [_spread([float(sum(value(r, c) for r in recs) / len(recs)) for recs in rows], fmt) + unit
+                for c, fmt, unit in cols]
+
+    where = "median (min–max) over seeds " + ", ".join(map(str, seeds)) if len(seeds) > 1 else f"seed {seeds[0]}"
+    lines = [f"Each cell: {where}.", "",
+             "| cycle | ours: prediction F_R RMSE | ours: fill | ours: kJ/m³ | ours: path | "
              "fixed Bézier: prediction F_R RMSE | fixed: fill | fixed: kJ/m³ |", "|" + "---|" * 8]
-    for a, b in zip(ours, fixed, strict=True):
-        path = "planned" if a.plan_ok else "plan failed its check → Bézier, model-placed"
-        lines.append(f"| {a.cycle} | {a.prediction_rmse_percent:.1f} % | {a.fill_fraction:.0%} | "
-                     f"{a.energy_per_m3 / 1e3:.1f} | {path} | {b.prediction_rmse_percent:.1f} % | "
-                     f"{b.fill_fraction:.0%} | {b.energy_per_m3 / 1e3:.1f} |")
+    for k in range(n):
+        ours = cells([[runs[s][0][k]] for s in seeds])
+        fixed = cells([[runs[s][1][k]] for s in seeds])
+        planned = sum(runs[s][0][k].plan_ok for s in seeds)
+        path = ("planned" if planned == len(seeds) else
+                f"planned {planned}/{len(seeds)}, else Bézier, model-placed" if planned else
+                "plan failed its check → Bézier, model-placed")
+        lines.append(f"| {k + 1} | {' | '.join(ours)} | {path} | {' | '.join(fixed)} |")
+    if n > 1:
+        ours = cells([runs[s][0][1:] for s in seeds])
+        fixed = cells([runs[s][1][1:] for s in seeds])
+        lines.append(f"| mean 2–{n} | {' | '.join(ours)} | | {' | '.join(fixed)} |")
     return "\n".join(lines)
 
 

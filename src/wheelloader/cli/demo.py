@@ -14,7 +14,7 @@ from .staging import OutputRun
 
 def register(subparsers: Any) -> None:
     """Add the ``demo`` subcommand."""
-    from wheelloader.demo import DEFAULT_CYCLES
+    from wheelloader.demo import DEFAULT_CYCLES, DEFAULT_SEEDS
 
     p = subparsers.add_parser("demo", help="run the cycle-to-cycle adaptation demo on the built-in default",
                               description="Run the cycle-to-cycle adaptation loop (calibrate, predict, plan, dig) "
@@ -24,6 +24,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--cycles", type=int, default=DEFAULT_CYCLES, help="digging cycles (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0,
                    help="random seed of the plant, 0 to 2^32 - 1 (default: %(default)s)")
+    p.add_argument("--seeds", type=int, default=None,
+                   help=f"plant seeds SEED, SEED+1, ...: the table gives each cycle's median and min-max over them "
+                        f"(default: {DEFAULT_SEEDS} with the fee-env plant, 1 with --plant mpm)")
     p.add_argument("--no-planner", action="store_true",
                    help="dig the Bezier path every cycle (calibration and prediction only)")
     p.add_argument("--window", type=int, default=None,
@@ -42,13 +45,18 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Handler of ``wheelloader demo``."""
-    from wheelloader.demo import run_demo
+    from wheelloader.demo import DEFAULT_SEEDS, MAX_SEEDS, run_demo
     from wheelloader.estimator import ParameterError
 
     if args.cycles < 1 or args.cycles > 50:
         raise ParameterError(f"--cycles must be between 1 and 50, got {args.cycles}")
     if not 0 <= args.seed < 2**32:
         raise ParameterError(f"--seed must be between 0 and 2^32 - 1, got {args.seed}")
+    seeds = args.seeds if args.seeds is not None else DEFAULT_SEEDS if args.plant == "fee-env" else 1
+    if not 1 <= seeds <= MAX_SEEDS:
+        raise ParameterError(f"--seeds must be between 1 and {MAX_SEEDS}, got {seeds}")
+    if args.seed + seeds > 2**32:
+        raise ParameterError(f"--seed + --seeds must stay below 2^32, got {args.seed} + {seeds}")
     if args.resolution is not None and args.plant != "mpm":
         raise ParameterError("--resolution sets the MPM grid and needs --plant mpm")
     resolution = 0.02 if args.resolution is None else args.resolution
@@ -68,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
             shutil.copytree(out / "cycles", staged / "cycles", dirs_exist_ok=True)
         summary = run_demo(staged, cycles=args.cycles, seed=args.seed, use_planner=not args.no_planner,
                            progress=lambda line: print(line, flush=True), mpc=args.mpc, plant=args.plant,
-                           resolution=resolution, window=args.window)
+                           resolution=resolution, window=args.window, seeds=seeds)
     print()
     print(summary["table"])
     print()
