@@ -25,7 +25,7 @@ from wheelloader.cli.staging import LOCK_SUFFIX, STAGE_PREFIX
 from wheelloader.estimator import preset
 
 PLAN = ["plan", "{params}", "--pareto", "--weights", "0,0.05", "-o", "{out}/plan.csv", "--plot", "{out}/plan.png"]
-DEMO = ["demo", "--cycles", "2", "-o", "{out}"]
+DEMO = ["demo", "--cycles", "2", "--seeds", "1", "-o", "{out}"]
 
 
 def _snapshot(folder: Path) -> dict[str, bytes]:
