@@ -1,0 +1,154 @@
+"""The payload as a state: the soil the bucket keeps, beyond the FEE's carved area.
+
+The FEE books every m^3 a path removes as bucket fill, up to the nominal capacity. The continuum plant keeps
+only part of it (0.51-0.70 of what a path removes in the project's 259 MPM cycles, ``../shared/model-notes.md``):
+soil flows over the lip and the sides once a heap forms. This module models the kept soil as a state ``V`` [m^3]
+that grows with the removed volume ``R`` times a retention fraction ``r`` and saturates smoothly at a heaped
+capacity ``C = h * capacity``:
+
+    V(R) = V_0 + u / (1 + (u / C_free)^p)^(1/p),   u = r R,   C_free = C - V_0,
+
+a smooth minimum of ``u`` and ``C_free`` (exponent ``p``; ``p -> inf`` gives the hard cap of
+:meth:`~wheelloader.estimator.pile.Pile.carve`). ``V`` is monotone in ``R``, equals ``V_0 + r R`` for small cuts,
+never exceeds ``C`` and is differentiable everywhere, so the planner can write it in CasADi
+(:func:`kept_volume` works on NumPy arrays and on CasADi symbols alike). The kept soil's weight stays on the
+bucket after the tip leaves the soil; the force model's opt-in carried-load term
+(:class:`~wheelloader.estimator.validity.ModelOptions` ``carried_load=True``) resolves that weight (and its
+inertia where the acceleration is known) in the blade frame.
+
+"Fill" is this ``V`` wherever the payload model is selected: the predicted kept fill of a path is
+``V`` at its end (:func:`kept_fill`), and :func:`payload_contact_state` gives the force model a contact state
+whose ``fill_volume`` is ``V`` along the path.
+
+The parameters ``(r, h, p)`` are calibrated from logs that carry the kept fill (the MPM plant's ``fill_volume``
+column) by :func:`fit_payload`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .checks import check_range
+from .cyclelog import CycleLog
+from .errors import CalibrationError, ParameterError
+from .kinematics import DEFAULT_SLOPE_WINDOW, ContactState
+
+__all__ = ["PayloadOptions", "fit_payload", "kept_fill", "kept_volume", "payload_contact_state"]
+
+
+@dataclass(frozen=True)
+class PayloadOptions:
+    """Parameters of the payload state.
+
+    Attributes
+    ----------
+    retention : float
+        ``r`` in (0, 1]: the share of the removed volume that enters the bucket before it heaps.
+    heap_factor : float
+        ``h`` > 0: the heaped capacity the bucket holds, as a multiple of its nominal ``capacity``.
+    sharpness : float
+        ``p`` in [1, 50]: how sharply the fill bends onto the heaped capacity (1 is gentle, 50 nearly a hard cap).
+    """
+
+    retention: float = 1.0
+    heap_factor: float = 1.0
+    sharpness: float = 50.0
+
+    def __post_init__(self) -> None:
+        check_range("PayloadOptions.retention", self.retention, 0.0, 1.0, low_open=True)
+        check_range("PayloadOptions.heap_factor", self.heap_factor, 0.0, 10.0, low_open=True)
+        check_range("PayloadOptions.sharpness", self.sharpness, 1.0, 50.0)
+
+    def to_dict(self) -> dict[str, float]:
+        """Plain-JSON form."""
+        return {"retention": self.retention, "heap_factor": self.heap_factor, "sharpness": self.sharpness}
+
+
+def kept_volume(removed, capacity: float, options: PayloadOptions, initial: float = 0.0):
+    """Kept soil ``V`` [m^3] for a removed volume ``removed`` [m^3] (module docstring).
+
+    Works elementwise on NumPy arrays and on CasADi ``SX``/``MX`` expressions (only ``+ * / **`` and ``fmax``
+    through ``numpy``'s dispatch are used).
+
+    Parameters
+    ----------
+    removed : array_like or casadi expression
+        Cumulative volume removed from the pile since the cycle started [m^3], >= 0.
+    capacity : float
+        The bucket's nominal capacity [m^3].
+    options : PayloadOptions
+        ``(r, h, p)``.
+    initial : float
+        Soil already in the bucket when the cycle starts [m^3].
+    """
+    heaped = options.heap_factor * capacity
+    free = heaped - initial
+    if free <= 0.0:
+        return initial + 0.0 * removed
+    u = options.retention * removed
+    if isinstance(u, np.ndarray) or np.isscalar(u):
+        u = np.maximum(u, 0.0)
+    p = options.sharpness
+    return initial + u / (1.0 + (u / free) ** p) ** (1.0 / p)
+
+
+def kept_fill(state: ContactState, capacity: float, options: PayloadOptions, initial: float = 0.0) -> float:
+    """The kept fill [m^3] at the end of a path whose contact state carries its carving."""
+    if state.carve is None:
+        raise ParameterError("kept_fill needs a contact state computed by carving (fill='model')")
+    return float(kept_volume(state.carve.removed_history[-1], capacity, options, initial))
+
+
+def payload_contact_state(log: CycleLog, options: PayloadOptions,
+                          slope_window: float = DEFAULT_SLOPE_WINDOW) -> ContactState:
+    """The log's contact state with the payload model's kept fill as ``fill_volume``.
+
+    The carving follows the log's pile and path (``fill='model'``); the fill the force model sees is
+    :func:`kept_volume` of the removed volume instead of the carved fill capped at the nominal capacity. A
+    logged load or fill is not used: this is what the model predicts for the path.
+    """
+    state = log.contact_state(slope_window=slope_window, fill="model")
+    fill = kept_volume(state.carve.removed_history, log.bucket.capacity, options)
+    return replace(state, fill_volume=np.asarray(fill, dtype=float), measured_load=None)
+
+
+def fit_payload(logs: Sequence[CycleLog], *, slope_window: float = DEFAULT_SLOPE_WINDOW) -> PayloadOptions:
+    """Calibrate ``(r, h, p)`` to logs that carry the kept fill.
+
+    Least squares on the relative error of the kept fill along each path, every sample where the log's fill is
+    above 2 % of the capacity weighted alike (so a cycle's end and its rise both count).
+
+    Raises
+    ------
+    CalibrationError
+        If no log carries a ``fill_volume`` column.
+    """
+    from scipy.optimize import least_squares
+
+    removed, kept, caps = [], [], []
+    for log in logs:
+        if log.fill_volume is None:
+            continue
+        state = log.contact_state(slope_window=slope_window, fill="model")
+        mask = log.fill_volume > 0.02 * log.bucket.capacity
+        removed.append(state.carve.removed_history[mask])
+        kept.append(log.fill_volume[mask])
+        caps.append(np.full(int(mask.sum()), log.bucket.capacity))
+    if not removed or sum(r.size for r in removed) == 0:
+        raise CalibrationError("fit_payload needs logs with a logged fill_volume (the plant's kept soil)")
+    r_all, k_all, c_all = (np.concatenate(v) for v in (removed, kept, caps))
+
+    def residual(theta: np.ndarray) -> np.ndarray:
+        opts = PayloadOptions(*(float(t) for t in theta))
+        heaped = opts.heap_factor * c_all
+        u = opts.retention * r_all
+        model = u / (1.0 + (u / heaped) ** opts.sharpness) ** (1.0 / opts.sharpness)
+        return (model - k_all) / k_all
+
+    fit = least_squares(residual, x0=[0.9, 0.7, 2.0], bounds=([1e-3, 1e-2, 1.0], [1.0, 10.0, 50.0]),
+                        x_scale=[0.1, 0.1, 1.0])
+    r, h, p = (float(v) for v in fit.x)
+    return PayloadOptions(retention=r, heap_factor=h, sharpness=p)
