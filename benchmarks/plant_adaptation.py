@@ -12,12 +12,15 @@ Ray tasks on this machine (``--ray local``, one per CPU; ``--threads`` Taichi th
 ``--ray auto`` / ``--ray ray://HOST:10001``, or one after the other with ``--ray off``; the oracle's loops
 start when all the others of its soil are done. The tables are the same whatever ran them (times aside).
 
-Every cycle's log is saved under ``OUT/cycles/<soil>/seed<k>/<strategy>/`` as it finishes; running the
-same command again resumes (a saved cycle is read when its planned path is the same).
+Every cycle's log is saved (xz-compressed) under ``CYCLES/<soil>/seed<k>/<strategy>/`` as it finishes
+(``--cycles-dir``, default ``OUT/cycles``); running the same command again resumes (a saved cycle is read when
+its planned path is the same). The committed runs keep their saved cycles under ``data/results/<run>/cycles``
+(data, not docs).
 
 Usage::
 
-    python benchmarks/adaptation.py --plant mpm --out docs/results/adaptation_mpm      # 2 soils x 2 seeds x 5
+    python benchmarks/adaptation.py --plant mpm --out docs/results/adaptation_mpm \\
+        --cycles-dir data/results/adaptation_mpm/cycles                               # 2 soils x 2 seeds x 5
     python benchmarks/adaptation.py --plant mpm --quick --out /tmp/plant_quick          # 1 cycle, coarse grid
     python benchmarks/adaptation.py --plant dem --quick --out /tmp/plant_dem_quick      # Yade, CI's coarse spheres
     python benchmarks/adaptation.py --plant fee-env --out /tmp/plant_fee               # the same loop in the env
@@ -86,13 +89,18 @@ def planned_fill_limit(plant: Any, setting: str) -> float | None:
     return value
 
 
+def cycles_dir(args: argparse.Namespace) -> Path:
+    """Where the saved cycles are: ``--cycles-dir``, else ``OUT/cycles``."""
+    return Path(args.cycles_dir) if args.cycles_dir is not None else Path(args.out) / "cycles"
+
+
 def run(args: argparse.Namespace) -> dict[str, Any]:
     from wheelloader.estimator import ModelOptions
     from wheelloader.plant_loop import hindsight_parameters, plant_loop_unit
     from wheelloader.sweep import Unit, run_sweep
 
     plant = make_plant(args.plant, args.resolution, args.threads, coarse=args.quick)
-    out = Path(args.out)
+    saved = cycles_dir(args)
     started = time.perf_counter()
     fill_limit = planned_fill_limit(plant, args.fill_limit)
     args.fill_limit_used = fill_limit
@@ -101,7 +109,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     learning = [s for s in args.strategies if s != "oracle"]
     keys = [(soil, seed, name) for soil in args.soils for seed in range(args.seeds) for name in learning]
     units = [Unit(plant_loop_unit, {**loop_kwargs, "strategy": name, "soil": soil, "seed": seed, "stale": args.stale,
-                                    "cache": out / "cycles" / soil / f"seed{seed}" / name},
+                                    "cache": saved / soil / f"seed{seed}" / name},
                   label=f"{soil} | seed {seed} | {name}", num_cpus=args.threads) for soil, seed, name in keys]
     # phase 1: every loop that learns (or does not) from its own cycles, as sweep units (Ray tasks when present)
     print(f"{len(units)} loops ({args.cycles} cycles each) on the {args.plant} plant, --ray {args.ray}", flush=True)
@@ -123,7 +131,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 oracle_keys.append((soil, seed, "oracle"))
                 oracle_units.append(Unit(plant_loop_unit, {**loop_kwargs, "strategy": "oracle", "soil": soil,
                                                            "seed": seed, "oracle_params": params, "stale": "redig",
-                                                           "cache": out / "cycles" / soil / f"seed{seed}" / "oracle"},
+                                                           "cache": saved / soil / f"seed{seed}" / "oracle"},
                                          label=f"{soil} | seed {seed} | oracle", num_cpus=args.threads))
         if oracle_units:
             loops = run_sweep(oracle_units, args.ray, ray_cpus=args.ray_cpus, progress=_print).values_or_raise()
@@ -184,17 +192,18 @@ def lifted_to_common_height(rows: list[dict[str, Any]], cycles: Path | None) -> 
     of lifting what it kept from its end height to ``z_ref``, the highest end of the fixed path's cycles (a
     cycle ending above it is credited the difference): ``rho g V_kept (z_ref - z_end)``, with ``rho`` the
     continuum's density where the log has one, else the soil preset's. Read from the saved cycles
-    (``cycles/SOIL/seedN/STRATEGY/cycleK.csv``); None without fixed-path cycles or when a cycle is missing.
+    (``cycles/SOIL/seedN/STRATEGY/cycleK.csv.xz``); None without fixed-path cycles or when a cycle is missing.
     """
     from wheelloader.estimator import CycleLog, preset
+    from wheelloader.estimator.cyclelog import find_cycle_log
     from wheelloader.estimator.force_model import GRAVITY
 
     if cycles is None or not any(r["strategy"] == "fixed" for r in rows):
         return None
     ends = []
     for r in rows:
-        csv = Path(cycles) / r["soil"] / f"seed{r['seed']}" / r["strategy"] / f"cycle{r['cycle']}.csv"
-        if not csv.exists():
+        csv = find_cycle_log(Path(cycles) / r["soil"] / f"seed{r['seed']}" / r["strategy"], f"cycle{r['cycle']}")
+        if csv is None:
             return None
         log = CycleLog.load(csv)
         density = (log.metadata.get("continuum") or {}).get("density") or preset(r["soil"]).gamma
@@ -273,7 +282,9 @@ def markdown(result: dict[str, Any], cycles: Path | None = None) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--plant", choices=PLANTS, default="mpm")
-    parser.add_argument("--out", default="results/adaptation_mpm", help="output directory (and cycle cache)")
+    parser.add_argument("--out", default="results/adaptation_mpm", help="output directory")
+    parser.add_argument("--cycles-dir", default=None, metavar="DIR",
+                        help="folder of the saved cycles (the resume cache; default OUT/cycles)")
     parser.add_argument("--soils", nargs="+", default=["gravel", "sand"], help="soil presets of the plant")
     parser.add_argument("--seeds", type=int, default=2, help="plant seeds per soil (packing jitter)")
     parser.add_argument("--cycles", type=int, default=5, help="cycles per loop")
@@ -314,7 +325,7 @@ def main(argv: list[str] | None = None) -> int:
         result = run(args)
         result["summary"] = summarise(result["rows"])
         (out / "plant_adaptation.json").write_text(json.dumps(result, indent=1, default=str))
-    text = markdown(result, out / "cycles")  # reads every saved cycle: once
+    text = markdown(result, cycles_dir(args))  # reads every saved cycle: once
     (out / "plant_adaptation.md").write_text(text)
     plot(result, out / "plant_adaptation.png")
     print(text)

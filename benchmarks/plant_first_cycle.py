@@ -9,11 +9,13 @@ The variants switch on, one after the other: the least-weight-force failure angl
 soil carved; the plant counts the soil kept in the bucket's outline).
 
 Each variant is one unit of :mod:`wheelloader.sweep` (Ray tasks when Ray is installed). Every dug cycle is
-saved under ``OUT/cycles/`` with the digest of its path and read again when the plan is the same.
+saved (xz-compressed) under ``--cycles-dir`` (default ``OUT/cycles/``) with the digest of its path and read
+again when the plan is the same.
 
 Usage::
 
-    python benchmarks/plant_first_cycle.py --out docs/results/plant_first_cycle
+    python benchmarks/plant_first_cycle.py --out docs/results/plant_first_cycle \\
+        --cycles-dir data/results/plant_first_cycle/cycles
     python benchmarks/plant_first_cycle.py --quick --out /tmp/first_cycle      # 3 variants at 8 cm
 """
 
@@ -63,6 +65,7 @@ def dig_variant(name: str, settings: dict[str, Any] | None, soil: str, resolutio
 
     from wheelloader.adaptation import BETWEEN_CYCLES_MAX_ITER, LOOP_EXIT_MIN_FILL, NOMINAL_SOIL
     from wheelloader.estimator import CycleLog, Pile, preset
+    from wheelloader.estimator.cyclelog import find_cycle_log
     from wheelloader.planner import PlannerOptions, bezier_on_face, plan_next_cycle, verify_plan
     from wheelloader.plant_loop import path_digest
     from wheelloader.references.metrics import cycle_work
@@ -87,10 +90,11 @@ def dig_variant(name: str, settings: dict[str, Any] | None, soil: str, resolutio
     folder = Path(cache)
     folder.mkdir(parents=True, exist_ok=True)
     digest = path_digest(path)
-    csv = folder / f"{digest[:16]}.csv"
-    if csv.exists():
+    csv = find_cycle_log(folder, digest[:16])
+    if csv is not None:
         log, resumed = CycleLog.load(csv), True
     else:
+        csv = folder / f"{digest[:16]}.csv.xz"
         log, resumed = MPMPlant(resolution=resolution).dig(path, pile, soil, seed=seed), False
         log.save(csv, overwrite=True)
     energy, fill = cycle_work(log), float(log.fill_volume[-1])
@@ -100,7 +104,7 @@ def dig_variant(name: str, settings: dict[str, Any] | None, soil: str, resolutio
             "energy_J": energy, "fill_m3": fill, "energy_per_m3_kJ": energy / fill / 1e3 if fill > 0 else math.inf,
             "peak_F_R_N": float(np.max(log.resultant)), "max_heel_depth_m": float(np.max(heel)),
             "end_blade_angle_deg": math.degrees(float(path.blade_angle[-1])), "predicted": predicted,
-            "resumed": resumed, "cycle": csv.name}
+            "resumed": resumed, "cycle": f"{digest[:16]}.csv"}
 
 
 def markdown(result: dict[str, Any]) -> str:
@@ -132,7 +136,9 @@ def markdown(result: dict[str, Any]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", default="results/plant_first_cycle", help="output directory (and cycle cache)")
+    parser.add_argument("--out", default="results/plant_first_cycle", help="output directory")
+    parser.add_argument("--cycles-dir", default=None, metavar="DIR",
+                        help="folder of the dug cycles (the resume cache; default OUT/cycles)")
     parser.add_argument("--soil", default="gravel", help="soil preset of the plant")
     parser.add_argument("--resolution", type=float, default=0.02, help="MPM grid spacing [m]")
     parser.add_argument("--seed", type=int, default=0, help="plant seed")
@@ -148,7 +154,8 @@ def main(argv: list[str] | None = None) -> int:
 
     started = time.perf_counter()
     units = [Unit(dig_variant, {"name": n, "settings": VARIANTS[n], "soil": args.soil, "resolution": args.resolution,
-                                "seed": args.seed, "cache": str(out / "cycles")}, label=n) for n in names]
+                                "seed": args.seed,
+                                "cache": args.cycles_dir or str(out / "cycles")}, label=n) for n in names]
     rows = run_sweep(units, args.ray, ray_cpus=args.ray_cpus,
                      progress=lambda line: print(line, flush=True)).values_or_raise()
     result = {"benchmark": "plant_first_cycle", "settings": {k: v for k, v in vars(args).items() if k != "ray"}

@@ -7,13 +7,14 @@ placed on that cycle's start pile as the loop's ``fixed`` strategy places it,
 :func:`wheelloader.planner.bezier_on_face`) in the same plant, soil and seed. Each pair then differs only in
 the path: energy (work of the plant's bucket force along the path, :func:`wheelloader.references.metrics.cycle_work`)
 and fill (the plant's soil inside the bucket at the end) are measured the same way for both. The cycles it
-digs are saved beside the run's (``fixed_on_STRATEGY/cycleK/cycle1.csv`` in each loop's folder of ``--out``); a
-second invocation reads them instead of digging again (one dug along another path is refused unless ``--force``).
+digs are saved beside the run's (``fixed_on_STRATEGY/cycleK/cycle1.csv.xz`` in each loop's folder of
+``--cycles-dir``, default ``OUT/cycles``); a second invocation reads them instead of digging again (one dug
+along another path is refused unless ``--force``).
 
 Usage::
 
-    python benchmarks/plant_paired.py --cycles docs/results/adaptation_mpm_end55/cycles \\
-        --out docs/results/paired_mpm_end55 --ray local --ray-cpus 2
+    python benchmarks/plant_paired.py --cycles data/results/adaptation_mpm_end55/cycles \\
+        --out docs/results/paired_mpm_end55 --cycles-dir data/results/paired_mpm_end55/cycles --ray local --ray-cpus 2
     python benchmarks/plant_paired.py --plant fee-env --cycles RUN/cycles --out /tmp/paired   # FEE env plant
     python benchmarks/plant_paired.py --report --cycles RUN/cycles --out docs/results/paired_mpm_end55  # table only
 """
@@ -44,6 +45,7 @@ def dig_fixed_on_piles(plant: Any, files: list[str], soil: str, seed: int, folde
     path is an error unless ``force``, which digs it again."""
     from wheelloader.adaptation import NOMINAL_SOIL, FixedBezier
     from wheelloader.estimator import CycleLog, WheelloaderError, preset
+    from wheelloader.estimator.cyclelog import find_cycle_log, log_stem
     from wheelloader.plant_loop import run_plant_loop
     from wheelloader.references.metrics import cycle_work
 
@@ -55,13 +57,13 @@ def dig_fixed_on_piles(plant: Any, files: list[str], soil: str, seed: int, folde
         if expected is not None and "settings" in log.metadata and log.metadata["settings"] != expected:
             raise ValueError(f"{csv} was dug with plant settings {log.metadata['settings']}, not this plant's "
                              f"{expected} (--resolution?)")
-        k = int(Path(csv).stem.removeprefix("cycle"))
+        k = int(log_stem(csv).removeprefix("cycle"))
         cache = Path(folder) / f"cycle{k}"
         try:
             records, _ = run_plant_loop(plant, FixedBezier(preset(NOMINAL_SOIL)), log.pile, soil, cycles=1,
                                         seed=seed, cache=cache, stale="redig" if force else "error")
         except WheelloaderError as exc:
-            if force or not (cache / "cycle1.csv").exists():
+            if force or find_cycle_log(cache, "cycle1") is None:
                 raise
             raise WheelloaderError(f"{exc} (the fixed path on {csv}'s pile: pass --force to dig it again)") from None
         fixed = records[0]
@@ -143,7 +145,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         found = {k: v[:1] for k, v in list(found.items())[:1]}
     plant = make_plant(args.plant, args.resolution, threads=1)
     started = time.perf_counter()
-    out = Path(args.out)
+    saved = Path(args.cycles_dir) if args.cycles_dir is not None else Path(args.out) / "cycles"
     keys = list(found)
     units = []
     for soil, seed, strategy in keys:
@@ -152,7 +154,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         units.append(Unit(dig_fixed_on_piles, {"plant": plant, "files": [str(f) for f in found[(soil, seed, strategy)]],
                                                 "soil": soil, "seed": int(seed.removeprefix("seed")),
                                                 "force": args.force,
-                                                "folder": str(out / "cycles" / soil / seed / f"fixed_on_{strategy}")},
+                                                "folder": str(saved / soil / seed / f"fixed_on_{strategy}")},
                           label=f"{soil} | {seed} | fixed on {strategy}'s piles", num_cpus=1))
     print(f"{len(units)} loops' piles, fixed path dug on each ({args.plant} plant, --ray {args.ray})", flush=True)
     values = run_sweep(units, args.ray, ray_cpus=args.ray_cpus, progress=lambda line: print(line, flush=True))
@@ -168,8 +170,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cycles", default=None,
-                        help="a plant run's saved loops (SOIL/seedN/STRATEGY/cycleK.csv); needed unless --report")
-    parser.add_argument("--out", default="results/plant_paired", help="output directory (its cycles/ is reused)")
+                        help="a plant run's saved loops (SOIL/seedN/STRATEGY/cycleK.csv.xz); needed unless --report")
+    parser.add_argument("--out", default="results/plant_paired", help="output directory")
+    parser.add_argument("--cycles-dir", default=None, metavar="DIR",
+                        help="folder where the fixed-path cycles dug are saved and read again (default OUT/cycles)")
     parser.add_argument("--plant", choices=("mpm", "fee-env"), default="mpm",
                         help="the plant the run's cycles were dug in (default mpm)")
     parser.add_argument("--resolution", type=float, default=0.02, help="MPM grid spacing [m] (the run's; default 0.02)")

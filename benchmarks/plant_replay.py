@@ -13,7 +13,7 @@ of :func:`wheelloader.estimator.predict`, from the fit's covariance and residual
 
 Usage::
 
-    python benchmarks/plant_replay.py --cycles docs/results/adaptation_mpm/cycles --out docs/results/plant_replay
+    python benchmarks/plant_replay.py --cycles data/results/adaptation_mpm/cycles --out docs/results/plant_replay
     python benchmarks/plant_replay.py --quick --out /tmp/replay        # 1 loop, 2 variants
 """
 
@@ -53,14 +53,16 @@ QUICK = ("ours, last cycle (loop default)", "ours + least weight force, all earl
 
 
 def loops(root: Path) -> dict[tuple[str, str, str], list[Path]]:
-    """The saved loops under ``root`` (``SOIL/seedN/STRATEGY/cycleK.csv``), cycles in order."""
+    """The saved loops under ``root`` (``SOIL/seedN/STRATEGY/cycleK.csv.xz``, or ``.csv``), cycles in order."""
+    from wheelloader.estimator.cyclelog import cycle_log_files, log_stem
+
     found: dict[tuple[str, str, str], list[Path]] = {}
-    for csv in sorted(root.glob("*/seed*/*/cycle*.csv")):
+    for csv in cycle_log_files(root, "*/seed*/*/cycle*"):
         strategy, seed, soil = csv.parent.name, csv.parent.parent.name, csv.parent.parent.parent.name
         found.setdefault((soil, seed, strategy), []).append(csv)
     for key, files in found.items():
-        files.sort(key=lambda p: int(p.stem.removeprefix("cycle")))
-        numbers = [int(p.stem.removeprefix("cycle")) for p in files]
+        files.sort(key=lambda p: int(log_stem(p).removeprefix("cycle")))
+        numbers = [int(log_stem(p).removeprefix("cycle")) for p in files]
         if numbers != list(range(1, len(numbers) + 1)):
             raise SystemExit(f"{root}: loop {'/'.join(key)} has cycles {numbers}, not 1..{len(numbers)}")
     return found
@@ -198,8 +200,8 @@ def markdown(result: dict[str, Any]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--cycles", default="docs/results/adaptation_mpm/cycles",
-                        help="folder of the saved loops (SOIL/seedN/STRATEGY/cycleK.csv)")
+    parser.add_argument("--cycles", default="data/results/adaptation_mpm/cycles",
+                        help="folder of the saved loops (SOIL/seedN/STRATEGY/cycleK.csv.xz)")
     parser.add_argument("--out", default="results/plant_replay", help="output directory")
     parser.add_argument("--strategies", nargs="+", default=["fixed", "ours", "paper"],
                         help="whose saved loops to replay (default: the learning loops' and the fixed path's)")

@@ -25,12 +25,20 @@ that differ from the defaults.
 
 A path without forces (for prediction) is the same CSV with only ``t, x, z,
 blade_angle``: see :func:`load_path_csv`.
+
+Compressed logs
+---------------
+``LOG.csv.xz`` + ``LOG.json.xz`` are the same two files compressed with xz (LZMA): :meth:`CycleLog.save`
+writes them when the path it is given ends in ``.csv.xz``, and every reader here takes either form.
+:func:`find_cycle_log` names the saved log of a stem in a folder, compressed or not, and
+:func:`cycle_log_files` lists a folder's logs; :func:`log_stem` is a log's name without its suffixes.
 """
 
 from __future__ import annotations
 
 import csv
 import json
+import lzma
 import math
 from array import array
 from dataclasses import dataclass, field
@@ -51,6 +59,57 @@ FORMAT_VERSION = 1
 PATH_COLUMNS = ("t", "x", "z", "blade_angle")
 FORCE_COLUMNS = ("F_T", "F_N")
 OPTIONAL_COLUMNS = ("fill_volume", "W_load")
+#: Suffix of a compressed log (and of its sidecar), and the xz preset its writer uses.
+COMPRESSED_SUFFIX = ".xz"
+XZ_PRESET = 6
+#: The suffixes a saved cycle log may have, the compressed one (which writers choose) first.
+LOG_SUFFIXES = (".csv" + COMPRESSED_SUFFIX, ".csv")
+
+
+def _compressed(path: Path) -> bool:
+    return path.name.endswith(COMPRESSED_SUFFIX)
+
+
+def log_stem(csv_path: str | Path) -> str:
+    """A log's name without ``.csv`` or ``.csv.xz`` (``cycle3.csv.xz`` -> ``cycle3``)."""
+    name = Path(csv_path).name
+    for suffix in LOG_SUFFIXES:
+        if name.endswith(suffix):
+            return name[: -len(suffix)]
+    return Path(name).stem
+
+
+def sidecar_path(csv_path: str | Path) -> Path:
+    """The JSON sidecar of a log: ``LOG.json`` beside ``LOG.csv``, ``LOG.json.xz`` beside ``LOG.csv.xz``."""
+    csv_path = Path(csv_path)
+    if _compressed(csv_path):
+        return csv_path.with_name(log_stem(csv_path) + ".json" + COMPRESSED_SUFFIX)
+    return csv_path.with_suffix(".json")
+
+
+def find_cycle_log(folder: str | Path, stem: str) -> Path | None:
+    """The saved log ``stem`` in ``folder`` (``stem.csv.xz`` or ``stem.csv``), or None when there is neither."""
+    for suffix in LOG_SUFFIXES:
+        candidate = Path(folder) / f"{stem}{suffix}"
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def cycle_log_files(folder: str | Path, pattern: str = "*") -> list[Path]:
+    """The logs in ``folder`` whose stem matches the glob ``pattern`` (may hold ``/``), compressed or not,
+    sorted by path."""
+    found = {p for suffix in LOG_SUFFIXES for p in Path(folder).glob(pattern + suffix)}
+    return sorted(p for p in found if not (p.name.endswith(".csv") and p.with_name(p.name + ".xz") in found))
+
+
+def _open_text(path: Path, mode: str, **kwargs: Any) -> Any:
+    """``open`` in text mode, through xz for a ``.xz`` path (written with :data:`XZ_PRESET`)."""
+    if _compressed(path):
+        if "w" in mode:
+            return lzma.open(path, mode + "t", preset=XZ_PRESET, **kwargs)
+        return lzma.open(path, mode + "t", **kwargs)
+    return open(path, mode, **kwargs)
 
 
 @dataclass(frozen=True, eq=False)
@@ -142,9 +201,10 @@ class CycleLog:
 
     # ----------------------------------------------------------------- io
     def save(self, csv_path: str | Path, overwrite: bool = False) -> Path:
-        """Write ``csv_path`` and its JSON sidecar; refuse to overwrite unless asked."""
+        """Write ``csv_path`` and its JSON sidecar (both xz-compressed when ``csv_path`` ends in ``.csv.xz``);
+        refuse to overwrite unless asked."""
         csv_path = Path(csv_path)
-        sidecar = csv_path.with_suffix(".json")
+        sidecar = sidecar_path(csv_path)
         if not overwrite:
             for target in (csv_path, sidecar):
                 if target.exists():
@@ -164,20 +224,31 @@ class CycleLog:
             "bucket": self.bucket.to_dict(),
             "metadata": self.metadata,
         }
-        sidecar.write_text(json.dumps(to_jsonable(meta), indent=1, allow_nan=False))
+        with _open_text(sidecar, "w") as fh:
+            fh.write(json.dumps(to_jsonable(meta), indent=1, allow_nan=False))
         return csv_path
 
     @classmethod
     def load(cls, csv_path: str | Path) -> CycleLog:
-        """Read a cycle log (CSV + JSON sidecar) with clear errors for bad files."""
+        """Read a cycle log (CSV + JSON sidecar) with clear errors for bad files.
+
+        ``LOG.csv.xz`` (with ``LOG.json.xz``) is read through xz; ``LOG.csv`` that is absent while
+        ``LOG.csv.xz`` is present reads the compressed log.
+        """
         csv_path = Path(csv_path)
+        if not csv_path.exists() and csv_path.name.endswith(".csv"):
+            packed = csv_path.with_name(csv_path.name + COMPRESSED_SUFFIX)
+            csv_path = packed if packed.is_file() else csv_path
         columns = _read_columns(csv_path, required=PATH_COLUMNS + FORCE_COLUMNS)
         path = _path_from_columns(csv_path, columns)
-        sidecar = csv_path.with_suffix(".json")
+        sidecar = sidecar_path(csv_path)
         if not sidecar.exists():
             raise CycleLogError(f"{csv_path}: JSON sidecar {sidecar.name} not found (it holds the pile and bucket)")
         try:
-            meta = json.loads(sidecar.read_text(encoding="utf-8-sig"))
+            with _open_text(sidecar, "r", encoding="utf-8-sig") as fh:
+                meta = json.loads(fh.read())
+        except lzma.LZMAError as exc:
+            raise CycleLogError(f"{sidecar}: not an xz file ({exc})") from None
         except json.JSONDecodeError as exc:
             raise CycleLogError(f"{sidecar}: not valid JSON ({exc})") from None
         except UnicodeDecodeError as exc:
@@ -224,7 +295,7 @@ def write_columns(csv_path: Path, columns: dict[str, np.ndarray]) -> None:
     """Write named columns as CSV with a header row, full float precision (``repr``)."""
     names = list(columns)
     data = np.column_stack([np.asarray(columns[k], dtype=float) for k in names])
-    with open(csv_path, "w", newline="") as fh:
+    with _open_text(csv_path, "w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow(names)
         for row in data:
@@ -239,7 +310,7 @@ def _read_columns(csv_path: Path, required: tuple[str, ...]) -> dict[str, np.nda
     # streamed: one row at a time into typed arrays (8 bytes a value), so a 200 MB log does not become
     # gigabytes of Python strings
     try:  # utf-8-sig: a byte-order mark (spreadsheet exports) is not part of the first column name
-        with open(csv_path, newline="", encoding="utf-8-sig") as fh:
+        with _open_text(csv_path, "r", newline="", encoding="utf-8-sig") as fh:
             reader = csv.reader(line for line in fh if line.strip() and not line.lstrip().startswith("#"))
             first = next(reader, None)
             if first is None:
@@ -265,6 +336,8 @@ def _read_columns(csv_path: Path, required: tuple[str, ...]) -> dict[str, np.nda
                 count += 1
     except UnicodeDecodeError as exc:
         raise CycleLogError(f"{csv_path}: not a UTF-8 text CSV file ({exc.reason} at byte {exc.start})") from None
+    except lzma.LZMAError as exc:
+        raise CycleLogError(f"{csv_path}: not an xz file ({exc})") from None
     if count < 2:
         raise CycleLogError(f"{csv_path}: needs at least 2 data rows, found {count}")
     out: dict[str, np.ndarray] = {}
@@ -290,7 +363,7 @@ def _path_from_columns(csv_path: Path, columns: dict[str, np.ndarray], name: str
             f"{csv_path}: blade_angle reaches {np.max(np.abs(angle)):.3g}; angles must be in radians "
             "(values beyond pi look like degrees)"
         )
-    return BucketPath(t, columns["x"], columns["z"], angle, name or csv_path.stem)
+    return BucketPath(t, columns["x"], columns["z"], angle, name or log_stem(csv_path))
 
 
 def _check_geometry(csv_path: Path, log: CycleLog) -> None:

@@ -103,3 +103,69 @@ def test_constructor_validation(log):
         CycleLog(log.path, log.tangential[:-1], log.normal, log.pile)
     with pytest.raises(CycleLogError, match="NaN"):
         CycleLog(log.path, np.full(len(log.path), np.nan), log.normal, log.pile)
+
+
+# ----------------------------------------------------------------- compressed logs (.csv.xz + .json.xz)
+def test_compressed_round_trip_holds_the_same_bytes(tmp_path, log):
+    """A ``.csv.xz`` log is the plain log's two files compressed: same bytes inside, same log read back."""
+    import lzma
+
+    from wheelloader.estimator.cyclelog import find_cycle_log, log_stem, sidecar_path
+
+    log.save(tmp_path / "plain.csv")
+    packed = log.save(tmp_path / "packed.csv.xz")
+    assert sidecar_path(packed) == tmp_path / "packed.json.xz" and log_stem(packed) == "packed"
+    assert lzma.decompress(packed.read_bytes()) == (tmp_path / "plain.csv").read_bytes()
+    assert lzma.decompress((tmp_path / "packed.json.xz").read_bytes()) == (tmp_path / "plain.json").read_bytes()
+    a, b = CycleLog.load(tmp_path / "plain.csv"), CycleLog.load(packed)
+    assert b.path.name == "packed" and a.path.name == "plain"
+    for name in ("tangential", "normal", "fill_volume"):
+        assert np.array_equal(getattr(a, name), getattr(b, name))
+    assert a.pile == b.pile and a.pile_after == b.pile_after and a.metadata == b.metadata
+    # the plain name reads the compressed log when only that one is there; find_cycle_log prefers it
+    assert np.array_equal(CycleLog.load(tmp_path / "packed.csv").normal, log.normal)
+    assert find_cycle_log(tmp_path, "packed") == packed and find_cycle_log(tmp_path, "plain") == tmp_path / "plain.csv"
+    assert find_cycle_log(tmp_path, "absent") is None
+    with pytest.raises(FileExistsError):
+        log.save(packed)
+
+
+def test_cycle_log_files_lists_each_log_once(tmp_path, log):
+    from wheelloader.estimator.cyclelog import cycle_log_files
+
+    (tmp_path / "a" / "b").mkdir(parents=True)
+    log.save(tmp_path / "a" / "b" / "cycle1.csv.xz")
+    log.save(tmp_path / "a" / "b" / "cycle2.csv")
+    log.save(tmp_path / "a" / "b" / "cycle2.csv.xz")  # both forms: the compressed one is listed
+    assert cycle_log_files(tmp_path, "*/*/cycle*") == [tmp_path / "a" / "b" / "cycle1.csv.xz",
+                                                       tmp_path / "a" / "b" / "cycle2.csv.xz"]
+
+
+def test_a_damaged_compressed_log_is_a_clear_error(tmp_path, log):
+    packed = log.save(tmp_path / "c.csv.xz")
+    packed.write_bytes(b"not xz at all")
+    with pytest.raises(CycleLogError, match="not an xz file"):
+        CycleLog.load(packed)
+
+
+def test_committed_saved_cycles_read_back_byte_for_byte(tmp_path):
+    """A sample of the committed saved loop cycles (data/results/*/cycles, xz): read, written again plain, the
+    files are the compressed ones' contents byte for byte, and written compressed, the very same xz bytes."""
+    import lzma
+    from pathlib import Path
+
+    from wheelloader.estimator.cyclelog import cycle_log_files, sidecar_path
+
+    root = Path(__file__).resolve().parents[1] / "data" / "results"
+    runs = sorted(root.glob("*/cycles"))
+    assert runs, "no saved cycles under data/results"
+    for run in runs:
+        saved = cycle_log_files(run, "**/*")
+        assert saved and all(p.name.endswith(".csv.xz") for p in saved), run
+        for packed in saved[:: max(1, len(saved) // 2)][:2]:  # the first and the middle one of each run
+            back = CycleLog.load(packed)
+            back.save(tmp_path / "c.csv", overwrite=True)
+            back.save(tmp_path / "c.csv.xz", overwrite=True)
+            assert (tmp_path / "c.csv").read_bytes() == lzma.decompress(packed.read_bytes()), packed
+            assert (tmp_path / "c.json").read_bytes() == lzma.decompress(sidecar_path(packed).read_bytes()), packed
+            assert (tmp_path / "c.csv.xz").read_bytes() == packed.read_bytes(), packed

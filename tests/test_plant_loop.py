@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import lzma
 import math
 import os
 
@@ -86,10 +87,12 @@ def test_loop_on_the_fee_env_plant_resumes_from_its_cache(tmp_path):
         assert b.end.startswith("kept saved cycle (path planned now differs by ")
         assert a.energy_J == pytest.approx(b.energy_J, rel=1e-9) and a.plan_message == b.plan_message
         assert a.prediction_rmse_percent == pytest.approx(b.prediction_rmse_percent, rel=1e-9)
-    # a log saved before plans were recorded: the record says so
-    old_log = CycleLog.load(tmp_path / "cycle1.csv")
+    # a log saved before plans were recorded (and before saved cycles were compressed): the record says so
+    old_log = CycleLog.load(tmp_path / "cycle1.csv.xz")
     del old_log.metadata["plan"]
-    old_log.save(tmp_path / "cycle1.csv", overwrite=True)
+    for name in ("cycle1.csv.xz", "cycle1.json.xz"):
+        (tmp_path / name).unlink()
+    old_log.save(tmp_path / "cycle1.csv")
     older, _ = run_plant_loop(plant, FixedBezier(preset(NOMINAL_SOIL), rate=30.0), Pile.trapezoid(), "gravel",
                               cycles=1, cache=tmp_path, stale="keep")
     assert older[0].end.endswith("its plan's record is that of the plan made now")
@@ -182,8 +185,8 @@ def test_plant_loop_unit_builds_ours_with_the_failure_angle_rule(tmp_path):
                           planner=False, failure_angle="min_weight_force")
     assert [r["cycle"] for r in out["records"]] == [1, 2] and len(out["logs"]) == 2
     assert out["records"][1]["calibration_ok"]
-    assert sorted(p.name for p in (tmp_path / "c").iterdir()) == ["cycle1.csv", "cycle1.json", "cycle2.csv",
-                                                                  "cycle2.json"]
+    assert sorted(p.name for p in (tmp_path / "c").iterdir()) == ["cycle1.csv.xz", "cycle1.json.xz",
+                                                                  "cycle2.csv.xz", "cycle2.json.xz"]
     with pytest.raises(WheelloaderError, match="oracle_params"):
         plant_loop_unit(FEEEnvPlant(), "oracle", "gravel", cycles=1, seed=0, cache=None, planner=False)
 
@@ -391,10 +394,10 @@ def test_plant_paired_digs_the_fixed_path_on_each_saved_pile_and_resumes(tmp_pat
     assert again.returncode == 0 and again.stdout.count("(resumed)") == 4, again.stdout[-2000:]
     assert all(r["resumed"] for r in json.loads((tmp_path / "out" / "plant_paired.json").read_text())["rows"])
     # a saved cycle dug along another path is not overwritten without --force
-    saved = tmp_path / "out" / "cycles" / "gravel" / "seed1" / "fixed_on_deeper" / "cycle2" / "cycle1.json"
-    text = saved.read_text()
+    saved = tmp_path / "out" / "cycles" / "gravel" / "seed1" / "fixed_on_deeper" / "cycle2" / "cycle1.json.xz"
+    text = lzma.decompress(saved.read_bytes()).decode()
     assert text.count('"planned_path_sha256": "') == 1
-    saved.write_text(text.replace('"planned_path_sha256": "', '"planned_path_sha256": "0'))
+    saved.write_bytes(lzma.compress(text.replace('"planned_path_sha256": "', '"planned_path_sha256": "0').encode()))
     refused = subprocess.run(command, capture_output=True, text=True, timeout=600)
     assert refused.returncode != 0 and "pass --force" in refused.stderr, refused.stderr[-2000:]
     forced = subprocess.run(command + ["--force"], capture_output=True, text=True, timeout=600)

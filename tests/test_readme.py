@@ -138,8 +138,8 @@ def _workspace(path: Path) -> dict[str, str]:
     import shutil
     import sys
 
-    shutil.copytree(ROOT / "data", path / "data")
-    cycles = Path("docs") / "results" / "adaptation_mpm" / "cycles"  # read by benchmarks/plant_replay.py
+    shutil.copytree(ROOT / "data", path / "data", ignore=shutil.ignore_patterns("results"))
+    cycles = Path("data") / "results" / "adaptation_mpm" / "cycles"  # read by benchmarks/plant_replay.py
     shutil.copytree(ROOT / cycles, path / cycles)
     for name in ("benchmarks", "dem"):
         (path / name).symlink_to(ROOT / name, target_is_directory=True)

@@ -45,6 +45,7 @@ from wheelloader.estimator import (
     calibrate,
     predict,
 )
+from wheelloader.estimator.cyclelog import find_cycle_log
 from wheelloader.planner import MODEL_FALLBACK_NAME
 from wheelloader.references.filtering import DEFAULT_FILTER, filtered
 from wheelloader.references.metrics import cycle_work
@@ -54,10 +55,8 @@ from wheelloader.references.plant import Plant
 def _cached(cache: Path | None, key: str) -> CycleLog | None:
     if cache is None:
         return None
-    csv = cache / f"{key}.csv"
-    if not csv.is_file():
-        return None
-    return CycleLog.load(csv)
+    saved = find_cycle_log(cache, key)
+    return None if saved is None else CycleLog.load(saved)
 
 
 def path_distance(a: Any, b: Any) -> float:
@@ -149,7 +148,8 @@ def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParam
     seed : int
         Seed of the plant (packing, jitter).
     cache : str or Path, optional
-        Folder where each cycle's log is saved as ``cycle<k>.csv`` + JSON as it finishes; an existing
+        Folder where each cycle's log is saved as ``cycle<k>.csv.xz`` + ``.json.xz`` (xz-compressed; a
+        saved ``cycle<k>.csv`` is read too) as it finishes; an existing
         one whose path equals the planned one is read instead of digging (resume).
     sigma_s : float
         Gaussian filter of the plant's force before calibration and for the prediction error [s].
@@ -190,8 +190,8 @@ def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParam
         record = _PlanRecord(bool(plan.success), str(plan.message), float(plan.seconds), strategy.params)
         digest = path_digest(plan.path)
         saved = _cached(folder, f"cycle{k}")
-        log, record, end, kept, replaced = _resolve_saved_cycle(saved, digest, plan.path, stale, record,
-                                                                f"{folder}/cycle{k}.csv")
+        where = "" if saved is None else str(find_cycle_log(folder, f"cycle{k}"))
+        log, record, end, kept, replaced = _resolve_saved_cycle(saved, digest, plan.path, stale, record, where)
         resumed = log is not None
         if log is None:
             start = time.perf_counter()
@@ -201,7 +201,9 @@ def run_plant_loop(plant: Plant, strategy: Strategy, pile: Pile, soil: SoilParam
             log.metadata["plan"] = {"ok": record.ok, "message": record.message, "seconds": record.seconds,
                                     "params": record.params.to_dict()}
             if folder is not None:
-                log.save(folder / f"cycle{k}.csv", overwrite=True)
+                log.save(folder / f"cycle{k}.csv.xz", overwrite=True)
+                for plain in (folder / f"cycle{k}.csv", folder / f"cycle{k}.json"):  # a replaced uncompressed one
+                    plain.unlink(missing_ok=True)
         if log.pile_after is None:
             raise WheelloaderError(f"plant {getattr(plant, 'name', plant)!r} did not return the carved pile "
                                    "(CycleLog.pile_after)")
