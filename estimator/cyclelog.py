@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from .checks import check_choice
 from .errors import CycleLogError, ParameterError
 from .jsonable import to_jsonable
 from .kinematics import DEFAULT_SLOPE_WINDOW, ContactState, contact_state
@@ -189,8 +190,7 @@ class CycleLog:
         model's own bookkeeping (carving the pile along the path, as for a path never dug), the
         quantity a prediction of a new path has.
         """
-        if fill not in ("log", "model"):
-            raise ParameterError(f'fill must be "log" or "model", got {fill!r}')
+        check_choice("fill", fill, ("log", "model"))
         ax, az = self.path.acceleration()
         vx, vz, _ = self.path.velocity()
         logged = fill == "log"

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .checks import check_range
 from .errors import ParameterError
 from .machine import Bucket
 from .pile import CarveResult, Pile
@@ -163,8 +164,7 @@ def contact_state(
     for name, arr in (("x", xs), ("z", zs), ("blade_angle", theta)):
         if not np.all(np.isfinite(arr)):
             raise ParameterError(f"path {name} contains NaN or infinite values")
-    if not slope_window > 0.0:
-        raise ParameterError(f"slope_window must be > 0 m, got {slope_window!r}")
+    check_range("slope_window", slope_window, 0.0, None, low_open=True)  # m
     alpha = pile.slope_angle(xs, slope_window)
     vertical = pile.surface_height(xs) - zs
     depth = np.maximum(vertical, 0.0) * np.cos(alpha)

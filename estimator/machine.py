@@ -7,21 +7,17 @@ numbers; the defaults below are chosen, not measured, and each says how.
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
+from .checks import check_range
 from .errors import ParameterError
 
 
 def _check_positive(owner: object, *names: str) -> None:
     for name in names:
-        value = getattr(owner, name)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
-            raise ParameterError(f"{type(owner).__name__}.{name} must be a finite number, got {value!r}")
-        if float(value) <= 0.0:
-            raise ParameterError(f"{type(owner).__name__}.{name} must be > 0, got {value!r}")
-        object.__setattr__(owner, name, float(value))
+        value = check_range(f"{type(owner).__name__}.{name}", getattr(owner, name), 0.0, None, low_open=True)
+        object.__setattr__(owner, name, value)
 
 
 @dataclass(frozen=True)

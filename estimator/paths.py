@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .checks import check_range
 from .errors import ParameterError
 
 #: Default sampling rate [Hz] (the paper's data: 281 samples over 4.67 s).
@@ -84,8 +85,7 @@ class BucketPath:
 
     def resample(self, rate: float) -> BucketPath:
         """Linear resampling at ``rate`` [Hz] over the same time span."""
-        if not rate > 0.0:
-            raise ParameterError(f"rate must be > 0 Hz, got {rate!r}")
+        check_range("rate", rate, 0.0, None, low_open=True)  # Hz
         count = int(math.floor(self.duration * rate + 1e-9)) + 1
         t = self.t[0] + np.arange(count) / rate
         return BucketPath(t, np.interp(t, self.t, self.x), np.interp(t, self.t, self.z),
@@ -104,8 +104,7 @@ def _smoothstep(u: np.ndarray) -> np.ndarray:
 def blade_angle_profile(u: np.ndarray, start: float, end: float, curl_from: float = 0.55) -> np.ndarray:
     """Blade angle along the path parameter ``u`` in [0, 1]: ``start`` until ``curl_from``,
     then a smooth (C1) curl to ``end`` [rad]."""
-    if not 0.0 <= curl_from < 1.0:
-        raise ParameterError(f"curl_from must be in [0, 1), got {curl_from!r}")
+    check_range("curl_from", curl_from, 0.0, 1.0, high_open=True)
     return start + (end - start) * _smoothstep((u - curl_from) / (1.0 - curl_from))
 
 
@@ -126,8 +125,8 @@ def bezier_path(
     The parameter u advances uniformly in time over ``duration`` [s], sampled
     at ``rate`` [Hz]; the blade angle follows :func:`blade_angle_profile`.
     """
-    if not (duration > 0.0 and rate > 0.0):
-        raise ParameterError("duration and rate must be > 0")
+    check_range("duration", duration, 0.0, None, low_open=True)  # s
+    check_range("rate", rate, 0.0, None, low_open=True)  # Hz
     p0, p1, p2 = (np.asarray(p, dtype=float) for p in (start, control, end))
     for label, p in (("start", p0), ("control", p1), ("end", p2)):
         if p.shape != (2,) or not np.all(np.isfinite(p)):

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .checks import check_finite, check_range
 from .errors import ParameterError
 
 #: Default grid spacing of a pile surface [m].
@@ -54,10 +55,8 @@ class Pile:
     heights: np.ndarray = field(repr=False)
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.x0)):
-            raise ParameterError(f"Pile.x0 must be finite, got {self.x0!r}")
-        if not (math.isfinite(self.spacing) and self.spacing > 0.0):
-            raise ParameterError(f"Pile.spacing must be > 0 m, got {self.spacing!r}")
+        check_finite("Pile.x0", self.x0)
+        check_range("Pile.spacing", self.spacing, 0.0, None, low_open=True)
         z = _as_1d_finite("Pile.heights", self.heights).copy()
         if z.size < 2:
             raise ParameterError("Pile.heights needs at least 2 nodes")
@@ -78,8 +77,7 @@ class Pile:
             raise ParameterError("a pile polyline needs at least 2 points")
         if np.any(np.diff(xs) <= 0.0):
             raise ParameterError("pile polyline x must be strictly increasing")
-        if not spacing > 0.0:
-            raise ParameterError(f"spacing must be > 0 m, got {spacing!r}")
+        check_range("spacing", spacing, 0.0, None, low_open=True)  # m
         count = int(math.ceil((xs[-1] - xs[0]) / spacing - 1e-9)) + 1
         grid = xs[0] + spacing * np.arange(count)
         return cls(float(xs[0]), float(spacing), np.interp(grid, xs, zs))
@@ -99,8 +97,8 @@ class Pile:
         flat ground lie in front of it.
         """
         _check_angle("angle", angle)
-        if not length > 0.0 or not ground_before >= 0.0:
-            raise ParameterError("length must be > 0 m and ground_before >= 0 m")
+        check_range("length", length, 0.0, None, low_open=True)  # m
+        check_range("ground_before", ground_before, 0.0, None)
         xs = [toe_x - ground_before, toe_x, toe_x + length]
         zs = [0.0, 0.0, length * math.tan(angle)]
         if ground_before == 0.0:
@@ -122,8 +120,9 @@ class Pile:
         _check_angle("angle", angle)
         back = angle if back_angle is None else back_angle
         _check_angle("back_angle", back)
-        if not height > 0.0 or not top_length >= 0.0 or not ground_before >= 0.0:
-            raise ParameterError("height must be > 0 m; top_length and ground_before >= 0 m")
+        check_range("height", height, 0.0, None, low_open=True)  # m
+        check_range("top_length", top_length, 0.0, None)
+        check_range("ground_before", ground_before, 0.0, None)
         front = height / math.tan(angle)
         rear = height / math.tan(back)
         xs = [toe_x - ground_before, toe_x, toe_x + front, toe_x + front + top_length,
@@ -290,8 +289,8 @@ class Pile:
 
 
 def _check_angle(name: str, value: float) -> None:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and 0.0 < value < math.pi / 2):
-        hint = " (angles are in radians)" if isinstance(value, (int, float)) and value >= math.pi / 2 else ""
+    if not 0.0 < check_finite(name, value) < math.pi / 2:
+        hint = " (angles are in radians)" if value >= math.pi / 2 else ""
         raise ParameterError(f"{name} must be in (0, pi/2) rad, got {value!r}{hint}")
 
 

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from .checks import check_finite, check_range
 from .errors import ParameterError
 
 #: Names of the eight soil parameters in the paper's order (eq 18).
@@ -120,33 +121,21 @@ class SoilParams:
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-                raise ParameterError(
-                    f"SoilParams.{f.name} must be a real number, got {value!r} ({type(value).__name__})"
-                )
-            value = float(value)
-            if not math.isfinite(value):
-                raise ParameterError(f"SoilParams.{f.name} must be finite, got {value!r}")
-            object.__setattr__(self, f.name, value)
-        if self.gamma <= 0.0:
-            raise ParameterError(f"SoilParams.gamma must be > 0 kg/m^3, got {self.gamma!r}")
+            object.__setattr__(self, f.name, check_finite(f"SoilParams.{f.name}", getattr(self, f.name)))
+        check_range("SoilParams.gamma", self.gamma, 0.0, None, low_open=True)  # kg/m^3
         for name in ("cohesion", "adhesion", "k_c", "k_phi"):
-            if getattr(self, name) < 0.0:
-                raise ParameterError(f"SoilParams.{name} must be >= 0, got {getattr(self, name)!r}")
+            check_range(f"SoilParams.{name}", getattr(self, name), 0.0, None)
         for name in ("phi", "delta"):
             value = getattr(self, name)
             if not 0.0 <= value < math.pi / 2:
                 hint = " (it looks like degrees; angles are in radians)" if value >= math.pi / 2 else ""
                 raise ParameterError(f"SoilParams.{name} must be in [0, pi/2) rad, got {value!r}{hint}")
-        if self.n <= 0.0:
-            raise ParameterError(f"SoilParams.n must be > 0, got {self.n!r}")
+        check_range("SoilParams.n", self.n, 0.0, None, low_open=True)
 
     # ------------------------------------------------------------------ views
     def sinkage_modulus(self, edge_thickness: float) -> float:
         """The identifiable Bekker combination ``k_c / b + k_phi`` [N/m^(n+2)] (eq 15)."""
-        if not edge_thickness > 0.0:
-            raise ParameterError(f"edge_thickness must be > 0 m, got {edge_thickness!r}")
+        check_range("edge_thickness", edge_thickness, 0.0, None, low_open=True)  # m
         return self.k_c / edge_thickness + self.k_phi
 
     def to_array(self) -> np.ndarray:

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from .checks import check_range
 from .errors import ParameterError
 from .soil import PAPER_BOUNDS, PARAMETER_NAMES, SoilParams
 
@@ -37,8 +38,7 @@ def soil_vector(soil: SoilParams | Any, edge_thickness: float) -> np.ndarray:
     edge_thickness : float
         Cutting-edge thickness b [m].
     """
-    if not edge_thickness > 0.0:
-        raise ParameterError(f"edge_thickness must be > 0 m, got {edge_thickness!r}")
+    check_range("edge_thickness", edge_thickness, 0.0, None, low_open=True)  # m
     theta = soil.to_array() if isinstance(soil, SoilParams) else np.asarray(soil, dtype=float).ravel()
     if theta.size != len(PARAMETER_NAMES):
         raise ParameterError(f"expected {len(PARAMETER_NAMES)} soil parameters, got {theta.size}")

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from .checks import check_finite, check_range
 from .cyclelog import CycleLog
 from .errors import ParameterError
 from .force_model import DEFAULT_OPTIONS, ModelOptions, soil_forces
@@ -60,9 +61,7 @@ def _pair(name: str, value: Any) -> tuple[float, float]:
         if len(vals) != 2:
             raise ParameterError(f"{name} must be a number or a (tangential, normal) pair, got {value!r}")
         pair = (vals[0], vals[1])
-    if not all(math.isfinite(v) for v in pair):
-        raise ParameterError(f"{name} must be finite, got {value!r}")
-    return pair
+    return check_finite(f"{name}[0]", pair[0]), check_finite(f"{name}[1]", pair[1])
 
 
 def synthetic_cycle(
@@ -125,8 +124,7 @@ def synthetic_cycle(
     if not isinstance(path, BucketPath):
         raise ParameterError(f"path must be a BucketPath, got {type(path).__name__}")
     for name, value in (("noise", noise), ("vibration", vibration)):
-        if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
-            raise ParameterError(f"{name} must be a finite fraction >= 0, got {value!r}")
+        check_range(name, value, 0.0, None)  # a fraction of the peak force
     bias_t, bias_n = _pair("bias", bias)
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     acceleration = np.column_stack(path.acceleration()) if options.carried_load else None
@@ -138,9 +136,7 @@ def synthetic_cycle(
     if force_scale is None:
         scale = peak if peak > 0.0 else 1000.0
     else:
-        if not (math.isfinite(force_scale) and force_scale > 0.0):
-            raise ParameterError(f"force_scale must be > 0 N, got {force_scale!r}")
-        scale = float(force_scale)
+        scale = check_range("force_scale", force_scale, 0.0, None, low_open=True)  # N
     n = len(path)
     rate = (n - 1) / path.duration
     measured = []

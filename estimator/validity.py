@@ -38,6 +38,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .checks import check_choice, check_range
 from .errors import ParameterError
 
 #: Flag bit: the tip is out of soil (depth <= 0), every force is zero.
@@ -122,16 +123,12 @@ class ModelOptions:
         return names + (("failure_angle",) if self.failure_angle != "min_n_gamma" else ())
 
     def __post_init__(self) -> None:
-        if self.failure_angle not in ("min_n_gamma", "min_weight_force"):
-            raise ParameterError("ModelOptions.failure_angle must be 'min_n_gamma' (the paper's rule) or "
-                                 f"'min_weight_force', got {self.failure_angle!r}")
+        check_choice("ModelOptions.failure_angle", self.failure_angle, ("min_n_gamma", "min_weight_force"))
         for name in ("carried_load", "slip_friction"):
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError(f"ModelOptions.{name} must be True or False, got {getattr(self, name)!r}")
         for name in ("eps1", "eps2", "rho_min", "alpha_max", "contact_depth", "slope_margin", "slip_speed"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
-                raise ParameterError(f"ModelOptions.{name} must be a finite number > 0, got {value!r}")
+            check_range(f"ModelOptions.{name}", getattr(self, name), 0.0, None, low_open=True)
         if self.eps1 + self.eps2 + self.rho_min >= math.pi / 2 or self.alpha_max >= math.pi / 2 - self.eps1:
             raise ParameterError("ModelOptions: eps1 + eps2 + rho_min must be < 90 deg and alpha_max < 90 deg - eps1")
 

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from wheelloader.estimator import Bucket, BucketPath, Loader, Pile, SoilParams, as_soil
+from wheelloader.estimator.checks import check_int, check_range
 from wheelloader.estimator.errors import PlanningError
 
 from .cycle import cycle_duration, default_start, optimizer_for
@@ -103,12 +104,9 @@ class MPCController:
                  intervals: int = 12, min_remaining: float = 0.4, initial_plan: Plan | None = None,
                  options: PlannerOptions | None = None, reference_weight: float = 20.0, max_iter: int = 8,
                  feasible_tolerance: float = 1e-4, exit_min_fill: float = 0.0) -> None:
-        if not (isinstance(replan_every, int) and replan_every >= 1):
-            raise PlanningError(f"replan_every must be a positive integer, got {replan_every!r}")
-        if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0.0):
-            raise PlanningError(f"duration must be > 0 s, got {duration!r}")
-        if not control_rate > 0.0:
-            raise PlanningError(f"control_rate must be > 0 Hz, got {control_rate!r}")
+        check_int("replan_every", replan_every, error=PlanningError)
+        check_range("duration", duration, 0.0, None, low_open=True, error=PlanningError)
+        check_range("control_rate", control_rate, 0.0, None, low_open=True, error=PlanningError)
         from dataclasses import replace
 
         self.soil = as_soil(soil)

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wheelloader.estimator import DEFAULT_OPTIONS, ModelOptions, PlanningError
+from wheelloader.estimator.checks import check_choice, check_finite, check_int, check_range
 
 from .surface import SurfaceGrid
 
@@ -138,51 +139,35 @@ class PlannerOptions:
             else DEFAULT_OPTIONS
 
     def __post_init__(self) -> None:
-        if self.failure_angle not in ("min_n_gamma", "min_weight_force"):
-            raise PlanningError("PlannerOptions.failure_angle must be 'min_n_gamma' or 'min_weight_force', "
-                                f"got {self.failure_angle!r}")
-        if self.cut_angle is not None and not (isinstance(self.cut_angle, (int, float))
-                                               and 0.0 < self.cut_angle < math.pi / 2):
-            raise PlanningError(f"PlannerOptions.cut_angle must be None or an angle in (0, pi/2) rad, "
-                                f"got {self.cut_angle!r}")
-        if not (isinstance(self.cut_depth, (int, float)) and math.isfinite(self.cut_depth) and self.cut_depth >= 0):
-            raise PlanningError(f"PlannerOptions.cut_depth must be a finite number >= 0 m, got {self.cut_depth!r}")
-        if self.heel_clearance is not None and not (isinstance(self.heel_clearance, (int, float))
-                                                    and math.isfinite(self.heel_clearance)):
-            raise PlanningError(f"PlannerOptions.heel_clearance must be None or a finite height [m], "
-                                f"got {self.heel_clearance!r}")
-        if self.end_blade_angle is not None and not (
-                isinstance(self.end_blade_angle, (int, float))
-                and self.blade_angle_limits[0] <= self.end_blade_angle <= self.blade_angle_limits[1]):
-            raise PlanningError(f"PlannerOptions.end_blade_angle must be None or within blade_angle_limits "
-                                f"{self.blade_angle_limits!r} rad, got {self.end_blade_angle!r}")
-        if not (isinstance(self.intervals, int) and 4 <= self.intervals <= 400):
-            raise PlanningError(f"PlannerOptions.intervals must be an integer in [4, 400], got {self.intervals!r}")
-        if not (isinstance(self.curl_out_intervals, int) and not isinstance(self.curl_out_intervals, bool)
-                and 0 <= self.curl_out_intervals < self.intervals // 2):
-            raise PlanningError(f"PlannerOptions.curl_out_intervals must be an integer in [0, intervals / 2), "
-                                f"got {self.curl_out_intervals!r}")
+        err = PlanningError
+        check_choice("PlannerOptions.failure_angle", self.failure_angle, ("min_n_gamma", "min_weight_force"),
+                     error=err)
+        if self.cut_angle is not None:
+            check_range("PlannerOptions.cut_angle", self.cut_angle, 0.0, math.pi / 2, low_open=True, high_open=True,
+                        error=err)
+        check_range("PlannerOptions.cut_depth", self.cut_depth, 0.0, None, error=err)
+        if self.heel_clearance is not None:
+            check_finite("PlannerOptions.heel_clearance", self.heel_clearance, error=err)
+        if self.end_blade_angle is not None:
+            check_range("PlannerOptions.end_blade_angle", self.end_blade_angle, *self.blade_angle_limits, error=err)
+        check_int("PlannerOptions.intervals", self.intervals, minimum=4, maximum=400, error=err)
+        check_int("PlannerOptions.curl_out_intervals", self.curl_out_intervals, minimum=0,
+                  maximum=self.intervals // 2 - 1, error=err)
         for name in ("energy_weight", "smoothing_weight", "rho_margin", "end_clearance", "lift_headroom",
                      "validity_band"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
-                raise PlanningError(f"PlannerOptions.{name} must be a finite number >= 0, got {value!r}")
-        if not (0.0 < self.fill_limit <= 1.0):
-            raise PlanningError(f"PlannerOptions.fill_limit must be in (0, 1], got {self.fill_limit!r}")
-        if not (0.0 < self.force_margin <= 1.0):
-            raise PlanningError(f"PlannerOptions.force_margin must be in (0, 1], got {self.force_margin!r}")
-        if not self.max_tilt_acceleration > 0.0:
-            raise PlanningError("PlannerOptions.max_tilt_acceleration must be > 0 rad/s^2")
+            check_range(f"PlannerOptions.{name}", getattr(self, name), 0.0, None, error=err)
+        check_range("PlannerOptions.fill_limit", self.fill_limit, 0.0, 1.0, low_open=True, error=err)
+        check_range("PlannerOptions.force_margin", self.force_margin, 0.0, 1.0, low_open=True, error=err)
+        check_range("PlannerOptions.max_tilt_acceleration", self.max_tilt_acceleration, 0.0, None, low_open=True,
+                    error=err)
         lo, hi = self.blade_angle_limits
         if not (-math.pi / 2 < lo < hi < math.pi / 2):
             raise PlanningError(f"PlannerOptions.blade_angle_limits must be (low, high) in (-pi/2, pi/2) rad, "
                                 f"got {self.blade_angle_limits!r}")
-        if not (isinstance(self.max_iter, int) and self.max_iter >= 1) or not self.tolerance > 0.0:
-            raise PlanningError("PlannerOptions.max_iter must be a positive integer and tolerance > 0")
-        if self.max_wall_time is not None and not (isinstance(self.max_wall_time, (int, float))
-                                                   and math.isfinite(self.max_wall_time) and self.max_wall_time > 0):
-            raise PlanningError(f"PlannerOptions.max_wall_time must be None or a number of seconds > 0, "
-                                f"got {self.max_wall_time!r}")
+        check_int("PlannerOptions.max_iter", self.max_iter, error=err)
+        check_range("PlannerOptions.tolerance", self.tolerance, 0.0, None, low_open=True, error=err)
+        if self.max_wall_time is not None:
+            check_range("PlannerOptions.max_wall_time", self.max_wall_time, 0.0, None, low_open=True, error=err)
 
 
 @dataclass(frozen=True)
@@ -209,12 +194,8 @@ class StartState:
 
     def __post_init__(self) -> None:
         for name in ("x", "z", "blade_angle", "vx", "vz", "omega", "fill"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise PlanningError(f"StartState.{name} must be a finite number, got {value!r}")
-            object.__setattr__(self, name, float(value))
-        if self.fill < 0.0:
-            raise PlanningError(f"StartState.fill must be >= 0 m^3, got {self.fill!r}")
+            object.__setattr__(self, name, check_finite(f"StartState.{name}", getattr(self, name), error=PlanningError))
+        check_range("StartState.fill", self.fill, 0.0, None, error=PlanningError)
 
     @classmethod
     def from_observation(cls, obs: np.ndarray, capacity: float) -> StartState:

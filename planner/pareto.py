@@ -21,6 +21,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from wheelloader.estimator import Bucket, Loader, Pile, SoilParams, as_soil
+from wheelloader.estimator.checks import check_range
 from wheelloader.estimator.errors import PlanningError
 
 from .cycle import cycle_duration, default_start, optimizer_for
@@ -155,8 +156,7 @@ def pareto_sweep(soil: SoilParams | str | dict, pile: Pile, weights: Sequence[fl
     if not lams:
         raise PlanningError("weights must not be empty")
     for lam in lams:
-        if not (math.isfinite(lam) and lam >= 0.0):
-            raise PlanningError(f"energy weights must be finite and >= 0 per kJ, got {lam!r}")
+        check_range("energy weights [per kJ]", lam, 0.0, None, error=PlanningError)
     opt = optimizer_for(bucket, loader, options)
     start = start or default_start(pile)
     duration = cycle_duration(pile, start) if duration is None else duration

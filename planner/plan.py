@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from wheelloader.estimator import BucketPath, PlanningError
+from wheelloader.estimator.checks import check_range
 
 __all__ = ["Plan"]
 
@@ -69,8 +70,7 @@ class Plan:
 
     def path(self, rate: float = 60.0, name: str = "planned") -> BucketPath:
         """The plan sampled at ``rate`` [Hz] (linear between nodes: the controls are piecewise constant)."""
-        if not rate > 0.0:
-            raise PlanningError(f"rate must be > 0 Hz, got {rate!r}")
+        check_range("rate", rate, 0.0, None, low_open=True, error=PlanningError)  # Hz
         count = int(math.floor(self.duration * rate + 1e-9)) + 1
         t = self.t[0] + np.arange(count) / rate
         if t[-1] < self.t[-1] - 1e-9:

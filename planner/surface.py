@@ -14,13 +14,13 @@ over ``x +- slope_window`` (:mod:`wheelloader.estimator.kinematics`).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
 from wheelloader.estimator import DEFAULT_SLOPE_WINDOW, Pile
+from wheelloader.estimator.checks import check_int, check_range
 from wheelloader.estimator.errors import PlanningError
 
 
@@ -54,16 +54,11 @@ class SurfaceGrid:
     window: int = 20
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.knots, int) and self.knots >= 4):
-            raise PlanningError(f"SurfaceGrid.knots must be an integer >= 4, got {self.knots!r}")
-        for name in ("spacing", "kappa", "behind"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
-                raise PlanningError(f"SurfaceGrid.{name} must be a finite number >= 0, got {value!r}")
-        if self.spacing <= 0.0 or self.kappa <= 0.0:
-            raise PlanningError("SurfaceGrid.spacing and kappa must be > 0 m")
-        if not (isinstance(self.window, int) and 4 <= self.window <= self.knots - 2):
-            raise PlanningError(f"SurfaceGrid.window must be an integer in [4, knots - 2], got {self.window!r}")
+        check_int("SurfaceGrid.knots", self.knots, minimum=4, error=PlanningError)
+        for name in ("spacing", "kappa"):
+            check_range(f"SurfaceGrid.{name}", getattr(self, name), 0.0, None, low_open=True, error=PlanningError)
+        check_range("SurfaceGrid.behind", self.behind, 0.0, None, error=PlanningError)
+        check_int("SurfaceGrid.window", self.window, minimum=4, maximum=self.knots - 2, error=PlanningError)
 
     @property
     def size(self) -> int:

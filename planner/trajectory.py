@@ -25,6 +25,7 @@ from wheelloader.estimator import (
     SoilParams,
     as_soil,
 )
+from wheelloader.estimator.checks import check_range
 
 from .casadi_model import soil_vector
 from .guess import face_position, first_rise, straight_dig, surface_dig
@@ -122,20 +123,16 @@ class TrajectoryOptimizer:
         soil = as_soil(soil)
         if not isinstance(start, StartState):
             raise PlanningError(f"start must be a StartState, got {type(start).__name__}")
-        if not (isinstance(duration, (int, float)) and math.isfinite(duration) and 0.2 <= duration <= 60.0):
-            raise PlanningError(f"duration must be between 0.2 and 60 s, got {duration!r}")
+        check_range("duration", duration, 0.2, 60.0, error=PlanningError)
         lam = self.options.energy_weight if energy_weight is None else energy_weight
-        if not (isinstance(lam, (int, float)) and math.isfinite(lam) and lam >= 0.0):
-            raise PlanningError(f"energy_weight must be a finite number >= 0, got {lam!r}")
+        check_range("energy_weight", lam, 0.0, None, error=PlanningError)
         cap = self.bucket.capacity
-        if not (0.0 <= min_fill <= cap):
-            raise PlanningError(f"min_fill must be between 0 and the capacity {cap} m^3, got {min_fill!r}")
+        check_range("min_fill", min_fill, 0.0, cap, error=PlanningError)  # at most the bucket's capacity
         if start.fill > cap * (1 + 1e-9):
             raise PlanningError(f"start fill {start.fill} m^3 exceeds the bucket capacity {cap} m^3")
         n = self.intervals
         h = float(duration) / n
-        if not (math.isfinite(reference_weight) and reference_weight >= 0.0):
-            raise PlanningError(f"reference_weight must be a finite number >= 0, got {reference_weight!r}")
+        check_range("reference_weight", reference_weight, 0.0, None, error=PlanningError)
         ref = np.zeros((n + 1, 2))
         if reference is not None and reference_weight > 0.0:
             ts = np.arange(n + 1) * h
@@ -157,8 +154,7 @@ class TrajectoryOptimizer:
             elif isinstance(initial_guess, Plan) and "face" in initial_guess.raw:
                 face = initial_guess.raw["face"]
             args["x0"] = np.clip(self._guess_vector(initial_guess, pile, start, h), lbx, ubx)
-        if not (isinstance(exit_min_fill, (int, float)) and 0.0 <= exit_min_fill <= 1.0):
-            raise PlanningError(f"exit_min_fill must be a fraction in [0, 1], got {exit_min_fill!r}")
+        check_range("exit_min_fill", exit_min_fill, 0.0, 1.0, error=PlanningError)
         free = [1.0, exit_min_fill * cap] if exit_min_fill > 0.0 else [0.0, 0.0]
         tail = np.concatenate([ref.ravel(), [reference_weight], [face], free])
         tic = time.perf_counter()

@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from ..checks import check_range
 from ..cyclelog import CycleLog
 from ..errors import CalibrationError
 from ..force_model import DEFAULT_OPTIONS, FLAG_TENSION, ModelOptions, soil_forces
@@ -93,8 +94,7 @@ def cycle_weights_for(count: int, forgetting: float | None = None,
     if forgetting is not None and cycle_weights is not None:
         raise CalibrationError("give forgetting or cycle_weights, not both")
     if forgetting is not None:
-        if isinstance(forgetting, bool) or not isinstance(forgetting, (int, float)) or not 0.0 < forgetting <= 1.0:
-            raise CalibrationError(f"forgetting must be a number in (0, 1], got {forgetting!r}")
+        check_range("forgetting", forgetting, 0.0, 1.0, low_open=True, error=CalibrationError)
         return [float(forgetting) ** (count - 1 - k) for k in range(count)]
     if cycle_weights is not None:
         try:

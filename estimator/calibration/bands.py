@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from ..checks import check_range
 from ..errors import ParameterError
 from ..kinematics import ContactState
 from ..machine import Bucket
@@ -125,8 +126,7 @@ def normal_quantile(level: float) -> float:
     """Two-sided standard-normal quantile ``z`` with ``P(|Z| <= z) = level``."""
     from statistics import NormalDist
 
-    if isinstance(level, bool) or not (isinstance(level, (int, float)) and 0.0 < level < 1.0):
-        raise ParameterError(f"band level must be in (0, 1), got {level!r}")
+    check_range("band level", level, 0.0, 1.0, low_open=True, high_open=True)
     return float(NormalDist().inv_cdf(0.5 + 0.5 * level))
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..checks import check_choice
 from ..cyclelog import CycleLog
 from ..errors import ParameterError
 from ..force_model import DEFAULT_OPTIONS, ModelOptions, SoilForces, soil_forces
@@ -146,8 +147,7 @@ def predict(
         options = params.model_options if isinstance(params, Calibration) else DEFAULT_OPTIONS
     if fill is None:
         fill = params.fill_source if isinstance(params, Calibration) else "log"
-    if fill not in ("log", "model"):
-        raise ParameterError(f'fill must be "log" or "model", got {fill!r}')
+    check_choice("fill", fill, ("log", "model"))
     observed_t = observed_n = None
     acceleration = None
     if isinstance(path_or_cycle, CycleLog):
