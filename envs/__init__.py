@@ -28,11 +28,11 @@ stable-baselines3 installed).
 from gymnasium.envs.registration import register, registry
 
 from .bucket_loading import BucketLoadingEnv
-from .config import REWARD_TERMS, RewardWeights, SoilRandomization
+from .config import REWARD_TERMS, EnvConfig, RewardTerms, RewardWeights, SoilRandomization
 from .truth import TruthOptions
 
-__all__ = ["ENV_IDS", "REWARD_TERMS", "BucketLoadingEnv", "BucketLoadingVectorEnv", "RewardWeights",
-           "SoilRandomization", "TruthOptions"]
+__all__ = ["ENV_IDS", "REWARD_TERMS", "BucketLoadingEnv", "BucketLoadingVectorEnv", "EnvConfig", "RewardTerms",
+           "RewardWeights", "SoilRandomization", "TruthOptions"]
 
 _ENTRY = "wheelloader.envs.bucket_loading:BucketLoadingEnv"
 _VECTOR = "wheelloader.envs.vector:BucketLoadingVectorEnv"

@@ -25,16 +25,15 @@ the parser of ``reset(options=...)`` shared by both envs
 from __future__ import annotations
 
 import dataclasses
-import math
-import numbers
 from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 
 from wheelloader.estimator import FLAG_OUT_OF_SOIL, ParameterError, SoilParams, as_soil
+from wheelloader.estimator.checks import check_range
 
-from .config import EnvConfig, RewardWeights, check_relax
+from .config import EnvConfig, RewardTerms, RewardWeights, check_relax
 from .truth import as_truth
 
 #: Keys accepted in ``reset(options=...)`` by both envs (the batched env also takes ``reset_mask``).
@@ -102,8 +101,8 @@ def outside_validity(depth: Any, flags: Any) -> Any:
 
 def reward_terms(weights: RewardWeights, capacity: float, max_push_force: float, max_lift_force: float,
                  fill_gain: Any, energy: Any, invalid: Any, stalled: Any, f_t: Any, f_n: Any
-                 ) -> tuple[Any, Any, Any, Any, Any]:
-    """The five reward terms of a step, in the order of :data:`~wheelloader.envs.config.REWARD_TERMS`.
+                 ) -> RewardTerms:
+    """The five reward terms of a step (:class:`~wheelloader.envs.config.RewardTerms`).
 
     Parameters
     ----------
@@ -126,8 +125,9 @@ def reward_terms(weights: RewardWeights, capacity: float, max_push_force: float,
 
     Returns
     -------
-    tuple
-        ``(fill, energy, validity, stall, force)`` terms; the reward is their sum in this order.
+    RewardTerms
+        ``(fill, energy, validity, stall, force)``; the reward is their sum in this order
+        (:meth:`RewardTerms.total`).
     """
     r_fill = weights.fill * fill_gain / capacity
     r_energy = -weights.energy * energy
@@ -138,7 +138,7 @@ def reward_terms(weights: RewardWeights, capacity: float, max_push_force: float,
     ex_n = f_n / max_lift_force - soft
     excess = 0.5 * (ex_t + abs(ex_t)) + 0.5 * (ex_n + abs(ex_n))  # exact_pos of each, inlined
     r_force = -weights.force * excess
-    return r_fill, r_energy, r_valid, r_stall, r_force
+    return RewardTerms(r_fill, r_energy, r_valid, r_stall, r_force)
 
 
 # ------------------------------------------------------------------ cycle end
@@ -200,10 +200,7 @@ def _check_keep_pile(value: Any) -> bool:
 
 
 def _check_sensor_noise(value: Any) -> float:
-    if (isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) or not math.isfinite(value)
-            or value < 0):
-        raise ParameterError(f"reset option sensor_noise must be a finite number >= 0 N, got {value!r}")
-    return float(value)
+    return check_range("reset option sensor_noise", value, 0.0)
 
 
 def _check_soil(value: Any) -> None | str | SoilParams:

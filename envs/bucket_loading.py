@@ -6,7 +6,6 @@ import copy
 import dataclasses
 import inspect
 import math
-from collections.abc import Mapping, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -16,9 +15,7 @@ from gymnasium import spaces
 from wheelloader.estimator import (
     DEFAULT_OPTIONS,
     GRAVITY,
-    Bucket,
     CycleLog,
-    Loader,
     ParameterError,
     Pile,
     SoilParams,
@@ -26,6 +23,7 @@ from wheelloader.estimator import (
     contact_single,
     soil_forces_single,
 )
+from wheelloader.estimator.checks import check_optional_int
 
 from .bookkeeping import (
     RESET_OPTIONS,
@@ -37,25 +35,22 @@ from .bookkeeping import (
     step_work,
 )
 from .config import (
-    DEFAULT_BLADE_ANGLE_LIMITS,
-    DEFAULT_LOOKAHEAD,
-    DEFAULT_START_NOISE,
     NOISE_CHUNK,
+    SETTING_NAMES,
     STEPS_PER_CYCLE,
     EnvConfig,
-    RewardWeights,
-    SoilRandomization,
+    SoilArgument,
     choose_soil,
     draw_noise_chunk,
     draw_start_pose,
-    make_config,
     next_pile,
+    settings_parameters,
 )
 from .cycle_history import RECORD_KEYS, CycleHistory, to_cycle_log
 from .rllib_env_config import accepts_env_config
-from .truth import TruthOptions, as_truth, model_excess, stone_decay, stone_step
+from .truth import as_truth, model_excess, stone_step
 
-__all__ = ["RESET_OPTIONS", "BucketLoadingEnv"]
+__all__ = ["RESET_OPTIONS", "BucketLoadingEnv", "SoilArgument"]
 
 def env_config_episode_limit(settings: dict[str, Any]) -> dict[str, Any]:
     """Built from an env_config (RLlib's way, no ``gym.make`` and so no ``TimeLimit`` wrapper), an episode
@@ -71,10 +66,6 @@ def env_config_episode_limit(settings: dict[str, Any]) -> dict[str, Any]:
 def _pick(condition: Any, a: Any, b: Any) -> Any:
     """``where`` for Python scalars."""
     return a if condition else b
-
-
-#: What the ``soil`` argument accepts (see :func:`~wheelloader.envs.config.parse_soil`).
-SoilArgument = str | SoilParams | SoilRandomization | Mapping[str, Any] | Sequence[str | SoilParams]
 
 
 class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -181,7 +172,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     ``gym.make("wheelloader/BucketLoading-v0", ...)`` (or ``BucketLoadingEnv(...)``) with
     the keyword-only arguments (same names and defaults as
-    :func:`~wheelloader.envs.config.make_config`, which validates them):
+    :class:`~wheelloader.envs.config.EnvConfig`, the one list of the settings, which validates them):
 
     * ``soil``: hidden soil: preset name (default ``"gravel"``),
       :class:`SoilParams`, parameter dict, ``"random"`` (uniform over the
@@ -243,47 +234,11 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 60}
 
     @accepts_env_config(known=lambda: _SINGLE_ENV_KEYS, defaults=env_config_episode_limit)
-    def __init__(
-        self,
-        render_mode: str | None = None,
-        *,
-        soil: SoilArgument = "gravel",
-        pile: Pile | Mapping[str, Any] | None = None,
-        loader: Loader | Mapping[str, Any] | None = None,
-        bucket: Bucket | Mapping[str, Any] | None = None,
-        control_rate: float = 60.0,
-        sensor_noise: float = 150.0,
-        sensor_range: float = 100_000.0,
-        reward_weights: RewardWeights | Mapping[str, float] | None = None,
-        truth: TruthOptions | Mapping[str, float] | None = None,
-        start_pose: Sequence[float] | None = None,
-        start_noise: Sequence[float] = DEFAULT_START_NOISE,
-        blade_angle_limits: Sequence[float] = DEFAULT_BLADE_ANGLE_LIMITS,
-        lift_headroom: float = 1.0,
-        max_tilt_acceleration: float = 4.0,
-        stall_patience: int = 1,
-        exit_clearance: float = 0.02,
-        exit_min_fill: float = 0.0,
-        lookahead: Sequence[float] = DEFAULT_LOOKAHEAD,
-        slope_window: float = 0.1,
-        keep_pile: bool = False,
-        relax: bool | float = False,
-        relax_iterations: int = 500,
-        cycles_per_episode: int = 1,
-        max_episode_steps: int | None = None,
-    ) -> None:
-        if max_episode_steps is not None and (isinstance(max_episode_steps, bool)
-                                              or not isinstance(max_episode_steps, int) or max_episode_steps < 1):
-            raise ParameterError(f"max_episode_steps must be None or an int >= 1, got {max_episode_steps!r}")
-        self.max_episode_steps = max_episode_steps
-        self.cfg: EnvConfig = make_config(
-            soil=soil, pile=pile, loader=loader, bucket=bucket, control_rate=control_rate,
-            sensor_noise=sensor_noise, sensor_range=sensor_range, reward_weights=reward_weights, truth=truth,
-            start_pose=start_pose, start_noise=start_noise, blade_angle_limits=blade_angle_limits,
-            lift_headroom=lift_headroom, max_tilt_acceleration=max_tilt_acceleration, stall_patience=stall_patience,
-            exit_clearance=exit_clearance, exit_min_fill=exit_min_fill, lookahead=lookahead,
-            slope_window=slope_window, keep_pile=keep_pile, relax=relax, relax_iterations=relax_iterations,
-            cycles_per_episode=cycles_per_episode)
+    def __init__(self, render_mode: str | None = None, *, max_episode_steps: int | None = None,
+                 **settings: Any) -> None:
+        # The settings are EnvConfig's fields (the one list); the signature below names them all.
+        self.max_episode_steps = check_optional_int("max_episode_steps", max_episode_steps)
+        self.cfg: EnvConfig = EnvConfig.from_kwargs(type(self).__name__, **settings)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ParameterError(f"render_mode must be one of {self.metadata['render_modes']} or None, "
                                  f"got {render_mode!r}")
@@ -292,8 +247,6 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         self.action_space = spaces.Box(-1.0, 1.0, (3,), dtype=np.float32)
         low, high = self.cfg.obs_bounds()
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
-        self._low = [float(v) for v in low]
-        self._high = [float(v) for v in high]
         self._renderer = None
         self._soil: SoilParams | None = None
         self._start_pile: Pile = self.cfg.pile
@@ -302,27 +255,6 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         self.max_logged_cycles = 20
         self._seed: int | None = None
         self._record: dict[str, list] | None = None
-        self._cache_settings()
-
-    # ------------------------------------------------------------------ setup helpers
-    def _cache_settings(self) -> None:
-        cfg = self.cfg
-        self._dt = cfg.dt
-        ld = cfg.loader
-        self._vmax, self._wmax = ld.max_speed, ld.max_tilt_rate
-        self._dv, self._dw = ld.max_acceleration * cfg.dt, cfg.max_tilt_acceleration * cfg.dt
-        self._xlim, self._zlim, self._alim = cfg.x_limits, cfg.z_limits, cfg.blade_angle_limits
-        self._fpush, self._flift = ld.max_push_force, ld.max_lift_force
-        self._truth = cfg.truth
-        self._truth_active = cfg.truth.active
-        self._decay = stone_decay(cfg.truth, cfg.dt)
-        self._sigma = cfg.sensor_noise
-        self._frange = cfg.sensor_range
-        self._cap = cfg.bucket.capacity
-        self._min_fill = cfg.exit_min_fill * cfg.bucket.capacity
-        self._exit_clearance = cfg.exit_clearance
-        self._bucket, self._window = cfg.bucket, cfg.slope_window
-        self._patience = cfg.stall_patience
 
     @property
     def soil(self) -> SoilParams:
@@ -344,7 +276,6 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
             self._seed = int(seed)
         if request.config_changed:
             self.cfg = request.config
-            self._cache_settings()
         if self._record is not None and len(self._record["t"]) >= 2:
             self._finish_cycle("reset")
         carved = self._carver.pile() if self._carver is not None else None
@@ -375,7 +306,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         depth, rho, alpha, lt = contact_single(pile, self._x, self._z, self._th, cfg.bucket.floor_length,
                                                cfg.slope_window)
         self._depth, self._rho, self._alpha, self._lt = depth, rho, alpha, lt
-        self._touched, self._entered = cycle_progress(False, False, depth > 0.0, 0.0, self._min_fill)
+        self._touched, self._entered = cycle_progress(False, False, depth > 0.0, 0.0, cfg.exit_fill_volume)
         self._crest = float(np.max(pile.heights))
 
     def _initial_forces(self, k: int) -> tuple[float, float]:
@@ -392,15 +323,15 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         return m_t, m_n
 
     def _measure(self, force: float, z: float) -> float:
-        value = force + self._sigma * float(z)
-        r = self._frange
+        value = force + self.cfg.sensor_noise * float(z)
+        r = self.cfg.sensor_range
         return -r if value < -r else (r if value > r else value)
 
     def _log_sample(self, m_t: float, m_n: float, f_t: float, f_n: float, flags: int) -> None:
         rec = self._record
         if rec is None:  # stepping after the end of an episode: nothing is logged
             return
-        rec["t"].append(self._cycle_t * self._dt)
+        rec["t"].append(self._cycle_t * self.cfg.dt)
         rec["x"].append(self._x)
         rec["z"].append(self._z)
         rec["blade_angle"].append(self._th)
@@ -415,6 +346,8 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
     def step(self, action: np.ndarray):
         if self._carver is None:
             raise ParameterError("call reset() before step()")
+        cfg = self.cfg
+        ld = cfg.loader
         x, z, th = self._x, self._z, self._th
         xn, zn, thn, vx, vz, om = self._move(action)
         undo = self._carve(x, z, xn, zn)
@@ -424,7 +357,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         if j == 0:
             self._noise_n, self._noise_u = draw_noise_chunk(self.np_random)
         depth, rho, alpha, w_load, f_t, f_n, beta, flags = self._plant(xn, zn, thn, math.hypot(xn - x, zn - z), j)
-        stalled = f_t > self._fpush or f_n > self._flift
+        stalled = f_t > ld.max_push_force or f_n > ld.max_lift_force
         if stalled:  # the bucket does not move: carving undone, pose held, velocity zeroed
             self._undo_carve(undo)
             xn, zn, thn, vx, vz, om = x, z, th, 0.0, 0.0, 0.0
@@ -445,24 +378,25 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         self._mt, self._mn = m_t, m_n
         self._cycle_t += 1
         self._log_sample(m_t, m_n, f_t, f_n, flags)
-        terms = reward_terms(self.cfg.reward, self._cap, self._fpush, self._flift, fill - fill0, e_soil + e_pay,
-                             outside_validity(depth, flags), stalled, f_t, f_n)
-        reward = terms[0] + terms[1] + terms[2] + terms[3] + terms[4]
+        cap = cfg.bucket.capacity
+        terms = reward_terms(cfg.reward_weights, cap, ld.max_push_force, ld.max_lift_force, fill - fill0,
+                             e_soil + e_pay, outside_validity(depth, flags), stalled, f_t, f_n)
+        reward = terms.total()
         # cycle end (one rule for every backend): out of the soil after loading
         self._touched, self._entered = cycle_progress(self._touched, self._entered, depth > 0.0, fill,
-                                                      self._min_fill)
+                                                      cfg.exit_fill_volume)
         done = cycle_done(self._touched, self._entered, zn, zn - self._start_pile.height_at(xn), self._crest,
-                          self._exit_clearance)
+                          cfg.exit_clearance)
         info = {
-            "reward_fill": terms[0], "reward_energy": terms[1], "reward_validity": terms[2],
-            "reward_stall": terms[3], "reward_force": terms[4],
-            "fill_volume": fill, "fill_fraction": fill / self._cap, "spilled": float(self._carver.spilled),
+            "reward_fill": terms.fill, "reward_energy": terms.energy, "reward_validity": terms.validity,
+            "reward_stall": terms.stall, "reward_force": terms.force,
+            "fill_volume": fill, "fill_fraction": fill / cap, "spilled": float(self._carver.spilled),
             "force_tangential": f_t, "force_normal": f_n, "measured_tangential": m_t, "measured_normal": m_n,
             "energy_soil": self._energy_soil, "energy_payload": self._energy_payload,
             "depth": depth, "flags": flags, "stalled": stalled, "cycle_done": done,
             "cycle": self._cycle_count,
         }
-        terminated = (self._end_cycle(done) if done or self._stall_count >= self._patience else False)
+        terminated = (self._end_cycle(done) if done or self._stall_count >= cfg.stall_patience else False)
         obs = self._observation(self._mt, self._mn)  # a new cycle of the multi-cycle variant measured its start
         if self.render_mode == "human":
             self.render()
@@ -477,21 +411,23 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         a0 = 0.0 if a0 != a0 else (-1.0 if a0 < -1.0 else (1.0 if a0 > 1.0 else a0))
         a1 = 0.0 if a1 != a1 else (-1.0 if a1 < -1.0 else (1.0 if a1 > 1.0 else a1))
         a2 = 0.0 if a2 != a2 else (-1.0 if a2 < -1.0 else (1.0 if a2 > 1.0 else a2))
-        dt, dv, dw = self._dt, self._dv, self._dw
+        cfg = self.cfg
+        dt, dv, dw = cfg.dt, cfg.speed_step, cfg.tilt_rate_step
+        vmax, wmax = cfg.loader.max_speed, cfg.loader.max_tilt_rate
         x, z, th = self._x, self._z, self._th
-        d = a0 * self._vmax - self._vx
+        d = a0 * vmax - self._vx
         vx = self._vx + (-dv if d < -dv else (dv if d > dv else d))
-        d = a1 * self._vmax - self._vz
+        d = a1 * vmax - self._vz
         vz = self._vz + (-dv if d < -dv else (dv if d > dv else d))
-        d = a2 * self._wmax - self._om
+        d = a2 * wmax - self._om
         om = self._om + (-dw if d < -dw else (dw if d > dw else d))
-        lo, hi = self._xlim
+        lo, hi = cfg.x_limits
         xn = x + vx * dt
         xn = lo if xn < lo else (hi if xn > hi else xn)
-        lo, hi = self._zlim
+        lo, hi = cfg.z_limits
         zn = z + vz * dt
         zn = lo if zn < lo else (hi if zn > hi else zn)
-        lo, hi = self._alim
+        lo, hi = cfg.blade_angle_limits
         thn = th + om * dt
         thn = lo if thn < lo else (hi if thn > hi else thn)
         return xn, zn, thn, (xn - x) / dt, (zn - z) / dt, (thn - th) / dt
@@ -518,13 +454,14 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
 
         Returns ``(depth, rho, alpha, W_load, F_T, F_N, beta, flags)``.
         """
-        soil, bucket = self._soil, self._bucket
-        depth, rho, alpha, lt = contact_single(self._start_pile, x, z, th, bucket.floor_length, self._window)
+        cfg = self.cfg
+        soil, bucket = self._soil, cfg.bucket
+        depth, rho, alpha, lt = contact_single(self._start_pile, x, z, th, bucket.floor_length, cfg.slope_window)
         w_load = soil.gamma * GRAVITY * float(self._carver.fill)
         f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, lt, w_load, bucket, DEFAULT_OPTIONS,
                                                    self._beta)
-        if self._truth_active:
-            f_t, f_n = self._truth_forces(f_t, f_n, depth, dist / self._dt, dist, j)
+        if cfg.truth.active:
+            f_t, f_n = self._truth_forces(f_t, f_n, depth, dist / cfg.dt, dist, j)
         return depth, rho, alpha, w_load, f_t, f_n, beta, flags
 
     def _end_cycle(self, cycle_done: bool) -> bool:
@@ -546,11 +483,11 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
     def _truth_forces(self, f_t: float, f_n: float, depth: float, speed: float, dist: float,
                       j: int) -> tuple[float, float]:
         """Add the beyond-model effects of :mod:`wheelloader.envs.truth` (j < 0: no new stone)."""
-        tr = self._truth
-        f_t, f_n = model_excess(tr, f_t, f_n, depth, speed, self._bucket.width, where=_pick)
+        tr = self.cfg.truth
+        f_t, f_n = model_excess(tr, f_t, f_n, depth, speed, self.cfg.bucket.width, where=_pick)
         if j >= 0:
             u = self._noise_u[j]
-            self._stone = stone_step(tr, self._stone, depth, dist, u[0], float(u[1]), self._decay, where=_pick,
+            self._stone = stone_step(tr, self._stone, depth, dist, u[0], float(u[1]), self.cfg.stone_decay, where=_pick,
                                      log1p=math.log1p)
         return f_t + self._stone, f_n + 0.5 * self._stone
 
@@ -572,7 +509,8 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
                 i = int(u)
                 h = heights[i] + (u - i) * (heights[i + 1] - heights[i])
             vals.append(float(h) - z)
-        out = [lo if v < lo else (hi if v > hi else v) for v, lo, hi in zip(vals, self._low, self._high, strict=True)]
+        low, high = self.cfg.observation_limits
+        out = [lo if v < lo else (hi if v > hi else v) for v, lo, hi in zip(vals, low, high, strict=True)]
         return np.array(out, dtype=np.float32)
 
     # ------------------------------------------------------------------ cycle logs
@@ -625,7 +563,6 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         on it to start a cycle on the current carved pile."""
         twin = copy.deepcopy(self)
         twin.cfg = dataclasses.replace(twin.cfg, sensor_noise=0.0, truth=as_truth(None))
-        twin._cache_settings()
         if soil is not None:
             from wheelloader.estimator import as_soil
 
@@ -651,8 +588,8 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
             "pile": self.cfg.pile, "start_pile": self._start_pile, "carved": self._carver.pile(),
             "x": self._x, "z": self._z, "blade_angle": self._th, "fill": self._carver.fill,
             "capacity": self.cfg.bucket.capacity, "F_T": self._mt, "F_N": self._mn,
-            "floor_length": self.cfg.bucket.floor_length, "time": self._cycle_t * self._dt,
-            "limits": (self._fpush, self._flift),
+            "floor_length": self.cfg.bucket.floor_length, "time": self._cycle_t * self.cfg.dt,
+            "limits": (self.cfg.loader.max_push_force, self.cfg.loader.max_lift_force),
         }
 
     def close(self) -> None:
@@ -666,6 +603,13 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         return state
 
 
+def _signature() -> inspect.Signature:
+    """``__init__``'s signature: ``render_mode``, the settings of :class:`EnvConfig` (keyword-only, typed, with
+    their defaults) and ``max_episode_steps``."""
+    own = inspect.signature(BucketLoadingEnv.__init__.__wrapped__).parameters
+    return inspect.Signature([own["self"], own["render_mode"], *settings_parameters(), own["max_episode_steps"]])
+
+
+BucketLoadingEnv.__init__.__signature__ = _signature()
 #: Keys an env_config of :class:`BucketLoadingEnv` may hold: its keyword arguments (with ``render_mode``).
-_SINGLE_ENV_KEYS: tuple[str, ...] = tuple(
-    name for name in inspect.signature(BucketLoadingEnv.__init__).parameters if name != "self")
+_SINGLE_ENV_KEYS: tuple[str, ...] = ("render_mode", *SETTING_NAMES, "max_episode_steps")

@@ -8,11 +8,12 @@ and in :class:`~wheelloader.envs.vector.BucketLoadingVectorEnv`.
 
 from __future__ import annotations
 
+import functools
+import inspect
 import math
-import numbers
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, fields
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -24,14 +25,16 @@ from wheelloader.estimator import (
     SoilParams,
     as_soil,
 )
+from wheelloader.estimator.checks import check_finite, check_int, check_range
 
 from .soils import SoilRandomization, SoilSpec, drift_soil, parse_soil
-from .truth import TruthOptions, as_truth
+from .truth import TruthOptions, as_truth, stone_decay
 
 __all__ = ["BASE_OBS_NAMES", "BASE_OBS_UNITS", "DEFAULT_BLADE_ANGLE_LIMITS", "DEFAULT_LOOKAHEAD", "DEFAULT_START_NOISE",
-           "NOISE_CHUNK", "REWARD_TERMS", "EnvConfig", "RewardWeights", "SoilRandomization", "SoilSpec",
-           "as_reward_weights", "check_relax", "choose_soil", "draw_noise_chunk", "draw_start_pose", "drift_soil",
-           "make_config", "next_pile", "nominal_start_pose", "parse_pile", "parse_soil", "pile_toe"]
+           "NOISE_CHUNK", "REWARD_TERMS", "SETTING_NAMES", "EnvConfig", "RewardTerms", "RewardWeights", "SoilArgument",
+           "SoilRandomization", "SoilSpec", "as_reward_weights", "check_relax", "choose_soil", "draw_noise_chunk",
+           "draw_start_pose", "drift_soil", "next_pile", "nominal_start_pose", "parse_pile", "parse_soil", "pile_toe",
+           "settings_parameters"]
 
 #: Noise values are drawn in chunks of this many steps (one RNG call per chunk).
 NOISE_CHUNK = 256
@@ -54,8 +57,24 @@ DEFAULT_BLADE_ANGLE_LIMITS: tuple[float, float] = (math.radians(-45.0), math.rad
 #: Default look-ahead distances of the surface observations [m].
 DEFAULT_LOOKAHEAD: tuple[float, ...] = (0.1, 0.2, 0.3, 0.4, 0.5)
 
-#: Keys of the reward terms in ``info``; the reward is their sum in this order.
-REWARD_TERMS: tuple[str, ...] = ("reward_fill", "reward_energy", "reward_validity", "reward_stall", "reward_force")
+
+class RewardTerms(NamedTuple):
+    """The five reward terms of a step (:func:`~wheelloader.envs.bookkeeping.reward_terms`); floats in the
+    single env, arrays in the batched one. The reward is their sum in this order (:meth:`total`)."""
+
+    fill: Any
+    energy: Any
+    validity: Any
+    stall: Any
+    force: Any
+
+    def total(self) -> Any:
+        """The reward: the terms summed in their order (the same floating-point result in every backend)."""
+        return self.fill + self.energy + self.validity + self.stall + self.force
+
+
+#: Keys of the reward terms in ``info`` (``"reward_" + RewardTerms field``); the reward is their sum in this order.
+REWARD_TERMS: tuple[str, ...] = tuple(f"reward_{name}" for name in RewardTerms._fields)
 
 
 @dataclass(frozen=True)
@@ -92,10 +111,7 @@ class RewardWeights:
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-                raise ParameterError(f"RewardWeights.{f.name} must be a finite number >= 0, got {value!r}")
-            object.__setattr__(self, f.name, float(value))
+            object.__setattr__(self, f.name, check_range(f"RewardWeights.{f.name}", getattr(self, f.name), 0.0))
 
 
 def as_reward_weights(value: RewardWeights | Mapping[str, float] | None) -> RewardWeights:
@@ -158,77 +174,209 @@ def _as_obj(value: Any, cls: type, name: str):
 
 
 def _positive(name: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-        raise ParameterError(f"{name} must be a finite number > 0, got {value!r}")
-    return float(value)
+    return check_range(name, value, 0.0, low_open=True)
 
 
 def _non_negative(name: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-        raise ParameterError(f"{name} must be a finite number >= 0, got {value!r}")
-    return float(value)
+    return check_range(name, value, 0.0)
 
 
 def check_relax(value: Any, name: str = "relax") -> bool | float:
     """Validate a ``relax`` setting: a bool, or a repose angle in (0, pi/2) rad (returned as float)."""
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
-    if (isinstance(value, numbers.Real) and not isinstance(value, np.bool_) and math.isfinite(value)
-            and 0.0 < value < 0.5 * math.pi):
-        return float(value)
-    raise ParameterError(f"{name} must be a bool or a repose angle in (0, pi/2) rad, got {value!r}")
+    try:
+        return check_range(name, value, 0.0, 0.5 * math.pi, low_open=True, high_open=True)
+    except ParameterError:
+        raise ParameterError(f"{name} must be a bool or a repose angle in (0, pi/2) rad, got {value!r}") from None
 
 
-def _fraction(name: str, value: Any) -> float:
-    value = _non_negative(name, value)
-    if value > 1.0:
-        raise ParameterError(f"{name} must be a fraction in [0, 1], got {value!r}")
-    return value
+def _triple(name: str, value: Any, check: Any = check_finite) -> tuple[float, float, float]:
+    try:
+        values = tuple(value)
+    except TypeError:
+        values = ()
+    if len(values) != 3:
+        raise ParameterError(f"{name} must be an (x [m], z [m], blade_angle [rad]) triple, got {value!r}")
+    return tuple(check(f"{name}[{i}]", v) for i, v in enumerate(values))
+
+
+#: What the ``soil`` setting accepts (see :func:`~wheelloader.envs.soils.parse_soil`).
+SoilArgument = str | SoilParams | SoilRandomization | Mapping[str, Any] | Sequence[str | SoilParams]
 
 
 # ------------------------------------------------------------------ config
 @dataclass(frozen=True, eq=False)
 class EnvConfig:
-    """All settings of a bucket-loading env, validated (see the env docstring for meanings)."""
+    """All settings of a bucket-loading env: the one list of them, validated in ``__post_init__``.
 
-    soil: SoilSpec
-    pile: Pile
-    loader: Loader
-    bucket: Bucket
-    control_rate: float
-    sensor_noise: float
-    sensor_range: float
-    reward: RewardWeights
-    truth: TruthOptions
-    start_pose: tuple[float, float, float]
-    start_noise: tuple[float, float, float]
-    blade_angle_limits: tuple[float, float]
-    lift_headroom: float
-    max_tilt_acceleration: float
-    stall_patience: int
-    exit_clearance: float
-    exit_min_fill: float
-    lookahead: tuple[float, ...]
-    slope_window: float
-    keep_pile: bool
-    relax: bool | float
-    relax_iterations: int
-    cycles_per_episode: int
+    Both envs take these names as keyword arguments (:meth:`from_kwargs`); their signatures are built from
+    this class (:func:`settings_parameters`). A field accepts what the env's docstring lists (e.g. a preset
+    name for ``soil``, a dict for ``loader``) and holds the parsed value (a :class:`~wheelloader.estimator.
+    SoilParams` or :class:`~wheelloader.envs.soils.SoilRandomization`, a :class:`Loader`, ...); the values
+    derived from them are cached properties. :func:`dataclasses.replace` validates again.
 
-    @property
+    Parameters
+    ----------
+    soil : str, SoilParams, SoilRandomization, dict or list
+        Hidden soil (default ``"gravel"``; ``"random"``: uniform over the presets).
+    pile : Pile or dict, optional
+        Start surface (default: 30 deg trapezoid, 1 m high).
+    loader, bucket : Loader, Bucket or dict, optional
+        Machine and bucket (defaults: the estimator's).
+    control_rate : float
+        Steps per second [Hz] (> 0).
+    sensor_noise : float
+        Std of the additive force noise [N] (>= 0).
+    sensor_range : float
+        Saturation of the force sensor [N] (> 0).
+    reward_weights : RewardWeights or dict, optional
+        Weights of the reward terms.
+    truth : TruthOptions or dict, optional
+        Effects beyond the model (all off by default).
+    start_pose : (x, z, blade_angle), optional
+        Start pose [m, m, rad] (default: 0.10 m before the pile toe, 0.03 m above the ground, -5 deg).
+    start_noise : (x, z, blade_angle)
+        Half-widths of the uniform start-pose noise [m, m, rad] (>= 0).
+    blade_angle_limits : (low, high)
+        Blade-angle range inside (-pi/2, pi/2) [rad].
+    lift_headroom : float
+        Workspace above the crest [m] (>= 0).
+    max_tilt_acceleration : float
+        Tilt-rate change limit [rad/s^2] (> 0).
+    stall_patience : int
+        Consecutive stalled steps that end the episode (>= 1).
+    exit_clearance : float
+        Clearance above the start surface that ends a cycle [m] (>= 0).
+    exit_min_fill : float
+        Fill needed (fraction of capacity, in [0, 1]) before a first exit ends a cycle.
+    lookahead : sequence of float
+        Look-ahead distances of the surface observations [m] (finite).
+    slope_window : float
+        Window of the local-slope estimate [m] (> 0).
+    keep_pile : bool
+        Start each episode on the carved pile of the previous cycle.
+    relax : bool or float
+        Relax a kept pile (True: to the soil's friction angle; a float: to that repose angle [rad]).
+    relax_iterations : int
+        Sweeps of :meth:`Pile.relaxed` per new cycle (>= 1).
+    cycles_per_episode : int
+        Digging cycles per episode (>= 1).
+    """
+
+    soil: SoilArgument = "gravel"
+    pile: Pile | Mapping[str, Any] | None = None
+    loader: Loader | Mapping[str, Any] | None = None
+    bucket: Bucket | Mapping[str, Any] | None = None
+    control_rate: float = 60.0
+    sensor_noise: float = 150.0
+    sensor_range: float = 100_000.0
+    reward_weights: RewardWeights | Mapping[str, float] | None = None
+    truth: TruthOptions | Mapping[str, float] | None = None
+    start_pose: Sequence[float] | None = None
+    start_noise: Sequence[float] = DEFAULT_START_NOISE
+    blade_angle_limits: Sequence[float] = DEFAULT_BLADE_ANGLE_LIMITS
+    lift_headroom: float = 1.0
+    max_tilt_acceleration: float = 4.0
+    stall_patience: int = 1
+    exit_clearance: float = 0.02
+    exit_min_fill: float = 0.0
+    lookahead: Sequence[float] = DEFAULT_LOOKAHEAD
+    slope_window: float = 0.1
+    keep_pile: bool = False
+    relax: bool | float = False
+    relax_iterations: int = 500
+    cycles_per_episode: int = 1
+
+    def __post_init__(self) -> None:
+        set_ = functools.partial(object.__setattr__, self)
+        pile = parse_pile(self.pile)
+        set_("soil", parse_soil(self.soil))
+        set_("pile", pile)
+        set_("loader", _as_obj(self.loader, Loader, "loader"))
+        set_("bucket", _as_obj(self.bucket, Bucket, "bucket"))
+        for name in ("control_rate", "sensor_range", "max_tilt_acceleration", "slope_window"):
+            set_(name, _positive(name, getattr(self, name)))
+        for name in ("sensor_noise", "lift_headroom", "exit_clearance"):
+            set_(name, _non_negative(name, getattr(self, name)))
+        set_("exit_min_fill", check_range("exit_min_fill", self.exit_min_fill, 0.0, 1.0))
+        set_("reward_weights", as_reward_weights(self.reward_weights))
+        set_("truth", as_truth(self.truth))
+        set_("start_pose", _triple("start_pose", nominal_start_pose(pile) if self.start_pose is None
+                                   else self.start_pose))
+        set_("start_noise", _triple("start_noise", self.start_noise, _non_negative))
+        angles = tuple(self.blade_angle_limits)
+        if len(angles) != 2:
+            raise ParameterError(f"blade_angle_limits must be (low, high), got {self.blade_angle_limits!r}")
+        low = check_range("blade_angle_limits[0]", angles[0], -0.5 * math.pi, 0.5 * math.pi, low_open=True)
+        high = check_range("blade_angle_limits[1]", angles[1], low, 0.5 * math.pi, low_open=True, high_open=True)
+        set_("blade_angle_limits", (low, high))
+        set_("lookahead", tuple(check_finite(f"lookahead[{i}]", v) for i, v in enumerate(self.lookahead)))
+        for name in ("stall_patience", "relax_iterations", "cycles_per_episode"):
+            set_(name, check_int(name, getattr(self, name)))
+        if not isinstance(self.keep_pile, (bool, np.bool_)):
+            raise ParameterError(f"keep_pile must be a bool, got {self.keep_pile!r}")
+        set_("keep_pile", bool(self.keep_pile))
+        set_("relax", check_relax(self.relax))
+
+    @classmethod
+    def from_kwargs(cls, owner: str = "EnvConfig", /, **settings: Any) -> EnvConfig:
+        """The settings given as keyword arguments of an env (``owner`` names it in the error).
+
+        Raises
+        ------
+        TypeError
+            A keyword that is not a setting (as Python's message for an unknown keyword argument).
+        ParameterError
+            A bad value, naming the setting.
+        """
+        unknown = [name for name in settings if name not in SETTING_NAMES]
+        if unknown:
+            raise TypeError(f"{owner}() got an unexpected keyword argument {unknown[0]!r}; the settings are "
+                            f"{list(SETTING_NAMES)}")
+        return cls(**settings)
+
+    # ------------------------------------------------------------------ derived values
+    @functools.cached_property
     def dt(self) -> float:
         """Control period [s]."""
         return 1.0 / self.control_rate
 
-    @property
+    @functools.cached_property
     def x_limits(self) -> tuple[float, float]:
         """Workspace of the tip along x [m]: the pile grid."""
         return self.pile.x0, self.pile.x_end
 
-    @property
+    @functools.cached_property
     def z_limits(self) -> tuple[float, float]:
         """Workspace of the tip along z [m]: ground (lowest pile node) to crest + headroom."""
         return float(self.pile.heights.min()), float(self.pile.heights.max()) + self.lift_headroom
+
+    @functools.cached_property
+    def speed_step(self) -> float:
+        """Largest change of a tip-velocity component per step, ``loader.max_acceleration * dt`` [m/s]."""
+        return self.loader.max_acceleration * self.dt
+
+    @functools.cached_property
+    def tilt_rate_step(self) -> float:
+        """Largest change of the tilt rate per step, ``max_tilt_acceleration * dt`` [rad/s]."""
+        return self.max_tilt_acceleration * self.dt
+
+    @functools.cached_property
+    def exit_fill_volume(self) -> float:
+        """``exit_min_fill`` as a volume [m^3]."""
+        return self.exit_min_fill * self.bucket.capacity
+
+    @functools.cached_property
+    def stone_decay(self) -> float:
+        """Per-step decay factor of a stone spike (:func:`~wheelloader.envs.truth.stone_decay`)."""
+        return stone_decay(self.truth, self.dt)
+
+    @functools.cached_property
+    def observation_limits(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(low, high) of the observation as Python floats (the float32 bounds, for clipping)."""
+        low, high = self.obs_bounds()
+        return tuple(float(v) for v in low), tuple(float(v) for v in high)
 
     def obs_names(self) -> tuple[str, ...]:
         """Names of all observation entries."""
@@ -249,79 +397,25 @@ class EnvConfig:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able summary (for cycle-log metadata)."""
-        soil = self.soil.to_dict()
         return {
-            "soil": soil, "loader": self.loader.to_dict(), "bucket": self.bucket.to_dict(),
+            "soil": self.soil.to_dict(), "loader": self.loader.to_dict(), "bucket": self.bucket.to_dict(),
             "control_rate": self.control_rate, "sensor_noise": self.sensor_noise, "sensor_range": self.sensor_range,
-            "reward": asdict(self.reward), "truth": self.truth.to_dict(), "stall_patience": self.stall_patience,
-            "exit_clearance": self.exit_clearance, "exit_min_fill": self.exit_min_fill, "keep_pile": self.keep_pile,
-            "relax": self.relax,
-            "relax_iterations": self.relax_iterations,
-            "cycles_per_episode": self.cycles_per_episode,
+            "reward": asdict(self.reward_weights), "truth": self.truth.to_dict(),
+            "stall_patience": self.stall_patience, "exit_clearance": self.exit_clearance,
+            "exit_min_fill": self.exit_min_fill, "keep_pile": self.keep_pile, "relax": self.relax,
+            "relax_iterations": self.relax_iterations, "cycles_per_episode": self.cycles_per_episode,
         }
 
 
-def make_config(
-    *,
-    soil: Any = "gravel",
-    pile: Any = None,
-    loader: Any = None,
-    bucket: Any = None,
-    control_rate: float = 60.0,
-    sensor_noise: float = 150.0,
-    sensor_range: float = 100_000.0,
-    reward_weights: Any = None,
-    truth: Any = None,
-    start_pose: Sequence[float] | None = None,
-    start_noise: Sequence[float] = DEFAULT_START_NOISE,
-    blade_angle_limits: Sequence[float] = DEFAULT_BLADE_ANGLE_LIMITS,
-    lift_headroom: float = 1.0,
-    max_tilt_acceleration: float = 4.0,
-    stall_patience: int = 1,
-    exit_clearance: float = 0.02,
-    exit_min_fill: float = 0.0,
-    lookahead: Sequence[float] = DEFAULT_LOOKAHEAD,
-    slope_window: float = 0.1,
-    keep_pile: bool = False,
-    relax: bool | float = False,
-    relax_iterations: int = 500,
-    cycles_per_episode: int = 1,
-) -> EnvConfig:
-    """Validate the env keyword arguments (shared by the single and the vector env)."""
-    pile_obj = parse_pile(pile)
-    rate = _positive("control_rate", control_rate)
-    angles = tuple(float(a) for a in blade_angle_limits)
-    if len(angles) != 2 or not (-0.5 * math.pi < angles[0] < angles[1] < 0.5 * math.pi):
-        raise ParameterError(f"blade_angle_limits must be (low, high) inside (-pi/2, pi/2), got {blade_angle_limits!r}")
-    if start_pose is None:
-        start_pose = nominal_start_pose(pile_obj)
-    pose = tuple(float(v) for v in start_pose)
-    noise = tuple(_non_negative("start_noise", float(v)) for v in start_noise)
-    if len(pose) != 3 or len(noise) != 3 or not all(math.isfinite(v) for v in pose):
-        raise ParameterError("start_pose and start_noise must be (x [m], z [m], blade_angle [rad]) triples")
-    look = tuple(float(v) for v in lookahead)
-    if not all(math.isfinite(v) for v in look):
-        raise ParameterError(f"lookahead distances must be finite, got {lookahead!r}")
-    if isinstance(stall_patience, bool) or not isinstance(stall_patience, int) or stall_patience < 1:
-        raise ParameterError(f"stall_patience must be an int >= 1, got {stall_patience!r}")
-    if isinstance(relax_iterations, bool) or not isinstance(relax_iterations, int) or relax_iterations < 1:
-        raise ParameterError(f"relax_iterations must be an int >= 1, got {relax_iterations!r}")
-    if isinstance(cycles_per_episode, bool) or not isinstance(cycles_per_episode, int) or cycles_per_episode < 1:
-        raise ParameterError(f"cycles_per_episode must be an int >= 1, got {cycles_per_episode!r}")
-    relax = check_relax(relax)
-    return EnvConfig(
-        soil=parse_soil(soil), pile=pile_obj, loader=_as_obj(loader, Loader, "loader"),
-        bucket=_as_obj(bucket, Bucket, "bucket"), control_rate=rate,
-        sensor_noise=_non_negative("sensor_noise", sensor_noise),
-        sensor_range=_positive("sensor_range", sensor_range), reward=as_reward_weights(reward_weights),
-        truth=as_truth(truth), start_pose=pose, start_noise=noise, blade_angle_limits=angles,
-        lift_headroom=_non_negative("lift_headroom", lift_headroom),
-        max_tilt_acceleration=_positive("max_tilt_acceleration", max_tilt_acceleration),
-        stall_patience=stall_patience, exit_clearance=_non_negative("exit_clearance", exit_clearance),
-        exit_min_fill=_fraction("exit_min_fill", exit_min_fill),
-        lookahead=look, slope_window=_positive("slope_window", slope_window), keep_pile=bool(keep_pile),
-        relax=relax, relax_iterations=relax_iterations, cycles_per_episode=cycles_per_episode,
-    )
+#: The names of the env settings, in order (the fields of :class:`EnvConfig`).
+SETTING_NAMES: tuple[str, ...] = tuple(f.name for f in fields(EnvConfig))
+
+
+def settings_parameters() -> list[inspect.Parameter]:
+    """The env settings as keyword-only parameters (names, defaults and annotations of :class:`EnvConfig`),
+    for the envs' signatures."""
+    return [inspect.Parameter(f.name, inspect.Parameter.KEYWORD_ONLY, default=f.default, annotation=f.type)
+            for f in fields(EnvConfig)]
 
 
 # ------------------------------------------------------------------ random draws (shared order)

@@ -29,6 +29,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 
 from wheelloader.estimator import ParameterError
+from wheelloader.estimator.checks import check_int
 
 try:
     from stable_baselines3.common.vec_env import VecEnv, VecMonitor
@@ -75,9 +76,7 @@ class BatchedVecEnv(VecEnv):
     def __init__(self, env: str | VectorEnv, n_envs: int | None = None, *, render_mode: str | None = None,
                  **env_kwargs: Any) -> None:
         if isinstance(env, str):
-            count = 1 if n_envs is None else n_envs
-            if isinstance(count, bool) or not isinstance(count, int) or count < 1:
-                raise ParameterError(f"n_envs must be an int >= 1, got {n_envs!r}")
+            count = 1 if n_envs is None else check_int("n_envs", n_envs)
             env = gym.make_vec(env, num_envs=count, vectorization_mode="vector_entry_point",
                                render_mode=render_mode, **env_kwargs)
         elif n_envs is not None or env_kwargs or render_mode is not None:

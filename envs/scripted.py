@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from wheelloader.estimator import BucketPath, Loader, ParameterError, default_path
+from wheelloader.estimator.checks import check_range
 
 
 class PathTracker:
@@ -37,8 +38,7 @@ class PathTracker:
                  gain: float = 4.0, angle_gain: float = 4.0) -> None:
         if not isinstance(path, BucketPath):
             raise ParameterError(f"path must be a BucketPath, got {type(path).__name__}")
-        if not control_rate > 0.0:
-            raise ParameterError(f"control_rate must be > 0 Hz, got {control_rate!r}")
+        control_rate = check_range("control_rate [Hz]", control_rate, 0.0, low_open=True)
         self.path = path
         self.loader = loader or Loader()
         self.dt = 1.0 / float(control_rate)

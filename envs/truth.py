@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from wheelloader.estimator import ParameterError
+from wheelloader.estimator.checks import check_range
 
 
 @dataclass(frozen=True)
@@ -63,12 +64,9 @@ class TruthOptions:
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-                raise ParameterError(f"TruthOptions.{f.name} must be a finite number >= 0, got {value!r}")
-            object.__setattr__(self, f.name, float(value))
-        if self.stone_duration <= 0.0:
-            raise ParameterError(f"TruthOptions.stone_duration must be > 0 s, got {self.stone_duration!r}")
+            value = check_range(f"TruthOptions.{f.name}", getattr(self, f.name), 0.0,
+                                low_open=f.name == "stone_duration")
+            object.__setattr__(self, f.name, value)
 
     @property
     def active(self) -> bool:

@@ -43,6 +43,7 @@ from wheelloader.estimator import (
     soil_forces,
     soil_forces_single,
 )
+from wheelloader.estimator.checks import check_int
 
 from .batched_surface import BatchedSurfaces
 from .bookkeeping import (
@@ -57,14 +58,16 @@ from .bookkeeping import (
 from .config import (
     NOISE_CHUNK,
     REWARD_TERMS,
+    SETTING_NAMES,
+    EnvConfig,
     choose_soil,
     draw_noise_chunk,
     draw_start_pose,
-    make_config,
     next_pile,
+    settings_parameters,
 )
 from .rllib_env_config import accepts_env_config
-from .truth import model_excess, stone_decay, stone_step
+from .truth import model_excess, stone_step
 
 __all__ = ["STEP_INFO_KEYS", "BucketLoadingVectorEnv"]
 
@@ -111,17 +114,14 @@ class BucketLoadingVectorEnv(VectorEnv):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 60, "autoreset_mode": AutoresetMode.NEXT_STEP}
 
-    @accepts_env_config(known=lambda: ("num_envs", "max_episode_steps", "render_mode",
-                                       *inspect.signature(make_config).parameters))
+    @accepts_env_config(known=lambda: ("num_envs", "max_episode_steps", "render_mode", *SETTING_NAMES))
     def __init__(self, num_envs: int = 1, max_episode_steps: int = 600, render_mode: str | None = None,
-                 **kwargs: Any) -> None:
-        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
-            raise ParameterError(f"num_envs must be an int >= 1, got {num_envs!r}")
-        if isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, int) or max_episode_steps < 1:
-            raise ParameterError(f"max_episode_steps must be an int >= 1, got {max_episode_steps!r}")
+                 **settings: Any) -> None:
+        num_envs = check_int("num_envs", num_envs)
+        max_episode_steps = check_int("max_episode_steps", max_episode_steps)
         if render_mode not in (None, "rgb_array"):
             raise ParameterError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
-        self.cfg = make_config(**kwargs)
+        self.cfg = EnvConfig.from_kwargs(type(self).__name__, **settings)
         if self.cfg.cycles_per_episode != 1:
             raise ParameterError("the batched vector env supports cycles_per_episode=1 only; use "
                                  "vectorization_mode='sync' for multi-cycle episodes")
@@ -261,8 +261,7 @@ class BucketLoadingVectorEnv(VectorEnv):
         self._steps[i] = 0
         depth, rho, alpha, lt = contact_single(pile, x, z, th, cfg.bucket.floor_length, cfg.slope_window)
         self._depth[i], self._rho[i], self._alpha[i] = depth, rho, alpha
-        self._touched[i], self._entered[i] = cycle_progress(False, False, depth > 0.0, 0.0,
-                                                            cfg.exit_min_fill * cfg.bucket.capacity)
+        self._touched[i], self._entered[i] = cycle_progress(False, False, depth > 0.0, 0.0, cfg.exit_fill_volume)
         self._crest[i] = float(np.max(pile.heights))
         self._noise_n[i], self._noise_u[i] = draw_noise_chunk(rng)
         f_t, f_n, _, _ = soil_forces_single(soil, depth, rho, alpha, lt, 0.0, cfg.bucket, DEFAULT_OPTIONS)
@@ -311,7 +310,7 @@ class BucketLoadingVectorEnv(VectorEnv):
         stone = self._stone[g]
         if new_stones:
             u = self._noise_u[rows, j]
-            stone = stone_step(tr, stone, depth, dist, u[:, 0], u[:, 1], stone_decay(tr, self.cfg.dt))
+            stone = stone_step(tr, stone, depth, dist, u[:, 0], u[:, 1], self.cfg.stone_decay)
             self._stone[g] = stone
         return f_t + stone, f_n + 0.5 * stone
 
@@ -370,8 +369,7 @@ class BucketLoadingVectorEnv(VectorEnv):
         cfg = self.cfg
         ld = cfg.loader
         g: Any = slice(None) if r.size == self.num_envs else r  # gather/scatter index (a slice is cheaper)
-        dt = cfg.dt
-        dv, dw = ld.max_acceleration * dt, cfg.max_tilt_acceleration * dt
+        dt, dv, dw = cfg.dt, cfg.speed_step, cfg.tilt_rate_step
         x, z, th = self._x[g].copy(), self._z[g].copy(), self._th[g].copy()
         vx = self._vx[g] + np.clip(a[:, 0] * ld.max_speed - self._vx[g], -dv, dv)
         vz = self._vz[g] + np.clip(a[:, 1] * ld.max_speed - self._vz[g], -dv, dv)
@@ -428,11 +426,11 @@ class BucketLoadingVectorEnv(VectorEnv):
         self._x[g], self._z[g], self._th[g], self._vx[g], self._vz[g], self._om[g] = xn, zn, thn, vx, vz, om
         self._depth[g], self._rho[g], self._alpha[g] = depth, rho, alpha
         cap = cfg.bucket.capacity
-        terms = reward_terms(cfg.reward, cap, ld.max_push_force, ld.max_lift_force, fill - fill0, e_soil + e_pay,
-                             outside_validity(depth, flags), stalled, f_t, f_n)
+        terms = reward_terms(cfg.reward_weights, cap, ld.max_push_force, ld.max_lift_force, fill - fill0,
+                             e_soil + e_pay, outside_validity(depth, flags), stalled, f_t, f_n)
         # cycle end (the shared rule)
         touched, entered = cycle_progress(self._touched[g], self._entered[g], depth > 0.0, fill,
-                                          cfg.exit_min_fill * cap)
+                                          cfg.exit_fill_volume)
         self._entered[g] = entered
         self._touched[g] = touched
         done = cycle_done(touched, entered, zn, zn - h_surf, self._crest[g], cfg.exit_clearance)
@@ -589,3 +587,14 @@ class BucketLoadingVectorEnv(VectorEnv):
     def np_random_generators(self) -> list[np.random.Generator | None]:
         """Per-sub-env generators (sub-env i is seeded with seed + i)."""
         return list(self._rngs)
+
+
+def _signature() -> inspect.Signature:
+    """``__init__``'s signature: ``num_envs``, ``max_episode_steps``, ``render_mode`` and the settings of
+    :class:`~wheelloader.envs.config.EnvConfig` (keyword-only, typed, with their defaults)."""
+    own = inspect.signature(BucketLoadingVectorEnv.__init__.__wrapped__).parameters
+    head = [p for name, p in own.items() if name != "settings"]
+    return inspect.Signature([*head, *settings_parameters()])
+
+
+BucketLoadingVectorEnv.__init__.__signature__ = _signature()

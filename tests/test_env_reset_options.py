@@ -12,7 +12,7 @@ import pytest
 
 import wheelloader.envs  # noqa: F401  (registers the ids)
 from wheelloader.envs.bookkeeping import RESET_OPTIONS, parse_reset_options
-from wheelloader.envs.config import make_config
+from wheelloader.envs.config import EnvConfig
 from wheelloader.envs.vector import BucketLoadingVectorEnv
 from wheelloader.estimator import preset
 from wheelloader.estimator.errors import ParameterError
@@ -104,7 +104,7 @@ def test_a_rejected_reset_leaves_the_env_as_it_was():
 
 
 def test_parser_returns_settings_and_keeps_the_config_unless_changed():
-    cfg = make_config(keep_pile=True, relax=0.4)
+    cfg = EnvConfig(keep_pile=True, relax=0.4)
     req = parse_reset_options(None, cfg)
     assert (req.keep_pile, req.relax, req.soil, req.config_changed) == (True, 0.4, None, False)
     assert req.config is cfg

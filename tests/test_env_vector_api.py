@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import subprocess
 import sys
@@ -15,7 +16,7 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 import wheelloader.envs  # noqa: F401  (registers the ids)
 from wheelloader.envs import BucketLoadingEnv
-from wheelloader.envs.config import make_config
+from wheelloader.envs.config import EnvConfig
 from wheelloader.envs.vector import RESET_INFO_KEYS, STEP_INFO_KEYS, BucketLoadingVectorEnv
 from wheelloader.estimator import Pile, preset
 from wheelloader.estimator.errors import ParameterError
@@ -172,15 +173,18 @@ def test_get_attr_set_attr_and_call():
 
 
 def test_single_env_keywords_are_typed_and_match_the_config():
-    """Typed keyword arguments (Hopper-v5 style) with the same names and defaults as make_config."""
-    env_params = inspect.signature(BucketLoadingEnv.__init__).parameters
-    cfg_params = inspect.signature(make_config).parameters
-    mine = {k: p for k, p in env_params.items() if k not in ("self", "render_mode", "max_episode_steps")}
-    assert list(mine) == list(cfg_params)
-    for name, param in mine.items():
-        assert param.kind is inspect.Parameter.KEYWORD_ONLY, name
-        assert param.default == cfg_params[name].default, name
-        assert param.annotation is not inspect.Parameter.empty, name
+    """Typed keyword arguments (Hopper-v5 style) with the names and defaults of EnvConfig, the one list of the
+    settings, in both envs' signatures."""
+    cfg_fields = {f.name: f for f in dataclasses.fields(EnvConfig)}
+    for cls, own in ((BucketLoadingEnv, ("self", "render_mode", "max_episode_steps")),
+                     (BucketLoadingVectorEnv, ("self", "num_envs", "max_episode_steps", "render_mode"))):
+        env_params = inspect.signature(cls.__init__).parameters
+        mine = {k: p for k, p in env_params.items() if k not in own}
+        assert list(mine) == list(cfg_fields), cls
+        for name, param in mine.items():
+            assert param.kind is inspect.Parameter.KEYWORD_ONLY, name
+            assert param.default == cfg_fields[name].default, name
+            assert param.annotation is not inspect.Parameter.empty, name
     env = gym.make(MAIN_ID, soil="sand", sensor_noise=0.0, stall_patience=2)
     assert env.unwrapped.cfg.sensor_noise == 0.0 and env.unwrapped.cfg.stall_patience == 2
     with pytest.raises(TypeError, match="unexpected keyword"):
