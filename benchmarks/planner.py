@@ -389,7 +389,7 @@ def main(argv: list[str] | None = None) -> int:
 
     t_start = time.perf_counter()
     load_start = _load()
-    from wheelloader.planner.nlp_cache import origin as nlp_origin
+    from wheelloader.planner.nlp import origin as nlp_origin
 
     tic = time.perf_counter()
     opt = TrajectoryOptimizer()

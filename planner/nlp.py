@@ -35,14 +35,16 @@ acceleration ramps).
   whose slope the model cannot describe).
 * An iteration callback (:class:`IterationMonitor`) hands the iterates to a caller that may stop the solve.
 
-The NLP is built once per (intervals, bucket, loader, options) and cached, in
-memory and on disk (:mod:`.nlp_cache`: once per machine); each call only
+The NLP is built once per bucket, loader and :func:`structural_options` (the options that shape its
+expressions) and cached, in memory and on disk (:mod:`.nlp_cache`: once per machine); its IPOPT solver once
+per process and solver settings, the second and later ones on the first one's derivatives. Each call only
 passes new parameters, bounds and the initial guess.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import casadi as ca
 import numpy as np
@@ -51,13 +53,14 @@ from wheelloader.envs.bookkeeping import step_work
 from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, Loader
 from wheelloader.estimator.validity import alpha_lower_limit
 
+from . import nlp_cache
 from .casadi_model import casadi_forces, smooth_max, smooth_min, smooth_pos
-from .nlp_cache import load_or_build
 from .options import PlannerOptions
 
-__all__ = ["VALIDITY_RELAX", "build"]
+__all__ = ["VALIDITY_RELAX", "build", "origin", "structural_options"]
 
-_CACHE: dict[tuple, tuple] = {}
+#: The NLPs of this process by (bucket, loader, structural options): expressions, layout, derivatives, solvers.
+_CACHE: dict[tuple, dict] = {}
 #: How fast the validity-domain limits on rho relax above the surface [rad/m]: the limits bind in soil
 #: and fade out within centimetres above it (a product ``depth * (rho - limit) >= 0`` would be degenerate
 #: out of soil and blow up IPOPT's multipliers).
@@ -69,32 +72,78 @@ def _smooth_work(v):
     return smooth_pos(v, 1.0)
 
 
+#: PlannerOptions fields that do not shape the NLP's expressions: IPOPT's settings (the solver is made per
+#: value), the bounds on the decision variables and the energy weight (a parameter). (The margins stay constants
+#: of the expressions: as parameters, CasADi differentiates ``F_T / (margin * F_max)`` in another floating-point
+#: order, and the plans would change in their last bits.)
+_NOT_STRUCTURAL = ("max_iter", "max_wall_time", "ipopt_warm_start", "tolerance", "energy_weight", "fill_limit",
+                   "blade_angle_limits", "lift_headroom")
+#: The derivatives IPOPT needs, by their nlpsol option name and the name of the solver's own function.
+_DERIVATIVES = (("grad_f", "nlp_grad_f"), ("jac_g", "nlp_jac_g"), ("hess_lag", "nlp_hess_l"))
+
+
+def structural_options(options: PlannerOptions) -> PlannerOptions:
+    """``options`` with every field that does not shape the NLP's expressions at its default: two settings
+    with the same structural options share one NLP (its expressions and derivatives)."""
+    defaults = PlannerOptions()
+    return replace(options, **{name: getattr(defaults, name) for name in _NOT_STRUCTURAL})
+
+
+def origin(bucket: Bucket, loader: Loader, options: PlannerOptions) -> str | None:
+    """How this process obtained the NLP of these settings (:func:`.nlp_cache.origin` of their structural
+    options); ``None`` if it was not built here."""
+    return nlp_cache.origin(bucket, loader, structural_options(options))
+
+
 def build(bucket: Bucket, loader: Loader, options: PlannerOptions):
-    """The solver, its functions (``forces``, ``outputs``) and the constraint layout, built once per key
-    (in memory for this process, on disk for the machine: :mod:`.nlp_cache`)."""
-    key = (bucket, loader, options)
-    if key not in _CACHE:
+    """The solver, its functions (``forces``, ``outputs``, ``constraints``, ``monitor``) and the constraint
+    layout.
+
+    Memoised per process at two levels: the NLP (expressions, layout and the derivatives IPOPT needs) once per
+    bucket, loader and :func:`structural_options` (and once per machine on disk: :mod:`.nlp_cache`), and the
+    IPOPT solver once per NLP and solver settings (iteration limit, tolerance, warm start). A second solver of
+    an NLP is made from the first one's derivative functions (no new differentiation), so its iterates are
+    bit-identical to those of a solver that built its own.
+    """
+    structural = structural_options(options)
+    entry = _CACHE.get((bucket, loader, structural))
+    if entry is None:
         # the disk cache holds the NLP's expressions (plain CasADi Functions); the IPOPT solver with its
         # iteration callback (a Python object, not serialisable) is made on top of them in each process
-        problem, functions, layout = load_or_build(bucket, loader, options, _build_nlp)
-        solver, monitor = _make_solver(problem, options)
-        _CACHE[key] = (solver, {**functions, "monitor": monitor}, layout)
-    return _CACHE[key]
+        problem, functions, layout = nlp_cache.load_or_build(bucket, loader, structural, _build_nlp)
+        entry = _CACHE[(bucket, loader, structural)] = {"problem": problem, "functions": functions,
+                                                         "layout": layout, "derivatives": None, "solvers": {}}
+    settings = _solver_settings(options)
+    if settings not in entry["solvers"]:
+        solver, monitor = _make_solver(entry["problem"], settings, entry["derivatives"])
+        if entry["derivatives"] is None:
+            entry["derivatives"] = {name: solver.get_function(own) for name, own in _DERIVATIVES}
+        entry["solvers"][settings] = (solver, {**entry["functions"], "monitor": monitor})
+    solver, functions = entry["solvers"][settings]
+    return solver, functions, entry["layout"]
 
 
-def _make_solver(problem, options: PlannerOptions):
-    """IPOPT on ``problem`` (a Function ``(x, p) -> (f, g)``) with an :class:`IterationMonitor`."""
-    solver_opts = {
-        "ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
+def _solver_settings(options: PlannerOptions) -> tuple[tuple[str, object], ...]:
+    """IPOPT's options for ``options`` (hashable: the key of a solver within its NLP)."""
+    settings: dict[str, object] = {
         "ipopt.max_iter": options.max_iter, "ipopt.tol": options.tolerance,
-        "ipopt.acceptable_tol": 1e-3, "ipopt.acceptable_iter": 5,
-        "ipopt.mu_strategy": "adaptive", "error_on_fail": False,
+        "ipopt.acceptable_tol": 1e-3, "ipopt.acceptable_iter": 5, "ipopt.mu_strategy": "adaptive",
     }
     if options.max_wall_time is not None:
-        solver_opts["ipopt.max_wall_time"] = float(options.max_wall_time)
+        settings["ipopt.max_wall_time"] = float(options.max_wall_time)
     if options.ipopt_warm_start:
-        solver_opts.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
-                            "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})
+        settings.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
+                         "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})
+    return tuple(settings.items())
+
+
+def _make_solver(problem, settings: tuple[tuple[str, object], ...], derivatives: dict | None):
+    """IPOPT on ``problem`` (a Function ``(x, p) -> (f, g)``) with an :class:`IterationMonitor`; with
+    ``derivatives`` (another solver's ``grad_f``, ``jac_g`` and ``hess_lag`` of the same problem) nothing is
+    differentiated again."""
+    solver_opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "error_on_fail": False,
+                   # the multipliers of the parameters are never read: no Jacobian with respect to p
+                   "calc_lam_p": False, **dict(settings), **(derivatives or {})}
     monitor = IterationMonitor(problem.size1_in(0), problem.size1_out(1))
     solver_opts["iteration_callback"] = monitor
     return ca.nlpsol("bucket_path", "ipopt", problem, solver_opts), monitor

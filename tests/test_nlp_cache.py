@@ -123,3 +123,33 @@ def test_old_entries_are_pruned(cache, monkeypatch):
     names = [p.name for p in _entries(cache)]
     assert len(names) == nlp_cache.MAX_ENTRIES
     assert f"nlp-{0:040d}.casadi" not in names  # the least recently used went first
+
+
+def test_settings_that_do_not_shape_the_nlp_share_it(cache):
+    """IPOPT's settings, the bounds and the energy weight share one NLP (one disk entry, one set of derivatives);
+    a margin or the transcription does not."""
+    variants = [PlannerOptions(intervals=10, max_iter=15), PlannerOptions(intervals=10, energy_weight=0.05),
+                PlannerOptions(intervals=10, fill_limit=0.8, lift_headroom=0.5, tolerance=1e-6),
+                PlannerOptions(intervals=10, ipopt_warm_start=True, max_wall_time=5.0)]
+    for options in variants:
+        assert nlp.structural_options(options) == OPTIONS
+    assert nlp.structural_options(PlannerOptions(intervals=10, force_margin=0.8)) != OPTIONS
+    assert nlp.structural_options(PlannerOptions(intervals=10, rho_margin=0.1)) != OPTIONS
+    for options in (OPTIONS, *variants):
+        TrajectoryOptimizer(options=options)
+    (entry,) = nlp._CACHE.values()
+    assert len(entry["solvers"]) == len(variants)  # the energy weight (a parameter) shares the first solver
+    assert len(_entries(cache)) == 1
+    assert nlp.origin(Bucket(), Loader(), variants[0]).startswith("built and cached")
+
+
+def test_a_solver_made_from_another_solvers_derivatives_plans_bit_identically(monkeypatch):
+    monkeypatch.setenv(nlp_cache.ENV_VAR, "off")
+    monkeypatch.setattr(nlp, "_CACHE", {})
+    short = PlannerOptions(intervals=10, max_iter=15)
+    _plan()  # builds the NLP and its derivatives with the default solver settings
+    shared = _plan(short)  # a second solver on the first one's derivatives
+    monkeypatch.setattr(nlp, "_CACHE", {})
+    alone = _plan(short)  # differentiated on its own
+    _same(shared, alone)
+    assert shared.iterations == 15 and not shared.success

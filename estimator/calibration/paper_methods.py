@@ -30,7 +30,6 @@ import math
 import time
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
 from scipy.optimize import minimize
 
 from ..soil import PARAMETER_NAMES, SoilParams
@@ -149,6 +148,8 @@ def fit_multi_stage(data: FitData, bounds: dict[str, tuple[float, float]], initi
 
     # Stage 2 (eqs 25-27): theta_2 = [gamma, C, phi], F_obs = F_N,obs / cos(delta*), Gaussian-filtered
     delta_s = theta[i["delta"]]
+    from scipy.ndimage import gaussian_filter1d  # here, not at the top: scipy.ndimage takes ~1 s to import
+
     if observed_normal_full is not None:
         f_obs_full = np.asarray(observed_normal_full, float) / math.cos(delta_s)  # eq 25
         f_filt_full = gaussian_filter1d(f_obs_full, sigma, mode="nearest") if sigma > 0 else f_obs_full

@@ -51,7 +51,6 @@ from wheelloader.planner import (
     PlannerOptions,
     PlanOutcome,
     bezier_on_face,
-    cautious_options,
     model_bezier_on_face,
     optimizer_for,
     plan_next_cycle,
@@ -494,8 +493,8 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
     options = PlannerOptions(max_iter=BETWEEN_CYCLES_MAX_ITER, failure_angle=failure_angle, cut_angle=cut_angle,
                              heel_clearance=heel_clearance, end_blade_angle=end_blade_angle,
                              curl_out_intervals=curl_out_intervals, midpoints=midpoints, **extra)
-    # build the NLPs once (the plan and its two wider-margin re-plans), before the loop's timings start
-    for level in (0, 1, 2):
-        optimizer_for(options=cautious_options(options, level))
+    # build the plan's NLP before the loop's timings start; those of the two wider-margin re-plans are built
+    # when a plan first fails its check (once per process: planner.optimizer_for)
+    optimizer_for(options=options)
     return functools.partial(plan_next_cycle, mpc=mpc, options=options,
                              replan_within_iterations=BETWEEN_CYCLES_REPLAN_ITER, exit_min_fill=LOOP_EXIT_MIN_FILL)

@@ -117,7 +117,7 @@ def run_plan(args: argparse.Namespace) -> int:
         verify_plan,
     )
     from wheelloader.planner.mpc import ACCEPTED_STATUSES
-    from wheelloader.planner.nlp_cache import origin
+    from wheelloader.planner.nlp import origin
 
     _validate(args)
     weights = _parse_weights(args.weights) if args.pareto else ()
