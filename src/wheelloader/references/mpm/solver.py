@@ -37,8 +37,11 @@ masses are per metre of out-of-plane width (plane strain).
 
 Taichi is imported on first use (:mod:`._backend`); all data live in fields allocated with spare
 capacity and reused by later solvers of the same process, so the kernels compile once per process.
-Results are deterministic for given inputs when Taichi runs on one thread (atomic additions of several
-threads can change the rounding order).
+The kernels are in :mod:`._kernels` (how they avoid atomic additions on the CPU and why); the old ones,
+kept for comparison, in :mod:`._legacy` (``legacy=True``). On the CPU the results are deterministic for
+given inputs and a given ``threads`` setting, whatever the number of threads Taichi runs (the particles
+are split into ``threads`` lanes with their own grid copies, added in lane order); the legacy kernels are
+deterministic on one thread only, GPU backends (atomic scatter) not at all.
 """
 
 # No ``from __future__ import annotations`` here: Taichi reads the kernels' annotations at definition.
@@ -49,7 +52,9 @@ from typing import Any
 
 import numpy as np
 
-from ._backend import taichi_module
+from ._backend import BACKENDS, initialised_backend, taichi_module
+from ._kernels import FLOAT_PARAMS, INT_PARAMS, POSE_CHUNK, build_kernels
+from ._legacy import build_legacy_kernels
 from .soil import ContinuumSoil
 from .tool import MAX_PLATES, ToolShape, Trajectory
 
@@ -82,336 +87,80 @@ class Domain:
 
 
 class _Fields:
-    """Taichi fields and kernels with fixed capacities (reused across solvers in one process)."""
+    """Taichi fields and kernels with fixed capacities (reused across solvers in one process).
 
-    def __init__(self, ti: Any, particles: int, nx: int, nz: int) -> None:
+    ``mode``: ``"lanes"`` (CPU, :mod:`._kernels` without atomics, ``lanes`` grid copies), ``"atomic"``
+    (GPU, :mod:`._kernels` with atomic scatter) or ``"legacy"`` (:mod:`._legacy`, the old kernels).
+    """
+
+    def __init__(self, ti: Any, particles: int, nx: int, nz: int, lanes: int, mode: str) -> None:
         self.ti = ti
-        self.particles, self.nx, self.nz = particles, nx, nz
+        self.particles, self.nx, self.nz, self.lanes, self.mode = particles, nx, nz, lanes, mode
         self.in_use = False
         fb = ti.FieldsBuilder()
-        vec2, mat2 = ti.types.vector(2, ti.f32), ti.types.matrix(2, 2, ti.f32)
         self.x = ti.Vector.field(2, ti.f32)
         self.v = ti.Vector.field(2, ti.f32)
         self.C = ti.Matrix.field(2, 2, ti.f32)
         self.F = ti.Matrix.field(2, 2, ti.f32)
-        fb.dense(ti.i, particles).place(self.x, self.v, self.C, self.F)
+        self.tau = ti.Matrix.field(2, 2, ti.f32)
+        self.near_flag = ti.field(ti.i32)
+        fb.dense(ti.i, particles).place(self.x, self.v, self.C, self.F, self.tau, self.near_flag)
         self.grid_v = ti.Vector.field(2, ti.f32)
         self.grid_m = ti.field(ti.f32)
         fb.dense(ti.ij, (nx, nz)).place(self.grid_v, self.grid_m)
+        self.lane_v = ti.Vector.field(2, ti.f32)
+        self.lane_m = ti.field(ti.f32)
+        fb.dense(ti.ijk, (lanes, nx, nz)).place(self.lane_v, self.lane_m)
         self.plate_a = ti.Vector.field(2, ti.f32)
         self.plate_b = ti.Vector.field(2, ti.f32)
         self.world_a = ti.Vector.field(2, ti.f32)
         self.world_b = ti.Vector.field(2, ti.f32)
         fb.dense(ti.i, MAX_PLATES).place(self.plate_a, self.plate_b, self.world_a, self.world_b)
+        self.box = ti.Vector.field(4, ti.f32)
+        fb.dense(ti.i, 2).place(self.box)
+        self.iparam = ti.field(ti.i32)
+        self.fparam = ti.field(ti.f32)
+        fb.dense(ti.i, len(INT_PARAMS)).place(self.iparam)
+        fb.dense(ti.i, len(FLOAT_PARAMS)).place(self.fparam)
+        self.pose = ti.field(ti.f32)
+        fb.dense(ti.ij, (POSE_CHUNK + 1, 3)).place(self.pose)
+        self.lane_impulse = ti.Vector.field(2, ti.f64)
+        self.lane_guard_impulse = ti.Vector.field(2, ti.f64)
+        self.lane_guarded = ti.field(ti.i64)
+        fb.dense(ti.i, lanes).place(self.lane_impulse, self.lane_guard_impulse, self.lane_guarded)
         self.impulse = ti.Vector.field(2, ti.f64)
         self.guard_impulse = ti.Vector.field(2, ti.f64)
         self.guarded = ti.field(ti.i64)
         fb.place(self.impulse, self.guard_impulse, self.guarded)
         self.tree = fb.finalize()
-        self._build_kernels(ti, vec2, mat2)
+        if mode == "legacy":
+            self.substep, self.reset_counters = build_legacy_kernels(self)
+            self.init_stress = None
+        else:
+            self.substep, self.reset_counters, self.init_stress = build_kernels(self, lanes, mode == "atomic")
 
     def destroy(self) -> None:
         self.tree.destroy()
-
-    # ---------------------------------------------------------------- kernels
-    def _build_kernels(self, ti: Any, vec2: Any, mat2: Any) -> None:  # noqa: C901 - one place for all kernels
-        x, v, C, F = self.x, self.v, self.C, self.F
-        grid_v, grid_m = self.grid_v, self.grid_m
-        plate_a, plate_b = self.plate_a, self.plate_b
-        world_a, world_b = self.world_a, self.world_b
-        impulse, guard_impulse, guarded = self.impulse, self.guard_impulse, self.guarded
-        f32 = ti.f32
-
-        @ti.func
-        def clear_grid(nx: ti.i32, nz: ti.i32):
-            for i, j in ti.ndrange(nx, nz):
-                grid_v[i, j] = vec2(0.0, 0.0)
-                grid_m[i, j] = 0.0
-
-        @ti.func
-        def cross2(a, b):
-            return a[0] * b[1] - a[1] * b[0]
-
-        @ti.func
-        def near_tool(xw, n_plates: ti.i32, reach: f32):
-            """Whether the world point is within ``reach`` of any plate (then transfers are checked)."""
-            near = 0
-            for k in range(n_plates):
-                a = world_a[k]
-                ab = world_b[k] - a
-                t = ti.min(ti.max((xw - a).dot(ab) / ab.dot(ab), 0.0), 1.0)
-                if (xw - a - t * ab).norm() < reach:
-                    near = 1
-            return near
-
-        @ti.func
-        def blocked(xw, node, n_plates: ti.i32):
-            """Index of a plate that the segment particle -> node crosses (CPIC), or -1."""
-            hit = -1
-            for k in range(n_plates):
-                a = world_a[k]
-                ab = world_b[k] - a
-                d1 = cross2(ab, xw - a)
-                d2 = cross2(ab, node - a)
-                pq = node - xw
-                d3 = cross2(pq, a - xw)
-                d4 = cross2(pq, world_b[k] - xw)
-                if d1 * d2 < 0.0 and d3 * d4 <= 0.0:
-                    hit = k
-            return hit
-
-        @ti.func
-        def p2g(n: ti.i32, x0: f32, z0: f32, inv_dx: f32, dt: f32, p_vol: f32, p_mass: f32, mu: f32, lam: f32,
-                tool_on: ti.i32, n_plates: ti.i32):
-            origin = vec2(x0, z0)
-            dx = 1.0 / inv_dx
-            for p in range(n):
-                near = 0
-                if tool_on:
-                    near = near_tool(x[p], n_plates, 2.5 * dx)
-                xp = (x[p] - origin) * inv_dx
-                base = ti.cast(xp - 0.5, ti.i32)
-                fx = xp - ti.cast(base, f32)
-                w = [0.5 * (1.5 - fx) ** 2, 0.75 - (fx - 1.0) ** 2, 0.5 * (fx - 0.5) ** 2]
-                U, sig, _V = ti.svd(F[p])
-                e0 = ti.log(ti.max(sig[0, 0], 1e-4))
-                e1 = ti.log(ti.max(sig[1, 1], 1e-4))
-                tr = e0 + e1
-                tau = U @ mat2([[2.0 * mu * e0 + lam * tr, 0.0], [0.0, 2.0 * mu * e1 + lam * tr]]) @ U.transpose()
-                affine = (-dt * p_vol * 4.0 * inv_dx * inv_dx) * tau + p_mass * C[p]
-                for i, j in ti.static(ti.ndrange(3, 3)):
-                    offset = ti.Vector([i, j])
-                    dpos = (ti.cast(offset, f32) - fx) / inv_dx
-                    weight = w[i][0] * w[j][1]
-                    ok = 1
-                    if near:
-                        if blocked(x[p], origin + ti.cast(base + offset, f32) * dx, n_plates) >= 0:
-                            ok = 0
-                    if ok:
-                        grid_v[base + offset] += weight * (p_mass * v[p] + affine @ dpos)
-                        grid_m[base + offset] += weight * p_mass
-                    else:
-                        # the stress (and APIC) impulse this node would have received sums to zero over all
-                        # nine nodes; the plate between takes it instead (momentum is conserved)
-                        impulse[None] += ti.cast(weight * (affine @ dpos), ti.f64)
-
-        @ti.func
-        def body_to_world(b, c, s):
-            return vec2(b[0] * c - b[1] * s, b[0] * s + b[1] * c)
-
-        @ti.func
-        def world_to_body(d, c, s):
-            return vec2(d[0] * c + d[1] * s, -d[0] * s + d[1] * c)
-
-        @ti.func
-        def grid_update(nx: ti.i32, nz: ti.i32, x0: f32, z0: f32, dx: f32, dt: f32, gravity: f32, damp: f32,
-                        sticky_floor: ti.i32, tool_on: ti.i32, n_plates: ti.i32,
-                        tx0: f32, tz0: f32, a0: f32, tx1: f32, tz1: f32, a1: f32,
-                        band: f32, tan_delta: f32, adhesion_impulse: f32):
-            c0, s0 = ti.cos(a0), ti.sin(a0)
-            tip = vec2(tx0, tz0)
-            vtip = vec2(tx1 - tx0, tz1 - tz0) / dt
-            omega = (a1 - a0) / dt
-            for i, j in ti.ndrange(nx, nz):
-                m = grid_m[i, j]
-                if m > 0.0:
-                    vel = grid_v[i, j] / m
-                    vel[1] -= dt * gravity
-                    vel *= damp
-                    if tool_on:
-                        rel = vec2(x0 + i * dx, z0 + j * dx) - tip
-                        q = world_to_body(rel, c0, s0)
-                        best = band
-                        nb = vec2(0.0, 0.0)
-                        for k in range(n_plates):
-                            a = plate_a[k]
-                            ab = plate_b[k] - a
-                            l2 = ab.dot(ab)
-                            t = (q - a).dot(ab) / l2
-                            d = q - (a + t * ab)
-                            dist = d.norm()
-                            if dist < best and 0.0 <= t <= 1.0:
-                                best = dist
-                                if dist > 1e-6 * dx:
-                                    nb = d / dist
-                                else:
-                                    nb = vec2(-ab[1], ab[0]) / ti.sqrt(l2)
-                        if best < band:
-                            nrm = body_to_world(nb, c0, s0)
-                            vt = vtip + omega * vec2(-rel[1], rel[0])
-                            r = vel - vt
-                            vn = r.dot(nrm)
-                            if vn < 0.0:
-                                tang = r - vn * nrm
-                                tl = tang.norm()
-                                cap = tan_delta * (-vn) + adhesion_impulse / m
-                                if tl <= cap:
-                                    tang = vec2(0.0, 0.0)
-                                else:
-                                    tang *= 1.0 - cap / tl
-                                new = vt + tang
-                                dv = vel - new
-                                impulse[None] += ti.cast(m, ti.f64) * ti.cast(dv, ti.f64)
-                                vel = new
-                    if i <= 2 and vel[0] < 0.0:
-                        vel[0] = 0.0
-                    if i >= nx - 3 and vel[0] > 0.0:
-                        vel[0] = 0.0
-                    if j <= 2:
-                        if sticky_floor:
-                            vel = vec2(0.0, 0.0)
-                        elif vel[1] < 0.0:
-                            vel[1] = 0.0
-                    if j >= nz - 3 and vel[1] > 0.0:
-                        vel[1] = 0.0
-                    grid_v[i, j] = vel
-
-        @ti.func
-        def g2p(n: ti.i32, x0: f32, z0: f32, inv_dx: f32, dt: f32, p_mass: f32, mu: f32, lam: f32, sin_phi: f32,
-                cos_phi: f32,
-                cohesion: f32, tool_on: ti.i32, n_plates: ti.i32,
-                tx0: f32, tz0: f32, a0: f32, tx1: f32, tz1: f32, a1: f32, guard: f32,
-                x_lo: f32, x_hi: f32, z_lo: f32, z_hi: f32):
-            origin = vec2(x0, z0)
-            c0, s0 = ti.cos(a0), ti.sin(a0)
-            c1, s1 = ti.cos(a1), ti.sin(a1)
-            tip0 = vec2(tx0, tz0)
-            tip1 = vec2(tx1, tz1)
-            vtip = (tip1 - tip0) / dt
-            omega = (a1 - a0) / dt
-            dx = 1.0 / inv_dx
-            for p in range(n):
-                near = 0
-                if tool_on:
-                    near = near_tool(x[p], n_plates, 2.5 * dx)
-                xp = (x[p] - origin) * inv_dx
-                base = ti.cast(xp - 0.5, ti.i32)
-                fx = xp - ti.cast(base, f32)
-                w = [0.5 * (1.5 - fx) ** 2, 0.75 - (fx - 1.0) ** 2, 0.5 * (fx - 0.5) ** 2]
-                new_v = vec2(0.0, 0.0)
-                new_c = mat2([[0.0, 0.0], [0.0, 0.0]])
-                for i, j in ti.static(ti.ndrange(3, 3)):
-                    offset = ti.Vector([i, j])
-                    dpos = ti.cast(offset, f32) - fx
-                    g = grid_v[base + offset]
-                    if near:
-                        k = blocked(x[p], origin + ti.cast(base + offset, f32) * dx, n_plates)
-                        if k >= 0:
-                            # a node across a plate: the particle's own velocity, not moving into the plate
-                            a = world_a[k]
-                            ab = world_b[k] - a
-                            nrm = vec2(-ab[1], ab[0]).normalized()
-                            if cross2(ab, x[p] - a) < 0.0:
-                                nrm = -nrm
-                            rel = x[p] - tip0
-                            r = v[p] - (vtip + omega * vec2(-rel[1], rel[0]))
-                            rn = r.dot(nrm)
-                            g = v[p]
-                            if rn < 0.0:
-                                g = v[p] - rn * nrm
-                    weight = w[i][0] * w[j][1]
-                    new_v += weight * g
-                    new_c += 4.0 * inv_dx * weight * g.outer_product(dpos)
-                # elastic predictor and Mohr-Coulomb return mapping in log-strain space
-                f_new = (ti.Matrix.identity(f32, 2) + dt * new_c) @ F[p]
-                U, sig, V = ti.svd(f_new)
-                e0 = ti.log(ti.max(sig[0, 0], 1e-4))
-                e1 = ti.log(ti.max(sig[1, 1], 1e-4))
-                tr = e0 + e1
-                p_mean = (lam + mu) * tr
-                q_dev = mu * ti.abs(e0 - e1)
-                if sin_phi > 1e-6 and p_mean * sin_phi >= cohesion * cos_phi:
-                    e_apex = cohesion * cos_phi / sin_phi / (2.0 * (lam + mu))
-                    e0 = e_apex
-                    e1 = e_apex
-                else:
-                    limit = cohesion * cos_phi - p_mean * sin_phi
-                    if q_dev > limit:
-                        half = 0.5 * (e0 - e1) * limit / q_dev
-                        e0 = 0.5 * tr + half
-                        e1 = 0.5 * tr - half
-                F[p] = U @ mat2([[ti.exp(e0), 0.0], [0.0, ti.exp(e1)]]) @ V.transpose()
-                C[p] = new_c
-                x_old = x[p]
-                x_new = x_old + dt * new_v
-                if tool_on:
-                    for k in range(n_plates):
-                        a = plate_a[k]
-                        ab = plate_b[k] - a
-                        length = ab.norm()
-                        q_old = world_to_body(x_old - tip0, c0, s0) - a
-                        q_new = world_to_body(x_new - tip1, c1, s1) - a
-                        t_old = q_old.dot(ab) / (length * length)
-                        t_new = q_new.dot(ab) / (length * length)
-                        w_old = (ab[0] * q_old[1] - ab[1] * q_old[0]) / length
-                        w_new = (ab[0] * q_new[1] - ab[1] * q_new[0]) / length
-                        if 0.0 <= t_old <= 1.0 and 0.0 <= t_new <= 1.0:
-                            if w_old * w_new < 0.0 or ti.abs(w_new) < guard:
-                                side = 1.0
-                                if w_old < 0.0:
-                                    side = -1.0
-                                perp = vec2(-ab[1], ab[0]) / length
-                                q_fix = a + t_new * ab + side * guard * perp
-                                x_new = tip1 + body_to_world(q_fix, c1, s1)
-                                nrm = side * body_to_world(perp, c1, s1)
-                                rel = x_new - tip1
-                                r = new_v - (vtip + omega * vec2(-rel[1], rel[0]))
-                                rn = r.dot(nrm)
-                                if rn < 0.0:
-                                    new_v -= rn * nrm
-                                    guard_impulse[None] += ti.cast(p_mass * rn * nrm, ti.f64)
-                                guarded[None] += 1
-                x_new[0] = ti.min(ti.max(x_new[0], x_lo), x_hi)
-                x_new[1] = ti.min(ti.max(x_new[1], z_lo), z_hi)
-                v[p] = new_v
-                x[p] = x_new
-
-        @ti.kernel
-        def reset_counters():
-            impulse[None] = ti.Vector([0.0, 0.0], ti.f64)
-            guard_impulse[None] = ti.Vector([0.0, 0.0], ti.f64)
-            guarded[None] = 0
-
-        @ti.kernel
-        def substep(n: ti.i32, nx: ti.i32, nz: ti.i32, x0: f32, z0: f32, dx: f32, dt: f32, p_vol: f32, p_mass: f32,
-                    mu: f32, lam: f32, sin_phi: f32, cos_phi: f32, cohesion: f32, gravity: f32, damp: f32,
-                    sticky_floor: ti.i32, tool_on: ti.i32, n_plates: ti.i32,
-                    tx0: f32, tz0: f32, a0: f32, tx1: f32, tz1: f32, a1: f32,
-                    band: f32, tan_delta: f32, adhesion_impulse: f32, guard: f32,
-                    x_lo: f32, x_hi: f32, z_lo: f32, z_hi: f32):
-            inv_dx = 1.0 / dx
-            c0, s0 = ti.cos(a0), ti.sin(a0)
-            for k in range(n_plates):
-                world_a[k] = vec2(tx0, tz0) + body_to_world(plate_a[k], c0, s0)
-                world_b[k] = vec2(tx0, tz0) + body_to_world(plate_b[k], c0, s0)
-            clear_grid(nx, nz)
-            p2g(n, x0, z0, inv_dx, dt, p_vol, p_mass, mu, lam, tool_on, n_plates)
-            grid_update(nx, nz, x0, z0, dx, dt, gravity, damp, sticky_floor, tool_on, n_plates, tx0, tz0, a0, tx1, tz1,
-                        a1, band, tan_delta, adhesion_impulse)
-            g2p(n, x0, z0, inv_dx, dt, p_mass, mu, lam, sin_phi, cos_phi, cohesion, tool_on, n_plates, tx0, tz0, a0,
-                tx1, tz1, a1, guard, x_lo, x_hi, z_lo, z_hi)
-
-        self.substep = substep
-        self.reset_counters = reset_counters
 
 
 _POOL: list[_Fields] = []
 
 
-def _acquire_fields(ti: Any, particles: int, nx: int, nz: int) -> _Fields:
+def _acquire_fields(ti: Any, particles: int, nx: int, nz: int, lanes: int, mode: str) -> _Fields:
     for fields in _POOL:
-        if not fields.in_use and fields.particles >= particles and fields.nx >= nx and fields.nz >= nz:
+        if (not fields.in_use and fields.mode == mode and fields.lanes == lanes and fields.particles >= particles
+                and fields.nx >= nx and fields.nz >= nz):
             fields.in_use = True
             return fields
     # grow with spare room so that slightly larger scenes reuse the allocation (and the compiled kernels)
     cap_p = int(math.ceil(particles * 1.25 / 4096.0)) * 4096
     cap_x = int(math.ceil(nx * 1.1 / 16.0)) * 16
     cap_z = int(math.ceil(nz * 1.1 / 16.0)) * 16
-    for old in [f for f in _POOL if not f.in_use]:
+    for old in [f for f in _POOL if not f.in_use and f.mode == mode and f.lanes == lanes]:
         cap_p, cap_x, cap_z = max(cap_p, old.particles), max(cap_x, old.nx), max(cap_z, old.nz)
         old.destroy()
         _POOL.remove(old)
-    fields = _Fields(ti, cap_p, cap_x, cap_z)
+    fields = _Fields(ti, cap_p, cap_x, cap_z, lanes, mode)
     fields.in_use = True
     _POOL.append(fields)
     return fields
@@ -444,12 +193,21 @@ class MPMSolver:
     sticky_floor : bool
         Floor nodes hold the soil still (True, a soil bed on rock) or let it slide (False).
     threads : int
-        Taichi CPU threads (used at the process's first Taichi initialisation only).
+        Taichi CPU threads (used at the process's first Taichi initialisation only) and, on the CPU, the
+        number of lanes the particles are split into (:mod:`._kernels`): the result depends on this
+        setting (the summation order of the grid) and not on how many threads Taichi actually runs.
+    legacy : bool
+        Run the kernels as they were before the single-thread rewrite (:mod:`._legacy`: an SVD of ``F``
+        in particle -> grid, atomic scatter; 2.4 times the cost on one thread). For comparisons only.
+    backend : str
+        ``"cpu"`` (default), ``"gpu"`` or ``"auto"`` (a GPU where Taichi finds one, else the CPU); used at
+        the process's first Taichi initialisation only (:func:`._backend.taichi_module`). On a GPU the
+        scatter is atomic and the result is not bit-reproducible.
     """
 
     def __init__(self, soil: ContinuumSoil, domain: Domain, dx: float, particles: np.ndarray, *,
                  tool: ToolShape | None = None, contact_band: float = 1.0, cfl: float = 0.3,
-                 sticky_floor: bool = True, threads: int = 1) -> None:
+                 sticky_floor: bool = True, threads: int = 1, legacy: bool = False, backend: str = "cpu") -> None:
         if not isinstance(soil, ContinuumSoil):
             raise ValueError(f"soil must be a ContinuumSoil, got {type(soil).__name__}")
         if not (isinstance(dx, (int, float)) and math.isfinite(dx) and dx > 0.0):
@@ -481,9 +239,16 @@ class MPMSolver:
         self.time = 0.0
         self.steps = 0
         self._bounds = (float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1]))
-        ti = taichi_module(threads)
+        if not isinstance(legacy, bool):
+            raise ValueError(f"legacy must be True or False, got {legacy!r}")
+        if backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+        ti = taichi_module(threads, backend)
         self._ti = ti
-        self._f = _acquire_fields(ti, self.n, self.nx, self.nz)
+        on_gpu = initialised_backend() != "cpu"
+        self.kernels = "legacy" if legacy else ("atomic" if on_gpu else "lanes")
+        self.lanes = threads if self.kernels == "lanes" else 1
+        self._f = _acquire_fields(ti, self.n, self.nx, self.nz, self.lanes, self.kernels)
         self._finalizer = weakref.finalize(self, _release, self._f)
         self._load(pts)
 
@@ -507,7 +272,10 @@ class MPMSolver:
                 plates_b[k] = plate.end
         f.plate_a.from_numpy(plates_a)
         f.plate_b.from_numpy(plates_b)
+        f.lane_v.fill(0.0)
+        f.lane_m.fill(0.0)
         f.reset_counters()
+        self._stress_stale = True
 
     def set_geostatic_stress(self, overburden: np.ndarray, lateral_ratio: float | None = None) -> None:
         """Start every particle at the elastic strain of a geostatic stress state.
@@ -531,6 +299,7 @@ class MPMSolver:
         Fm[: self.n, 0, 0] = np.exp(ex)
         Fm[: self.n, 1, 1] = np.exp(ez)
         self._f.F.from_numpy(Fm)
+        self._stress_stale = True
 
     # ------------------------------------------------------------- running
     def advance(self, t_end: float, trajectory: Trajectory | None = None, *, damping: float = 0.0) -> np.ndarray:
@@ -566,13 +335,32 @@ class MPMSolver:
         head = (self.n, self.nx, self.nz, self.x0, self.z0, self.dx, dt, self.particle_volume, self.particle_mass, mu,
                 lam, sin_phi, cos_phi, soil.cohesion, GRAVITY, damp, int(self.sticky_floor), tool_on, n_plates)
         tail = (band, math.tan(soil.wall_friction_angle), adhesion_impulse, guard, x_lo, x_hi, z_lo, z_hi)
-        before = f.impulse.to_numpy().astype(float) + f.guard_impulse.to_numpy().astype(float)
-        for k in range(steps):
-            pose = (float(px[k]), float(pz[k]), float(pa[k]), float(px[k + 1]), float(pz[k + 1]), float(pa[k + 1]))
-            f.substep(*head, *pose, *tail)
+        before = self.total_impulse
+        if self.kernels == "legacy":
+            for k in range(steps):
+                pose = (float(px[k]), float(pz[k]), float(pa[k]), float(px[k + 1]), float(pz[k + 1]), float(pa[k + 1]))
+                f.substep(*head, *pose, *tail)
+        else:
+            settings = dict(zip(("n", "nx", "nz", "x0", "z0", "dx", "dt", "p_vol", "p_mass", "mu", "lam", "sin_phi",
+                                 "cos_phi", "cohesion", "gravity", "damp", "sticky_floor", "tool_on", "n_plates"),
+                                head, strict=True))
+            settings.update(zip(("band", "tan_delta", "adhesion_impulse", "guard", "x_lo", "x_hi", "z_lo", "z_hi"),
+                                tail, strict=True))
+            f.iparam.from_numpy(np.array([settings[k] for k in INT_PARAMS], dtype=np.int32))
+            f.fparam.from_numpy(np.array([settings[k] for k in FLOAT_PARAMS], dtype=np.float32))
+            if self._stress_stale:
+                f.init_stress(self.n, mu, lam)
+            self._stress_stale = False
+            poses = np.zeros((POSE_CHUNK + 1, 3), dtype=np.float32)
+            for first in range(0, steps, POSE_CHUNK):
+                count = min(POSE_CHUNK, steps - first)
+                poses[: count + 1] = np.column_stack([px, pz, pa])[first: first + count + 1]
+                f.pose.from_numpy(poses)
+                for k in range(count):
+                    f.substep(k)
         self.time = float(t_end)
         self.steps += steps
-        return f.impulse.to_numpy().astype(float) + f.guard_impulse.to_numpy().astype(float) - before
+        return self.total_impulse - before
 
     # ------------------------------------------------------------- reading
     def positions(self) -> np.ndarray:
@@ -595,17 +383,67 @@ class MPMSolver:
     @property
     def total_impulse(self) -> np.ndarray:
         """Tool impulse since the solver started [N s per m] (grid contact and particle guard)."""
-        return self._f.impulse.to_numpy().astype(float) + self.guard_impulse
+        return self._counter("impulse") + self.guard_impulse
 
     @property
     def guard_impulse(self) -> np.ndarray:
         """Part of the tool impulse so far [N s per m] that came through the particle guard."""
-        return self._f.guard_impulse.to_numpy().astype(float)
+        return self._counter("guard_impulse")
 
     @property
     def guard_corrections(self) -> int:
         """Particle-steps corrected by the plate guard so far."""
-        return int(self._f.guarded.to_numpy())
+        return int(self._counter("guarded"))
+
+    def _counter(self, name: str) -> np.ndarray:
+        """A counter summed over the lanes in lane order (the legacy kernels' 0-D field)."""
+        if self.kernels == "legacy":
+            return getattr(self._f, name).to_numpy().astype(float)
+        lanes = getattr(self._f, "lane_" + name).to_numpy()[: self.lanes].astype(float)
+        total = lanes[0].copy()
+        for row in lanes[1:]:
+            total += row
+        return total
+
+    # ------------------------------------------------------------- state
+    def state(self) -> dict[str, np.ndarray]:
+        """Everything the next step depends on, and the counters, as arrays (:meth:`restore` puts it back).
+
+        Restoring a state into a solver built with the same inputs continues bit for bit as the solver
+        the state came from (the settled-pile cache, :mod:`.settle_cache`).
+        """
+        f, n = self._f, self.n
+        out = {name: getattr(f, name).to_numpy()[:n] for name in ("x", "v", "C", "F", "tau")}
+        for name in ("lane_impulse", "lane_guard_impulse", "lane_guarded"):
+            out[name] = getattr(f, name).to_numpy()[: self.lanes]
+        for name in ("impulse", "guard_impulse", "guarded"):
+            out[name] = getattr(f, name).to_numpy()
+        out["clock"] = np.array([self.time, float(self.steps), float(self._stress_stale)])
+        return out
+
+    def restore(self, state: dict[str, np.ndarray]) -> None:
+        """Put back a :meth:`state` of a solver with the same particle count, kernels and lanes."""
+        f, n = self._f, self.n
+        for name in ("x", "v", "C", "F", "tau"):
+            field = getattr(f, name)
+            data = np.asarray(state[name])
+            if data.shape[0] != n:
+                raise ValueError(f"state has {data.shape[0]} particles, the solver {n}")
+            full = field.to_numpy()
+            full[:n] = data
+            field.from_numpy(full)
+        for name in ("lane_impulse", "lane_guard_impulse", "lane_guarded"):
+            field = getattr(f, name)
+            data = np.asarray(state[name])
+            if data.shape[0] != self.lanes:
+                raise ValueError(f"state has {data.shape[0]} lanes, the solver {self.lanes}")
+            full = field.to_numpy()
+            full[: self.lanes] = data
+            field.from_numpy(full)
+        for name in ("impulse", "guard_impulse", "guarded"):
+            getattr(f, name).from_numpy(np.asarray(state[name]))
+        clock = np.asarray(state["clock"], dtype=float)
+        self.time, self.steps, self._stress_stale = float(clock[0]), int(clock[1]), bool(clock[2])
 
     def close(self) -> None:
         """Give the fields back to the process's pool (the solver is unusable afterwards)."""
