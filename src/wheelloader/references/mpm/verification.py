@@ -193,7 +193,8 @@ def blade_motion(depth: float, speed: float = 0.2, travel: float | None = None
 
 
 def run_blade(depth: float, soil: ContinuumSoil, dx: float, *, speed: float = 0.2, travel: float | None = None,
-              contact_band: float = 1.0, seed: int = 0, threads: int = 1, samples_per_s: float = 60.0
+              contact_band: float = 1.0, seed: int = 0, threads: int = 1, samples_per_s: float = 60.0,
+              legacy: bool = False
               ) -> CaseResult:
     """A vertical blade ``depth`` [m] deep pushed at ``speed`` [m/s] through a flat bed.
 
@@ -231,7 +232,8 @@ def run_blade(depth: float, soil: ContinuumSoil, dx: float, *, speed: float = 0.
         heap.append(counts * solver.particle_mass)
 
     wall0 = time.perf_counter()
-    with MPMSolver(soil, domain, dx, pts, tool=blade, contact_band=contact_band, threads=threads) as solver:
+    with MPMSolver(soil, domain, dx, pts, tool=blade, contact_band=contact_band, threads=threads,
+                   legacy=legacy) as solver:
         solver.set_geostatic_stress(over)
         times, force = _run(solver, traj, 0.2, duration, int(round(duration * samples_per_s)), observe=observe_heap)
         steps = solver.steps
@@ -247,7 +249,8 @@ def run_blade(depth: float, soil: ContinuumSoil, dx: float, *, speed: float = 0.
 
 
 def run_wall(height: float, soil: ContinuumSoil, dx: float, *, push: float = 0.0, speed: float = 0.05,
-             length: float | None = None, rest: float = 0.6, seed: int = 0, threads: int = 1) -> CaseResult:
+             length: float | None = None, rest: float = 0.6, seed: int = 0, threads: int = 1,
+             legacy: bool = False) -> CaseResult:
     """A smooth vertical wall (no friction, no adhesion) against a soil block ``height`` [m] high.
 
     The block starts stress-free and settles under gravity for ``rest`` [s] against the fixed wall on a
@@ -272,7 +275,8 @@ def run_wall(height: float, soil: ContinuumSoil, dx: float, *, push: float = 0.0
     xs = -0.25 * dx + (_ramp(np.clip(t - rest, 0.0, None), speed, ramp) if push > 0 else 0.0 * t)
     traj = Trajectory(t, xs, np.zeros_like(t), np.zeros_like(t))
     wall0 = time.perf_counter()
-    with MPMSolver(wall_soil, domain, dx, pts, tool=plate, sticky_floor=False, threads=threads) as solver:
+    with MPMSolver(wall_soil, domain, dx, pts, tool=plate, sticky_floor=False, threads=threads,
+                   legacy=legacy) as solver:
         solver.time = 0.0
         samples = int(round(duration * 60))
         times = np.linspace(0.0, duration, samples + 1)
@@ -288,7 +292,8 @@ def run_wall(height: float, soil: ContinuumSoil, dx: float, *, push: float = 0.0
 
 
 def run_column_collapse(aspect_ratio: float, soil: ContinuumSoil, dx: float, *, width: float = 0.2,
-                        duration: float | None = None, seed: int = 0, threads: int = 1) -> CaseResult:
+                        duration: float | None = None, seed: int = 0, threads: int = 1,
+                        legacy: bool = False) -> CaseResult:
     """A column ``width`` [m] wide and ``aspect_ratio * width`` high released against a smooth wall.
 
     The column stands at a frictionless wall (the symmetry plane of the experiments' half-columns) on
@@ -305,7 +310,7 @@ def run_column_collapse(aspect_ratio: float, soil: ContinuumSoil, dx: float, *, 
     reach = width * (1.0 + 3.0 * float(column_runout_scaling(aspect_ratio)["lube"])) + 0.1
     domain = Domain(0.0, 0.0, reach, h0 + 0.1)
     wall0 = time.perf_counter()
-    with MPMSolver(soil, domain, dx, pts, threads=threads) as solver:
+    with MPMSolver(soil, domain, dx, pts, threads=threads, legacy=legacy) as solver:
         solver.set_geostatic_stress(over)
         samples = int(round(duration * 20))
         times, force = _run(solver, None, 0.0, duration, samples)
