@@ -13,7 +13,7 @@ from scipy.optimize import lsq_linear, minimize_scalar
 
 from wheelloader.estimator import PAPER_BOUNDS, Bucket, Pile, bezier_path, contact_state, default_path, preset
 from wheelloader.estimator.calibration import Calibration, CalibrationOptions, FitQuality, calibrate, load_params
-from wheelloader.estimator.calibration.boxqp import solve_box_qp
+from wheelloader.estimator.calibration.boxqp import enumerate_faces, solve_box_qp
 from wheelloader.estimator.calibration.fitmodel import FIT_NAMES, FitData, fit_bounds, soil_to_fit, split_sinkage
 from wheelloader.estimator.calibration.prediction import predict
 from wheelloader.estimator.calibration.uncertainty import integrated_autocorrelation_time, noise_per_effective_sample
@@ -75,6 +75,25 @@ def test_box_qp_is_exact():
         ref_cost = np.sum((a[i] @ ref.x - y[i]) ** 2)
         assert cost[i] == pytest.approx(ref_cost, rel=1e-9, abs=1e-9)
         assert np.all(x[i] >= lo - 1e-12) and np.all(x[i] <= hi + 1e-12)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_active_set_agrees_with_face_enumeration(seed):
+    """The active-set solver and the exact enumeration of faces give the same minimum (to rounding), also
+    with a pinned variable (equal bounds), a nearly singular column and optima on several bounds."""
+    rng = np.random.default_rng(seed)
+    lo, hi = -rng.uniform(0.0, 2.0, 4), rng.uniform(0.0, 2.0, 4)
+    if seed % 2:
+        lo[1] = hi[1] = 0.3
+    a = rng.normal(size=(300, 12, 4)) * rng.uniform(0.01, 100.0, 4)
+    if seed % 3 == 0:
+        a[..., 3] = a[..., 2] * 2.0 + 1e-7 * a[..., 3]
+    y = rng.normal(size=(300, 12)) * 10.0
+    h, g, c = np.einsum("gmi,gmj->gij", a, a), np.einsum("gmi,gm->gi", a, y), np.einsum("gm,gm->g", y, y)
+    x, cost = solve_box_qp(h, g, c, lo, hi)
+    x_ref, cost_ref = enumerate_faces(h, g, c, lo, hi)
+    np.testing.assert_allclose(cost, cost_ref, rtol=1e-10, atol=1e-9 * float(np.max(c)))
+    assert np.all(x >= lo - 1e-12) and np.all(x <= hi + 1e-12)
 
 
 def test_split_sinkage_keeps_K_and_bounds():

@@ -5,12 +5,19 @@ Solves, for many independent problems at once,
     min_x  x^T H x - 2 g^T x + c     s.t.  lo <= x <= hi,
 
 with ``H`` symmetric positive semi-definite of size ``k <= 5`` (the normal
-equations of a bounded linear least-squares fit). The minimiser of a convex
-quadratic over a box lies in the relative interior of one face, where it is
-the unconstrained minimiser over that face's affine hull; so enumerating the
-``3^k`` faces (each variable free, at its lower or at its upper bound),
-keeping the feasible face minimisers and taking the best is exact. Every
-face is solved for all problems in one vectorised step.
+equations of a bounded linear least-squares fit).
+
+:func:`solve_box_qp` runs a primal-dual active-set iteration on all problems at once: each variable is
+free, at its lower or at its upper bound; the free ones are solved for (one batched k x k solve per
+iteration), a free variable that leaves its box is put on the bound it crossed and a bound variable whose
+gradient points into the box is freed. When no variable changes side, the point satisfies the KKT
+conditions of the convex problem and is its minimiser. Most problems settle in a few iterations; the few
+that do not within :data:`ACTIVE_SET_ITERATIONS` (the active-set method can cycle) are solved by
+:func:`enumerate_faces`: the minimiser of a convex quadratic over a box lies in the relative interior of
+one face, where it is the unconstrained minimiser over that face's affine hull, so enumerating the ``3^k``
+faces (each variable free, at its lower or at its upper bound), keeping the feasible face minimisers and
+taking the best is exact. Both agree to rounding (tested); the active-set iteration costs about a quarter
+of the enumeration on the calibration grid.
 """
 
 from __future__ import annotations
@@ -19,10 +26,58 @@ import itertools
 
 import numpy as np
 
+#: Active-set iterations before a problem is handed to :func:`enumerate_faces`.
+ACTIVE_SET_ITERATIONS = 12
+
 
 def solve_box_qp(H: np.ndarray, g: np.ndarray, c: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                  feas_tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
-    """Minimise ``x^T H x - 2 g^T x + c`` over ``lo <= x <= hi`` for a batch of problems.
+    """Minimise ``x^T H x - 2 g^T x + c`` over ``lo <= x <= hi`` for a batch of problems (active set).
+
+    Parameters and returns as :func:`enumerate_faces`, which solves the problems the active-set iteration
+    does not settle (module docstring).
+    """
+    H = np.asarray(H, dtype=float)
+    g = np.asarray(g, dtype=float)
+    c = np.asarray(c, dtype=float)
+    G, k, _ = H.shape
+    # scale to unit diagonal, as enumerate_faces does
+    s = 1.0 / np.sqrt(np.maximum(np.einsum("gii->gi", H), 1e-300))
+    Hs = H * s[:, :, None] * s[:, None, :]
+    gs = g * s
+    los, his = lo[None, :] / s, hi[None, :] / s
+    tol = feas_tol * np.maximum(his - los, 1e-300)
+    pinned = np.broadcast_to(hi <= lo, (G, k))  # equal bounds: always on the bound
+    eye = np.eye(k, dtype=bool)
+    Hr = Hs + 1e-12 * np.eye(k)  # the same ridge as the face solves
+    x = np.linalg.solve(Hr, gs[..., None])[..., 0]  # start: each variable on the side the free minimiser lies
+    side = np.where(pinned | (x < los), -1, np.where(x > his, 1, 0))
+    settled = np.zeros(G, dtype=bool)
+    for _ in range(ACTIVE_SET_ITERATIONS):
+        free = side == 0
+        x_bound = np.where(side < 0, los, np.where(side > 0, his, 0.0))
+        A = np.where(free[:, :, None] & free[:, None, :], Hr, 0.0) + (~free)[:, :, None] * eye
+        rhs = np.where(free, gs - (Hs @ x_bound[..., None])[..., 0], x_bound)
+        x = np.linalg.solve(A, rhs[..., None])[..., 0]
+        grad = (Hs @ x[..., None])[..., 0] - gs  # half the gradient of the objective
+        new = np.where(free & (x < los - tol), -1, np.where(free & (x > his + tol), 1, side))
+        new = np.where(~pinned & (((side < 0) & (grad < 0.0)) | ((side > 0) & (grad > 0.0))), 0, new)
+        settled = np.all(new == side, axis=1)  # no variable changes side: the KKT conditions hold
+        side = new
+        if settled.all():
+            break
+    x = np.clip(x, los, his)
+    val = np.einsum("gi,gij,gj->g", x, Hs, x) - 2.0 * np.einsum("gi,gi->g", gs, x)
+    x_out, cost = x * s, np.maximum(val + c, 0.0)
+    if not settled.all():
+        rest = ~settled
+        x_out[rest], cost[rest] = enumerate_faces(H[rest], g[rest], c[rest], lo, hi, feas_tol)
+    return x_out, cost
+
+
+def enumerate_faces(H: np.ndarray, g: np.ndarray, c: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                    feas_tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
+    """Minimise ``x^T H x - 2 g^T x + c`` over ``lo <= x <= hi`` by enumerating the ``3^k`` faces.
 
     Parameters
     ----------

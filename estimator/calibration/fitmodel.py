@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -370,36 +371,50 @@ class FitData:
                        None if self.carried is None else (self.carried[0][sl], self.carried[1][sl]),
                        None if self.slip is None else self.slip[sl])
 
-    @property
+    # Geometry-only arrays: they depend on the path and the pile, not on the soil, so each is computed once
+    # per data set (not once per model evaluation of every start); the products keep the order of the
+    # expressions they stand for, so the forces are the same to the last bit.
+    @cached_property
     def ramp(self) -> np.ndarray:
         """Surcharge ramp ``min(d / contact_depth, 1)`` (force_model)."""
         return np.minimum(self.depth / self.options.contact_depth, 1.0)
 
-    @property
+    @cached_property
     def surcharge(self) -> np.ndarray:
         """``q = r V_fill / w`` [m^2] of the weight-force failure angle (failure_angle module docstring)."""
         return self.ramp * self.fill_volume / self.width
 
+    @cached_property
+    def log_depth(self) -> np.ndarray:
+        """``ln d`` (the sinkage term's derivative in n)."""
+        return np.log(self.depth)
+
+    @cached_property
+    def _basis_weights(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(d^2 w g, r g V_fill or r W_load, w d)``: the factors' weights in :meth:`fee_basis`."""
+        d, w, r = self.depth, self.width, self.ramp
+        surcharge = r * GRAVITY * self.fill_volume if self.measured_load is None else r * self.measured_load
+        return d * d * w * GRAVITY, surcharge, w * d
+
     # ---------------------------------------------------------- basis
     def fee_basis(self, f: Factors):
         """``(B_gamma, B_c, B_a, q0)`` of the module docstring from :class:`Factors` (broadcast)."""
-        d, w, r = self.depth, self.width, self.ramp
+        weight, surcharge, wd = self._basis_weights
         if self.measured_load is None:
-            b_gamma = d * d * w * GRAVITY * f.n_gamma + r * GRAVITY * self.fill_volume * f.n_q
+            b_gamma = weight * f.n_gamma + surcharge * f.n_q
             q0 = np.zeros_like(b_gamma)
         else:
-            b_gamma = d * d * w * GRAVITY * f.n_gamma + np.zeros_like(f.n_q)
-            q0 = r * self.measured_load * f.n_q
-        return b_gamma, w * d * f.n_c, w * d * f.n_a, q0
+            b_gamma = weight * f.n_gamma + np.zeros_like(f.n_q)
+            q0 = surcharge * f.n_q
+        return b_gamma, wd * f.n_c, wd * f.n_a, q0
 
     def fee_basis_derivative(self, dn: tuple[np.ndarray, ...]):
         """Derivative of :meth:`fee_basis` given derivatives of the four factors."""
         dng, dnc, dna, dnq = dn
-        d, w, r = self.depth, self.width, self.ramp
+        weight, surcharge, wd = self._basis_weights
         if self.measured_load is None:
-            return (d * d * w * GRAVITY * dng + r * GRAVITY * self.fill_volume * dnq, w * d * dnc, w * d * dna,
-                    np.zeros_like(dnq))
-        return d * d * w * GRAVITY * dng, w * d * dnc, w * d * dna, r * self.measured_load * dnq
+            return weight * dng + surcharge * dnq, wd * dnc, wd * dna, np.zeros_like(dnq)
+        return weight * dng, wd * dnc, wd * dna, surcharge * dnq
 
     def carried_basis(self):
         """The carried-load term as ``(b_T, b_N, o_T, o_N)``: F_T += gamma b_T + o_T, F_N += gamma b_N + o_N.
@@ -478,7 +493,7 @@ class FitData:
         cd_t = cd if self.slip is None else cd * self.slip  # d(sin delta)/d delta in the F_T row
         jt[:, 4], jn[:, 4] = cd_t * fee + sd * dfee_delta, -math.sin(delta) * fee + cd * dfee_delta
         jt[:, 5] = sink
-        jt[:, 6] = k * sink * np.log(self.depth)
+        jt[:, 6] = k * sink * self.log_depth
         carried = self.carried_basis()
         if carried is not None:  # opt-in carried load (force_model)
             f_t = f_t + (gamma * carried[0] + carried[2])
