@@ -20,7 +20,15 @@ gravel cycle resampled to that many rows, each run in its own process under ``/u
 (wall time and peak resident memory; ``getrusage`` where GNU time is missing), and writes
 ``long_logs.json``.
 
-Run: ``python benchmarks/calibration.py [--out results/calibration]``.
+Speed against an older version (issue #31 item 4): ``--baseline REV`` also times the default method of
+git revision ``REV`` (extracted with ``git archive`` into a temporary directory) against the current code
+and the multi-stage method, on the training cycles above and on the continuum set's path-1 cycles
+(``--mpm-dir``, default ``data/mpm``). Each version runs in its own worker process; the three are called in
+turn, repeat after repeat, so all see the same load. Reported per cycle: the median fit time (the
+calibration's ``time_s``, wall clock, as the table above) and CPU time of the whole call, and the training
+F_R error of each, with the load average before and after.
+
+Run: ``python benchmarks/calibration.py [--out results/calibration] [--baseline REV]``.
 """
 
 from __future__ import annotations
@@ -28,7 +36,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
+import statistics
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -247,6 +259,150 @@ def several_cycles_timing(args) -> dict:
             "loadavg_before": load_before, "loadavg_after": os.getloadavg(), "summary": summary, "runs": runs}
 
 
+# ----------------------------------------------------------------------------- speed against a baseline
+#: Layout of the package in the repository (pyproject's package-dir): what a baseline worker imports.
+PACKAGE_DIRS = {"src/wheelloader": "wheelloader", "estimator": "wheelloader/estimator", "envs": "wheelloader/envs",
+                "planner": "wheelloader/planner"}
+SPEED_METHODS = (("baseline", "default"), ("current", "default"), ("current", "multi-stage"))
+
+
+def _speed_cycle(spec: dict):
+    """The cycle a speed request names: a synthetic training cycle (as :func:`run_soil`'s) or a saved log."""
+    from wheelloader.estimator import CycleLog, paper_paths, preset
+    from wheelloader.estimator.synthetic import synthetic_cycle
+
+    if spec["kind"] == "log":
+        return CycleLog.load(spec["path"])
+    return synthetic_cycle(preset(spec["soil"]), paper_paths()[0], noise=spec["noise"], vibration=spec["vibration"],
+                           seed=spec["seed"])
+
+
+def _worker() -> int:
+    """Serve speed requests (JSON lines on stdin, one answer per line on stdout) with whatever package is
+    importable: the current one, or a baseline's on ``PYTHONPATH``."""
+    from wheelloader.estimator import calibration
+
+    def run(cycle, method):
+        if hasattr(calibration, "CalibrationOptions"):
+            return calibration.calibrate(cycle, options=calibration.CalibrationOptions(method=method))
+        return calibration.calibrate(cycle, method)  # a version before CalibrationOptions
+
+    cache: dict = {}
+    for line in sys.stdin:
+        req = json.loads(line)
+        key = json.dumps(req["cycle"], sort_keys=True)
+        if key not in cache:
+            cache[key] = _speed_cycle(req["cycle"])
+            run(cache[key], req["method"])  # warm-up: imports, caches
+        wall, cpu = time.perf_counter(), time.process_time()
+        cal = run(cache[key], req["method"])
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+        print(json.dumps({"fit_s": cal.time_s, "wall_s": wall, "cpu_s": cpu, "nfev": cal.nfev, "cost": cal.cost,
+                          "train_rmse_r_percent": cal.quality.percent_r, "params": cal.params.to_dict(),
+                          "module": calibration.__file__}), flush=True)
+    return 0
+
+
+def _extract(rev: str, into: Path) -> tuple[str, Path]:
+    """``git archive`` of ``rev``'s package into ``into``; its full commit and the directory to import from."""
+    root = Path(__file__).resolve().parents[1]
+    commit = subprocess.run(["git", "-C", str(root), "rev-parse", rev], capture_output=True, text=True,
+                            check=True).stdout.strip()
+    raw = into / "tree"
+    raw.mkdir(parents=True)
+    archive = subprocess.run(["git", "-C", str(root), "archive", commit, *PACKAGE_DIRS], capture_output=True,
+                             check=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(raw)], input=archive, check=True)
+    pkg = into / "pkg"
+    pkg.mkdir()
+    for src, dst in PACKAGE_DIRS.items():  # the parent package first, then its subpackages into it
+        shutil.move(str(raw / src), str(pkg / dst))
+    return commit, pkg
+
+
+def speed_against_baseline(args) -> dict:
+    """Fit time of the default method, baseline ``args.baseline`` against the current code, and the
+    multi-stage method, interleaved per repeat (module docstring)."""
+    specs = [{"name": f"{name} (synthetic)", "kind": "synthetic", "soil": name, "seed": args.seed + 10 * i,
+              "noise": args.noise, "vibration": args.vibration} for i, name in enumerate(args.soils)]
+    mpm = Path(args.mpm_dir)
+    for name in args.soils:
+        log = mpm / f"{name}_path1.csv"
+        if log.is_file():
+            specs.append({"name": f"{name} path 1 (MPM)", "kind": "log", "path": str(log)})
+    script = str(Path(__file__).resolve())
+    with tempfile.TemporaryDirectory(prefix="calibration-baseline-") as tmp:
+        commit, pkg = _extract(args.baseline, Path(tmp))
+        env_base = dict(os.environ)
+        workers = {}
+        for version, path in (("baseline", str(pkg)), ("current", None)):
+            env = dict(env_base)
+            if path is not None:
+                env["PYTHONPATH"] = path + os.pathsep + env.get("PYTHONPATH", "")
+            workers[version] = subprocess.Popen([sys.executable, script, "--worker"], stdin=subprocess.PIPE,
+                                                stdout=subprocess.PIPE, text=True, env=env)
+        load_before = os.getloadavg()
+        rows = []
+        try:
+            for spec in specs:
+                cycle = {k: v for k, v in spec.items() if k != "name"}
+                runs: dict = {f"{v} {m}": [] for v, m in SPEED_METHODS}
+                for _ in range(args.repeats):
+                    for version, method in SPEED_METHODS:
+                        w = workers[version]
+                        w.stdin.write(json.dumps({"cycle": cycle, "method": method}) + "\n")
+                        w.stdin.flush()
+                        runs[f"{version} {method}"].append(json.loads(w.stdout.readline()))
+                row = {"cycle": spec["name"], "spec": cycle}
+                for key, rs in runs.items():
+                    row[key] = {"median_fit_s": statistics.median(r["fit_s"] for r in rs),
+                                "median_cpu_s": statistics.median(r["cpu_s"] for r in rs),
+                                "median_wall_s": statistics.median(r["wall_s"] for r in rs),
+                                "train_rmse_r_percent": rs[-1]["train_rmse_r_percent"], "cost": rs[-1]["cost"],
+                                "nfev": rs[-1]["nfev"], "params": rs[-1]["params"], "module": rs[-1]["module"]}
+                rows.append(row)
+                print(_speed_line(row), flush=True)
+        finally:
+            for w in workers.values():
+                w.stdin.close()
+                w.wait()
+    ratios = [r["current default"]["median_fit_s"] / r["current multi-stage"]["median_fit_s"] for r in rows]
+    return {"baseline": args.baseline, "baseline_commit": commit, "repeats": args.repeats,
+            "loadavg_before": load_before, "loadavg_after": os.getloadavg(), "cycles": rows,
+            "current_over_multi_stage_fit_time": {"median": statistics.median(ratios), "max": max(ratios),
+                                                  "cycles_at_or_below_1": sum(v <= 1.0 for v in ratios),
+                                                  "cycles": len(ratios)}}
+
+
+def _speed_line(row: dict) -> str:
+    cells = []
+    for key in ("baseline default", "current default", "current multi-stage"):
+        r = row[key]
+        cells.append(f"{r['median_fit_s'] * 1e3:7.1f} ({r['median_cpu_s'] * 1e3:6.1f}) "
+                     f"{r['train_rmse_r_percent']:6.2f} %")
+    return f"{row['cycle']:<30}" + " | ".join(cells)
+
+
+def speed_table(speed: dict) -> str:
+    """Markdown table of :func:`speed_against_baseline`: fit time, CPU time and training error per cycle."""
+    head = ("| cycle | ours, before: fit ms (CPU ms) | ours, now | multi-stage | now / multi-stage | train F_R %: "
+            "before / now / multi-stage |\n|---|---|---|---|---|---|\n")
+    lines = []
+    for r in speed["cycles"]:
+        b, c, m = r["baseline default"], r["current default"], r["current multi-stage"]
+        lines.append(f"| {r['cycle']} | {b['median_fit_s'] * 1e3:.1f} ({b['median_cpu_s'] * 1e3:.1f}) | "
+                     f"{c['median_fit_s'] * 1e3:.1f} ({c['median_cpu_s'] * 1e3:.1f}) | "
+                     f"{m['median_fit_s'] * 1e3:.1f} ({m['median_cpu_s'] * 1e3:.1f}) | "
+                     f"{c['median_fit_s'] / m['median_fit_s']:.2f} | {b['train_rmse_r_percent']:.2f} / "
+                     f"{c['train_rmse_r_percent']:.2f} / {m['train_rmse_r_percent']:.2f} |")
+    lb, la = speed["loadavg_before"], speed["loadavg_after"]
+    note = (f"\n*`python benchmarks/calibration.py --baseline {speed['baseline']}` (before = "
+            f"{speed['baseline_commit'][:10]}); medians of {speed['repeats']} calibrations per cell, the three "
+            f"called in turn; fit time = the calibration's `time_s` (wall clock of the optimisation), CPU = the "
+            f"whole call; load average {lb[0]:.1f} before, {la[0]:.1f} after.*\n")
+    return head + "\n".join(lines) + "\n" + note
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark and write ``results.json`` and plots into ``--out``."""
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
@@ -263,7 +419,29 @@ def main(argv: list[str] | None = None) -> int:
                         help="only measure 'wheelloader calibrate' on long logs of these row counts")
     parser.add_argument("--several-cycles", action="store_true",
                         help="only measure calibration from 1 and from 5 cycles together (several_cycles.json)")
+    parser.add_argument("--baseline", metavar="REV",
+                        help="also time the default method of git revision REV against the current code and the "
+                             "multi-stage method (module docstring); writes speed.json and speed.md")
+    parser.add_argument("--mpm-dir", default="data/mpm",
+                        help="continuum cycles <soil>_path1.csv timed with --baseline (default: %(default)s)")
+    parser.add_argument("--speed-only", action="store_true", help="with --baseline: only the speed comparison")
+    parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.worker:
+        return _worker()
+    if args.speed_only and not args.baseline:
+        parser.error("--speed-only needs --baseline REV")
+    speed = None
+    if args.baseline:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        speed = speed_against_baseline(args)
+        speed["machine"] = machine_info()
+        (out / "speed.json").write_text(json.dumps(speed, indent=1))
+        (out / "speed.md").write_text(speed_table(speed))
+        print(speed_table(speed))
+        if args.speed_only:
+            return 0
     if args.several_cycles:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
