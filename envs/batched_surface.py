@@ -41,7 +41,11 @@ class BatchedSurfaces:
 
     def pile(self, i: int, carved: bool = True) -> Pile:
         """Row ``i``'s carved (or start-of-cycle) surface as a :class:`Pile` (a copy)."""
-        return Pile(self.x0, self.spacing, (self.carved if carved else self.start)[i].copy())
+        return self.as_pile((self.carved if carved else self.start)[i])
+
+    def as_pile(self, heights: np.ndarray) -> Pile:
+        """``heights`` on this grid as a :class:`Pile` (a copy)."""
+        return Pile(self.x0, self.spacing, heights.copy())
 
     def height(self, heights: np.ndarray, rows: np.ndarray, x: np.ndarray) -> np.ndarray:
         """Surface height of ``heights[rows]`` at ``x`` (as Pile.height_at, row-wise; x may be 2-D) [m]."""

@@ -288,7 +288,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         obs = self._observation(f_t, f_n)
         if self.render_mode == "human":
             self.render()
-        return obs, {"soil": self._soil, "cycle": self._cycle_count}
+        return obs, {"soil": self._soil.to_dict(), "cycle": self._cycle_count}
 
     def _start_cycle(self, pile: Pile, new_episode: bool) -> None:
         """Fresh bucket at a new start pose on ``pile`` (draws the start pose from np_random)."""

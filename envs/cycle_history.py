@@ -55,13 +55,13 @@ class CycleHistory:
         return tuple(e["reason"] for e in self._entries)
 
 
-def to_cycle_log(entry: Mapping[str, Any], cfg: Any) -> CycleLog:
-    """A finished cycle as a :class:`~wheelloader.estimator.CycleLog` (measured forces; metadata: true
-    soil, seed, cycle index, end reason, energies [J] and the env settings ``cfg``)."""
+def to_cycle_log(entry: Mapping[str, Any], cfg: Any, source: str = "wheelloader.envs.BucketLoadingEnv") -> CycleLog:
+    """A finished cycle as a :class:`~wheelloader.estimator.CycleLog` (measured forces; metadata: the env class
+    ``source``, true soil, seed, cycle index, end reason, energies [J] and the env settings ``cfg``)."""
     rec = entry["record"]
     path = BucketPath(rec["t"], rec["x"], rec["z"], rec["blade_angle"], name=f"env cycle {entry['cycle']}")
     metadata = {
-        "source": "wheelloader.envs.BucketLoadingEnv", "true_soil": entry["soil"].to_dict(),
+        "source": source, "true_soil": entry["soil"].to_dict(),
         "seed": entry["seed"], "cycle": entry["cycle"], "end": entry["reason"],
         "energy_soil": entry["energy_soil"], "energy_payload": entry["energy_payload"],
         "env": cfg.to_dict(),

@@ -162,15 +162,17 @@ class BatchedVecEnv(VecEnv):
 
 
 def _info_list(info: dict[str, Any], n: int) -> list[dict[str, Any]]:
-    """Gymnasium's vector info (arrays with ``_key`` masks) as one dict per sub-env."""
+    """Gymnasium's vector info (arrays with ``_key`` masks; a nested dict for a dict-valued key, such as
+    ``soil``) as one dict per sub-env."""
     out: list[dict[str, Any]] = [{} for _ in range(n)]
     for key, values in info.items():
         if key.startswith("_"):
             continue
         mask = info.get("_" + key)
+        nested = _info_list(values, n) if isinstance(values, dict) else None
         for i in range(n):
             if mask is None or mask[i]:
-                value = values[i]
+                value = nested[i] if nested is not None else values[i]
                 out[i][key] = value.item() if isinstance(value, np.generic) else value
     return out
 

@@ -3,20 +3,23 @@
 Same dynamics, forces, rewards and random streams as
 :class:`~wheelloader.envs.bucket_loading.BucketLoadingEnv`: sub-env ``i``
 reset with ``seed`` behaves like a single env reset with ``seed + i`` and
-given the same actions (autoreset mode ``NEXT_STEP``: the step after a
-termination or truncation resets that env, as the single env's ``reset()``
-without a seed would). Forces come from the shared vectorised model
+given the same actions. Forces come from the shared vectorised model
 :func:`~wheelloader.estimator.soil_forces`, called once per distinct soil;
 per-env pile surfaces are rows of 2-D height arrays.
 
-Gymnasium's vector API: ``reset(seed=..., options=...)`` with the single
-env's reset options plus ``reset_mask`` (partial reset of the sub-envs where
-the mask is True), reset and step ``info`` with the single env's keys and a
-``_key`` mask each (as ``SyncVectorEnv`` builds them), ``get_attr`` /
-``set_attr`` / ``call`` and ``render`` (one frame per sub-env).
+Gymnasium's vector API, checked step by step against ``SyncVectorEnv`` of
+single envs: the three autoreset modes (``autoreset_mode=`` ``NEXT_STEP``,
+the default, ``SAME_STEP`` with ``final_obs`` / ``final_info``, and
+``DISABLED``), ``reset(seed=..., options=...)`` with the single env's reset
+options plus ``reset_mask`` (partial reset), reset and step ``info`` with the
+single env's keys and a ``_key`` mask each, ``get_attr`` / ``set_attr`` /
+``call`` (the single env's public methods and per-sub-env attributes:
+``last_cycle_log``, ``cycle_logs``, ``episode_record``, ``cycle_ends``,
+``render_state``, ``soil``, ``start_pile``, ``np_random``,
+``np_random_seed``) and ``render`` (one frame per sub-env).
 
 Not supported here (use ``gym.make_vec(..., vectorization_mode="sync")``):
-``cycles_per_episode > 1``, cycle logs, twins.
+``cycles_per_episode > 1`` and twins (``make_twin``).
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ from wheelloader.estimator import (
 )
 from wheelloader.estimator.checks import check_int
 
+from .batched_records import BatchedCycleRecorder
 from .batched_surface import BatchedSurfaces
 from .bookkeeping import (
     ResetRequest,
@@ -75,10 +79,13 @@ __all__ = ["STEP_INFO_KEYS", "BucketLoadingVectorEnv"]
 STEP_INFO_KEYS: tuple[str, ...] = REWARD_TERMS + (
     "fill_volume", "fill_fraction", "spilled", "force_tangential", "force_normal", "measured_tangential",
     "measured_normal", "energy_soil", "energy_payload", "depth", "flags", "stalled", "cycle_done", "cycle")
-#: Keys of the reset ``info`` of both envs.
+#: Keys of the reset ``info`` of both envs (``soil``: the soil's parameters as a plain dict).
 RESET_INFO_KEYS: tuple[str, ...] = ("soil", "cycle")
-#: Attributes whose value differs between sub-envs (``get_attr`` / ``set_attr`` give one per sub-env).
-PER_ENV_ATTRIBUTES: tuple[str, ...] = ("soil", "np_random", "start_pile")
+#: Attributes whose value differs between sub-envs (``get_attr`` / ``call`` give one per sub-env).
+PER_ENV_ATTRIBUTES: tuple[str, ...] = ("soil", "np_random", "np_random_seed", "start_pile", "cycle_ends")
+#: The single env's methods that ``call`` runs per sub-env.
+PER_ENV_METHODS: tuple[str, ...] = ("last_cycle_log", "cycle_logs", "episode_record", "render_state", "render")
+_SOURCE = "wheelloader.envs.BucketLoadingVectorEnv"
 
 
 class BucketLoadingVectorEnv(VectorEnv):
@@ -92,8 +99,18 @@ class BucketLoadingVectorEnv(VectorEnv):
         Truncation limit per sub-env (``gym.make_vec`` passes the registered one).
     render_mode : str or None
         ``"rgb_array"``: :meth:`render` returns one frame per sub-env.
-    **kwargs
-        The single env's keyword arguments (``cycles_per_episode`` must be 1).
+    autoreset_mode : AutoresetMode or str
+        ``NEXT_STEP`` (default: the step after an episode end resets that sub-env, reward 0),
+        ``SAME_STEP`` (the ending step resets it at once: the returned observation is the new episode's
+        first, the last one is in ``info["final_obs"]`` and its step info in ``info["final_info"]``) or
+        ``DISABLED`` (reset ended sub-envs yourself with ``reset(options={"reset_mask": ...})``; stepping
+        an ended sub-env raises).
+    record_cycles : bool
+        Keep each sub-env's cycle records for ``call("episode_record")`` and the cycle logs (default True;
+        the ring costs ``(max_episode_steps + 1) * 72`` bytes per sub-env).
+    **settings
+        The single env's settings (:class:`~wheelloader.envs.config.EnvConfig`; ``cycles_per_episode``
+        must be 1).
 
     RLlib's way works too: a mapping (a dict or RLlib's ``EnvContext``) as the
     first positional argument holds the same settings, ``num_envs`` included
@@ -106,29 +123,44 @@ class BucketLoadingVectorEnv(VectorEnv):
     ``reset(options=...)`` takes the single env's options (one parser,
     :func:`~wheelloader.envs.bookkeeping.parse_reset_options`) plus
     ``reset_mask``. Reset and step ``info`` carry the single env's keys, each
-    with a ``_key`` mask (:data:`STEP_INFO_KEYS`, :data:`RESET_INFO_KEYS`).
-    ``get_attr``, ``set_attr`` and ``call`` give one value per sub-env
-    (:data:`PER_ENV_ATTRIBUTES` differ between sub-envs; other attributes are
-    the batch's). SB3 users: :mod:`wheelloader.envs.sb3`.
+    with a ``_key`` mask (:data:`STEP_INFO_KEYS`, :data:`RESET_INFO_KEYS`), as
+    ``SyncVectorEnv`` builds them (``info["soil"]`` is a dict of per-sub-env
+    parameter arrays). ``get_attr``, ``set_attr`` and ``call`` give one value
+    per sub-env (:data:`PER_ENV_ATTRIBUTES` and :data:`PER_ENV_METHODS` per
+    sub-env; other attributes are the batch's). Each sub-env keeps its last
+    ``max_logged_cycles`` finished cycles (default 1, against the single env's
+    20: a batch of a thousand sub-envs would otherwise hold gigabytes; change
+    it with ``set_attr``). SB3 users: :mod:`wheelloader.envs.sb3`.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 60, "autoreset_mode": AutoresetMode.NEXT_STEP}
 
-    @accepts_env_config(known=lambda: ("num_envs", "max_episode_steps", "render_mode", *SETTING_NAMES))
+    @accepts_env_config(known=lambda: ("num_envs", "max_episode_steps", "render_mode", "autoreset_mode",
+                                       "record_cycles", *SETTING_NAMES))
     def __init__(self, num_envs: int = 1, max_episode_steps: int = 600, render_mode: str | None = None,
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP, record_cycles: bool = True,
                  **settings: Any) -> None:
         num_envs = check_int("num_envs", num_envs)
         max_episode_steps = check_int("max_episode_steps", max_episode_steps)
         if render_mode not in (None, "rgb_array"):
             raise ParameterError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        try:
+            mode = AutoresetMode(autoreset_mode)
+        except ValueError:
+            raise ParameterError(f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, "
+                                 f"got {autoreset_mode!r}") from None
+        if not isinstance(record_cycles, (bool, np.bool_)):
+            raise ParameterError(f"record_cycles must be a bool, got {record_cycles!r}")
         self.cfg = EnvConfig.from_kwargs(type(self).__name__, **settings)
         if self.cfg.cycles_per_episode != 1:
             raise ParameterError("the batched vector env supports cycles_per_episode=1 only; use "
                                  "vectorization_mode='sync' for multi-cycle episodes")
         self.num_envs = num_envs
-        self.max_episode_steps = max_episode_steps
+        self._max_steps = max_episode_steps
         self.render_mode = render_mode
-        self.metadata = {**type(self).metadata, "render_fps": int(round(self.cfg.control_rate))}
+        self.autoreset_mode = mode
+        self.metadata = {**type(self).metadata, "render_fps": int(round(self.cfg.control_rate)),
+                         "autoreset_mode": mode}
         self.single_action_space = spaces.Box(-1.0, 1.0, (3,), dtype=np.float32)
         self.action_space = batch_space(self.single_action_space, num_envs)
         low, high = self.cfg.obs_bounds()
@@ -137,8 +169,13 @@ class BucketLoadingVectorEnv(VectorEnv):
         self._low64, self._high64 = low.astype(np.float64), high.astype(np.float64)
         n = num_envs
         self._surf = BatchedSurfaces(self.cfg.pile, n)
+        self._records = (BatchedCycleRecorder(n, max_episode_steps, self.cfg.dt, keep=1) if record_cycles
+                         else None)
         self._rngs: list[np.random.Generator | None] = [None] * n
+        self._rng_seeds: list[int | None] = [None] * n
+        self._seeds: list[int | None] = [None] * n
         self._soils: list[SoilParams | None] = [None] * n
+        self._start_piles: list[Any] = [self.cfg.pile] * n
         self._groups: list[tuple[SoilParams, np.ndarray | slice]] | None = None
         self._gamma = np.zeros(n)
         z = np.zeros
@@ -159,6 +196,26 @@ class BucketLoadingVectorEnv(VectorEnv):
         self._noise_u = np.zeros((n, NOISE_CHUNK, 2))
         self._renderer = None
         self._started = False
+
+    @property
+    def max_episode_steps(self) -> int:
+        """Truncation limit per sub-env [steps]."""
+        return self._max_steps
+
+    @max_episode_steps.setter
+    def max_episode_steps(self, value: int) -> None:
+        self._max_steps = check_int("max_episode_steps", value)
+        if self._records is not None:
+            self._records.grow(self._max_steps)
+
+    @property
+    def max_logged_cycles(self) -> int:
+        """Finished cycles kept per sub-env (default 1)."""
+        return self._records.keep if self._records is not None else 0
+
+    @max_logged_cycles.setter
+    def max_logged_cycles(self, value: int) -> None:
+        self._recorder().keep = check_int("max_logged_cycles", value)
 
     # ------------------------------------------------------------------ reset
     def reset(self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None):
@@ -197,12 +254,13 @@ class BucketLoadingVectorEnv(VectorEnv):
         rows = np.nonzero(mask)[0]
         for i in rows:
             if seeds[i] is not None or self._rngs[i] is None:
-                self._rngs[i], _ = seeding.np_random(seeds[i])
+                self._rngs[i], self._rng_seeds[i] = seeding.np_random(seeds[i])
+            if seeds[i] is not None:
+                self._seeds[i] = seeds[i]
         if request.config_changed:
             self.cfg = request.config
         for i in rows:
             self._reset_env(int(i), request)
-        self._steps[rows] = 0
         self._prev_done[rows] = False
         self._started = True
         return self._observation(), self._reset_info(mask)
@@ -231,25 +289,35 @@ class BucketLoadingVectorEnv(VectorEnv):
         return mask.copy()
 
     def _reset_info(self, mask: np.ndarray) -> dict[str, Any]:
-        """Reset info of the sub-envs in ``mask`` (as SyncVectorEnv gathers the single env's)."""
-        soils = np.full(self.num_envs, None, dtype=object)
-        for i in np.nonzero(mask)[0]:
-            soils[i] = self._soils[i]
-        return {"soil": soils, "_soil": mask.copy(), "cycle": np.zeros(self.num_envs, dtype=int),
+        """Reset info of the sub-envs in ``mask``, as SyncVectorEnv gathers the single env's (``soil``: a dict
+        of parameter arrays with their masks)."""
+        rows = np.nonzero(mask)[0]
+        soil: dict[str, np.ndarray] = {}
+        for name in self._soils[rows[0]].to_dict():
+            values = np.zeros(self.num_envs)
+            values[rows] = [getattr(self._soils[i], name) for i in rows]
+            soil[name], soil["_" + name] = values, mask.copy()
+        return {"soil": soil, "_soil": mask.copy(), "cycle": np.zeros(self.num_envs, dtype=int),
                 "_cycle": mask.copy()}
 
-    def _reset_env(self, i: int, request: ResetRequest) -> None:
-        """Reset sub-env ``i`` exactly as BucketLoadingEnv.reset does (same random draws, same order)."""
+    def _reset_env(self, i: int, request: ResetRequest, carved: np.ndarray | None = None) -> None:
+        """Reset sub-env ``i`` exactly as BucketLoadingEnv.reset does (same random draws, same order);
+        ``carved``: its carved surface when the state rows already moved on."""
         cfg = self.cfg
         rng = self._rngs[i]
+        heights = self._surf.carved[i] if carved is None else carved
+        if self._records is not None and self._soils[i] is not None:
+            self._records.close(i, int(self._steps[i]), "reset", heights, energy_soil=float(self._e_soil[i]),
+                                energy_payload=float(self._e_pay[i]))
         keep = request.keep_pile
-        carved = self._surf.pile(i) if keep and self._soils[i] is not None else None
+        kept = self._surf.as_pile(heights) if keep and self._soils[i] is not None else None
         soil = choose_soil(cfg, self._soils[i], request.soil, rng)
         if soil is not self._soils[i]:
             self._groups = None
         self._soils[i] = soil
         self._gamma[i] = soil.gamma
-        pile = next_pile(cfg, carved, keep, request.relax, soil)
+        pile = next_pile(cfg, kept, keep, request.relax, soil)
+        self._start_piles[i] = pile
         self._surf.set(i, pile.heights)
         x, z, th = draw_start_pose(cfg, rng)
         self._x[i], self._z[i], self._th[i] = x, z, th
@@ -264,10 +332,13 @@ class BucketLoadingVectorEnv(VectorEnv):
         self._touched[i], self._entered[i] = cycle_progress(False, False, depth > 0.0, 0.0, cfg.exit_fill_volume)
         self._crest[i] = float(np.max(pile.heights))
         self._noise_n[i], self._noise_u[i] = draw_noise_chunk(rng)
-        f_t, f_n, _, _ = soil_forces_single(soil, depth, rho, alpha, lt, 0.0, cfg.bucket, DEFAULT_OPTIONS)
+        f_t, f_n, _, flags = soil_forces_single(soil, depth, rho, alpha, lt, 0.0, cfg.bucket, DEFAULT_OPTIONS)
         r = cfg.sensor_range
-        self._mt[i] = min(max(f_t + cfg.sensor_noise * float(self._noise_n[i, 0, 0]), -r), r)
-        self._mn[i] = min(max(f_n + cfg.sensor_noise * float(self._noise_n[i, 0, 1]), -r), r)
+        self._mt[i] = m_t = min(max(f_t + cfg.sensor_noise * float(self._noise_n[i, 0, 0]), -r), r)
+        self._mn[i] = m_n = min(max(f_n + cfg.sensor_noise * float(self._noise_n[i, 0, 1]), -r), r)
+        if self._records is not None:
+            self._records.start_cycle(i, (x, z, th, m_t, m_n, 0.0, f_t, f_n, flags), soil=soil, seed=self._seeds[i],
+                                      cycle=0, start_pile=pile, start_heights=pile.heights)
 
     # ------------------------------------------------------------------ forces
     def _soil_groups(self) -> list[tuple[SoilParams, np.ndarray | slice]]:
@@ -316,146 +387,190 @@ class BucketLoadingVectorEnv(VectorEnv):
 
     # ------------------------------------------------------------------ step
     def step(self, actions: np.ndarray):
-        """Step every sub-env; a sub-env whose episode ended at the previous step is reset instead
-        (``AutoresetMode.NEXT_STEP``: reward 0, not terminated, its reset info in ``info``).
+        """Step every sub-env and auto-reset ended ones as ``autoreset_mode`` says.
 
-        ``info`` has the single env's step keys (:data:`STEP_INFO_KEYS`) with ``_key`` masks that are
-        False for the sub-envs reset at this step, and for those the reset keys ``soil`` and ``cycle``.
+        ``NEXT_STEP``: a sub-env whose episode ended at the previous step is reset instead (reward 0, not
+        terminated; its step-info masks False, its reset info in ``info``). ``SAME_STEP``: a sub-env whose
+        episode ends now is reset at once; ``info["final_obs"]`` and ``info["final_info"]`` hold its last
+        observation and step info. ``DISABLED``: stepping an ended sub-env before ``reset`` raises.
         """
         if not self._started:
             raise ParameterError("call reset() before step()")
         n = self.num_envs
         acts = np.asarray(actions, dtype=np.float64).reshape(n, 3)
-        acts = np.clip(np.where(np.isnan(acts), 0.0, acts), -1.0, 1.0)
-        done = self._prev_done
-        reward = np.zeros(n)
-        terminated = np.zeros(n, dtype=bool)
-        truncated = np.zeros(n, dtype=bool)
-        info: dict[str, Any] = {}
-        any_done = bool(done.any())
-        if any_done:
+        mode = self.autoreset_mode
+        pending = self._prev_done
+        any_pending = bool(pending.any())
+        if any_pending and mode is AutoresetMode.DISABLED:
+            raise ParameterError(f"autoreset_mode DISABLED: sub-env(s) {np.nonzero(pending)[0].tolist()} ended; "
+                                 "reset them with reset(options={'reset_mask': mask}) before stepping")
+        carved: dict[int, np.ndarray] = {}
+        if any_pending:  # NEXT_STEP: they reset instead of stepping; what the reset needs is taken first
+            for i in np.nonzero(pending)[0]:
+                i = int(i)
+                carved[i] = self._surf.carved[i].copy()
+                self._close_cycle(i, "reset")
+        info, reward, terminated = self._step_all(acts, pending if any_pending else None)
+        self._steps += 1
+        truncated = self._steps >= self._max_steps
+        if any_pending:
+            reward[pending] = 0.0
+            terminated[pending] = False
+            truncated[pending] = False
+        ended = terminated | truncated
+        for i in np.nonzero(terminated)[0]:
+            self._close_cycle(int(i), "stall" if self._stall[i] >= self.cfg.stall_patience else "exit")
+        if any_pending:
             request = parse_reset_options(None, self.cfg)
-            for i in np.nonzero(done)[0]:
-                self._reset_env(int(i), request)
-            rows = np.nonzero(~done)[0]
+            for i, heights in carved.items():
+                self._reset_env(i, request, heights)
+            info = self._mask_info(info, ~pending, pending)
         else:
-            rows = np.arange(n)
-        if rows.size:
-            out, term = self._step_rows(rows, acts[rows])
-            stepped = ~done
             for key in STEP_INFO_KEYS:
-                value = out[key]
-                if any_done:  # scatter into full-size arrays (zeros where a sub-env was reset instead)
-                    full = np.zeros(n, dtype=value.dtype)
-                    full[rows] = value
-                    value = full
-                info[key] = value
-                info["_" + key] = stepped.copy()
-            reward[rows] = out["reward_fill"] + out["reward_energy"] + out["reward_validity"] + \
-                out["reward_stall"] + out["reward_force"]
-            self._steps[rows] += 1
-            terminated[rows] = term
-            truncated[rows] = self._steps[rows] >= self.max_episode_steps
-        self._prev_done = terminated | truncated
-        if any_done:
-            reset = self._reset_info(done)
-            info["soil"], info["_soil"] = reset["soil"], reset["_soil"]
-            info["cycle"] = info.get("cycle", reset["cycle"])
-            info["_cycle"] = np.ones(n, dtype=bool)
-        return self._observation(), reward, terminated, truncated, info
+                info["_" + key] = np.ones(n, dtype=bool)
+        obs = self._observation()
+        if mode is AutoresetMode.SAME_STEP and ended.any():
+            info = self._same_step_reset(info, obs, ended)
+            self._prev_done = np.zeros(n, dtype=bool)
+        else:
+            self._prev_done = ended
+        return obs, reward, terminated, truncated, info
 
-    def _step_rows(self, r: np.ndarray, a: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
-        """Step the sub-envs ``r`` (as BucketLoadingEnv.step, row-wise); per-row info values and termination."""
+    def _close_cycle(self, i: int, reason: str) -> None:
+        if self._records is not None:
+            self._records.close(i, int(self._steps[i]), reason, self._surf.carved[i],
+                                energy_soil=float(self._e_soil[i]), energy_payload=float(self._e_pay[i]))
+
+    def _mask_info(self, info: dict[str, Any], stepped: np.ndarray, reset: np.ndarray) -> dict[str, Any]:
+        """The step info of the sub-envs in ``stepped`` (zeros elsewhere, as SyncVectorEnv leaves them) and the
+        reset info of those in ``reset``."""
+        out: dict[str, Any] = {}
+        if stepped.any():
+            for key in STEP_INFO_KEYS:
+                value = info[key]
+                value[~stepped] = 0
+                out[key], out["_" + key] = value, stepped.copy()
+        reset_info = self._reset_info(reset)
+        out["soil"], out["_soil"] = reset_info["soil"], reset_info["_soil"]
+        out["cycle"], out["_cycle"] = out.get("cycle", reset_info["cycle"]), stepped | reset
+        return out
+
+    def _same_step_reset(self, info: dict[str, Any], obs: np.ndarray, ended: np.ndarray) -> dict[str, Any]:
+        """SAME_STEP: reset the sub-envs that ended now; their last observation and step info go to
+        ``final_obs`` and ``final_info``, their new observation into ``obs`` (in place)."""
+        rows = np.nonzero(ended)[0]
+        final_obs = np.full(self.num_envs, None, dtype=object)
+        for i in rows:
+            final_obs[i] = obs[i].copy()
+        final_info: dict[str, Any] = {}
+        for key in STEP_INFO_KEYS:
+            value = info[key].copy()
+            value[~ended] = 0
+            final_info[key], final_info["_" + key] = value, ended.copy()
+        request = parse_reset_options(None, self.cfg)
+        for i in rows:
+            self._reset_env(int(i), request)
+        obs[rows] = self._observation()[rows]
+        out = self._mask_info(info, ~ended, ended)
+        out["final_obs"], out["_final_obs"] = final_obs, ended.copy()
+        out["final_info"], out["_final_info"] = final_info, ended.copy()
+        return out
+
+    def _step_all(self, a: np.ndarray, pending: np.ndarray | None):
+        """Step every sub-env (as BucketLoadingEnv.step, row-wise). Rows in ``pending`` are stepped too but
+        reset afterwards (their step draws no noise). Returns the step info (fresh arrays, every
+        :data:`STEP_INFO_KEYS` key), the rewards and the terminations."""
         cfg = self.cfg
         ld = cfg.loader
-        g: Any = slice(None) if r.size == self.num_envs else r  # gather/scatter index (a slice is cheaper)
         dt, dv, dw = cfg.dt, cfg.speed_step, cfg.tilt_rate_step
-        x, z, th = self._x[g].copy(), self._z[g].copy(), self._th[g].copy()
-        vx = self._vx[g] + np.clip(a[:, 0] * ld.max_speed - self._vx[g], -dv, dv)
-        vz = self._vz[g] + np.clip(a[:, 1] * ld.max_speed - self._vz[g], -dv, dv)
-        om = self._om[g] + np.clip(a[:, 2] * ld.max_tilt_rate - self._om[g], -dw, dw)
+        a = np.clip(np.where(np.isnan(a), 0.0, a), -1.0, 1.0)
+        x, z, th = self._x.copy(), self._z.copy(), self._th.copy()
+        vx = self._vx + np.clip(a[:, 0] * ld.max_speed - self._vx, -dv, dv)
+        vz = self._vz + np.clip(a[:, 1] * ld.max_speed - self._vz, -dv, dv)
+        om = self._om + np.clip(a[:, 2] * ld.max_tilt_rate - self._om, -dw, dw)
         (x0, x1), (z0, z1), (a0, a1) = cfg.x_limits, cfg.z_limits, cfg.blade_angle_limits
         xn = np.clip(x + vx * dt, x0, x1)
         zn = np.clip(z + vz * dt, z0, z1)
         thn = np.clip(th + om * dt, a0, a1)
         vx, vz, om = (xn - x) / dt, (zn - z) / dt, (thn - th) / dt
-        fill0 = self._fill[g].copy()
-        spilled0 = self._spilled[g].copy()
-        undo = self._carve(r, g, x, z, xn, zn)
-        fill = self._fill[g].copy()
-        depth, rho, alpha, lt, h_surf = self._surf.contact(r, xn, zn, thn, cfg.slope_window, cfg.bucket.floor_length)
-        f_t, f_n, flags = self._forces(r, depth, rho, alpha, lt, fill)
-        self._k[g] += 1
-        k = self._k[g].copy()
-        j = k % NOISE_CHUNK
-        for idx in np.nonzero(j == 0)[0]:
-            i = int(r[idx])
+        fill0 = self._fill.copy()
+        spilled0 = self._spilled.copy()
+        rows = np.arange(self.num_envs)
+        undo = self._carve(rows, x, z, xn, zn)
+        fill = self._fill.copy()
+        depth, rho, alpha, lt, h_surf = self._surf.contact(rows, xn, zn, thn, cfg.slope_window,
+                                                           cfg.bucket.floor_length)
+        f_t, f_n, flags = self._forces(rows, depth, rho, alpha, lt, fill)
+        self._k += 1
+        j = self._k % NOISE_CHUNK
+        redraw = j == 0 if pending is None else (j == 0) & ~pending
+        for i in np.nonzero(redraw)[0]:
             self._noise_n[i], self._noise_u[i] = draw_noise_chunk(self._rngs[i])
         dist = np.hypot(xn - x, zn - z)
         truth_on = cfg.truth.active
         if truth_on:
-            f_t, f_n = self._truth(g, r, f_t, f_n, depth, dist / dt, dist, j, True)
+            f_t, f_n = self._truth(slice(None), rows, f_t, f_n, depth, dist / dt, dist, j, True)
         stalled = (f_t > ld.max_push_force) | (f_n > ld.max_lift_force)
         if stalled.any():
             s = np.nonzero(stalled)[0]
-            self._surf.undo(*undo, r[s])
+            self._surf.undo(*undo, s)
             fill[s] = fill0[s]
-            self._fill[r[s]] = fill0[s]
-            self._spilled[r[s]] = spilled0[s]
+            self._fill[s] = fill0[s]
+            self._spilled[s] = spilled0[s]
             xn[s], zn[s], thn[s] = x[s], z[s], th[s]
             vx[s] = vz[s] = om[s] = 0.0
-            d2, rho2, al2, lt2, h2 = self._surf.contact(r[s], x[s], z[s], th[s], cfg.slope_window,
+            d2, rho2, al2, lt2, h2 = self._surf.contact(s, x[s], z[s], th[s], cfg.slope_window,
                                                         cfg.bucket.floor_length)
             h_surf[s] = h2
-            ft2, fn2, fl2 = self._forces(r[s], d2, rho2, al2, lt2, fill0[s])
+            ft2, fn2, fl2 = self._forces(s, d2, rho2, al2, lt2, fill0[s])
             if truth_on:
-                ft2, fn2 = self._truth(r[s], r[s], ft2, fn2, d2, 0.0, 0.0, None, False)
+                ft2, fn2 = self._truth(s, s, ft2, fn2, d2, 0.0, 0.0, None, False)
             depth[s], rho[s], alpha[s], f_t[s], f_n[s], flags[s] = d2, rho2, al2, ft2, fn2, fl2
-            self._stall[g] = np.where(stalled, self._stall[g] + 1, 0)
+            self._stall = np.where(stalled, self._stall + 1, 0)
         else:
-            self._stall[g] = 0
+            self._stall[:] = 0
         # energy (the shared bookkeeping)
-        e_soil, e_pay = step_work(f_t, f_n, xn - x, zn - z, thn, self._gamma[g] * GRAVITY * fill)
-        self._e_soil[g] += e_soil
-        self._e_pay[g] += e_pay
+        e_soil, e_pay = step_work(f_t, f_n, xn - x, zn - z, thn, self._gamma * GRAVITY * fill)
+        self._e_soil += e_soil
+        self._e_pay += e_pay
         # measurement
         rng_r = cfg.sensor_range
-        noise = self._noise_n[r, j]
-        self._mt[g] = np.clip(f_t + cfg.sensor_noise * noise[:, 0], -rng_r, rng_r)
-        self._mn[g] = np.clip(f_n + cfg.sensor_noise * noise[:, 1], -rng_r, rng_r)
-        self._x[g], self._z[g], self._th[g], self._vx[g], self._vz[g], self._om[g] = xn, zn, thn, vx, vz, om
-        self._depth[g], self._rho[g], self._alpha[g] = depth, rho, alpha
+        noise = self._noise_n[rows, j]
+        self._mt = np.clip(f_t + cfg.sensor_noise * noise[:, 0], -rng_r, rng_r)
+        self._mn = np.clip(f_n + cfg.sensor_noise * noise[:, 1], -rng_r, rng_r)
+        self._x, self._z, self._th, self._vx, self._vz, self._om = xn, zn, thn, vx, vz, om
+        self._depth, self._rho, self._alpha = depth, rho, alpha
         cap = cfg.bucket.capacity
         terms = reward_terms(cfg.reward_weights, cap, ld.max_push_force, ld.max_lift_force, fill - fill0,
                              e_soil + e_pay, outside_validity(depth, flags), stalled, f_t, f_n)
         # cycle end (the shared rule)
-        touched, entered = cycle_progress(self._touched[g], self._entered[g], depth > 0.0, fill,
-                                          cfg.exit_fill_volume)
-        self._entered[g] = entered
-        self._touched[g] = touched
-        done = cycle_done(touched, entered, zn, zn - h_surf, self._crest[g], cfg.exit_clearance)
-        terminated = done | (self._stall[g] >= cfg.stall_patience)
-        out = dict(zip(REWARD_TERMS, terms, strict=True))
+        self._touched, self._entered = cycle_progress(self._touched, self._entered, depth > 0.0, fill,
+                                                      cfg.exit_fill_volume)
+        done = cycle_done(self._touched, self._entered, zn, zn - h_surf, self._crest, cfg.exit_clearance)
+        terminated = done | (self._stall >= cfg.stall_patience)
+        if self._records is not None:
+            self._records.write_step((xn, zn, thn, self._mt, self._mn, fill, f_t, f_n, flags))
+        info = dict(zip(REWARD_TERMS, terms, strict=True))
         # fresh arrays only (the env's state arrays change at the next step)
-        out.update(fill_volume=fill, fill_fraction=fill / cap, spilled=self._spilled[g].copy(), force_tangential=f_t,
-                   force_normal=f_n, measured_tangential=self._mt[g].copy(), measured_normal=self._mn[g].copy(),
-                   energy_soil=self._e_soil[g].copy(), energy_payload=self._e_pay[g].copy(), depth=depth,
-                   flags=np.asarray(flags, dtype=int), stalled=stalled, cycle_done=done,
-                   cycle=np.zeros(r.size, dtype=int))
-        return out, terminated
+        info.update(fill_volume=fill, fill_fraction=fill / cap, spilled=self._spilled.copy(), force_tangential=f_t,
+                    force_normal=f_n, measured_tangential=self._mt.copy(), measured_normal=self._mn.copy(),
+                    energy_soil=self._e_soil.copy(), energy_payload=self._e_pay.copy(), depth=depth.copy(),
+                    flags=np.asarray(flags, dtype=int), stalled=stalled, cycle_done=done,
+                    cycle=np.zeros(self.num_envs, dtype=int))
+        return info, terms.total(), terminated
 
-    def _carve(self, r: np.ndarray, g: Any, xa, za, xb, zb):
+    def _carve(self, rows: np.ndarray, xa, za, xb, zb):
         """Carve the rows' segments and fill their buckets (the rest spills); returns what undoes the cut."""
-        idx_u, old_u, area = self._surf.carve(r, xa, za, xb, zb)
+        idx_u, old_u, area = self._surf.carve(rows, xa, za, xb, zb)
         if area is None:
             return idx_u, old_u
         removed = area * self.cfg.bucket.width
-        fill = self._fill[g]
+        fill = self._fill
         room = np.maximum(0.0, self.cfg.bucket.capacity - fill)
         taken = np.where(removed <= room, removed, room)
         pos = removed > 0.0
-        self._fill[g] = np.where(pos, fill + taken, fill)
-        self._spilled[g] = np.where(pos, self._spilled[g] + (removed - taken), self._spilled[g])
+        self._fill = np.where(pos, fill + taken, fill)
+        self._spilled = np.where(pos, self._spilled + (removed - taken), self._spilled)
         return idx_u, old_u
 
     # ------------------------------------------------------------------ observation
@@ -492,7 +607,7 @@ class BucketLoadingVectorEnv(VectorEnv):
     def _render_state(self, i: int) -> dict[str, Any]:
         """What the renderer draws for sub-env ``i`` (as BucketLoadingEnv.render_state)."""
         return {
-            "pile": self.cfg.pile, "start_pile": self._surf.pile(i, carved=False), "carved": self._surf.pile(i),
+            "pile": self.cfg.pile, "start_pile": self._start_piles[i], "carved": self._surf.pile(i),
             "x": float(self._x[i]), "z": float(self._z[i]), "blade_angle": float(self._th[i]),
             "fill": float(self._fill[i]), "capacity": self.cfg.bucket.capacity, "F_T": float(self._mt[i]),
             "F_N": float(self._mn[i]), "floor_length": self.cfg.bucket.floor_length,
@@ -507,20 +622,51 @@ class BucketLoadingVectorEnv(VectorEnv):
             renderer.close()
             self._renderer = None
 
-    # ------------------------------------------------------------------ sub-env attributes
+    # ------------------------------------------------------------------ sub-env attributes and methods
+    def _recorder(self) -> BatchedCycleRecorder:
+        if self._records is None:
+            raise ParameterError("this batched env was built with record_cycles=False: it keeps no cycle records")
+        return self._records
+
     def _per_env(self, name: str, i: int) -> Any:
         if name == "soil":
             return self._soils[i]
         if name == "np_random":
             return self._rngs[i]
-        return self._surf.pile(i, carved=False)  # start_pile
+        if name == "np_random_seed":
+            return self._rng_seeds[i]
+        if name == "cycle_ends":
+            return self._recorder().histories[i].ends
+        return self._start_piles[i]  # start_pile
+
+    def episode_record(self, i: int, index: int = -1, current: bool = False) -> dict[str, np.ndarray]:
+        """Sub-env ``i``'s :meth:`BucketLoadingEnv.episode_record` (``call("episode_record", ...)`` asks every
+        sub-env)."""
+        records = self._recorder()
+        if current:
+            if not records.is_open(i):
+                raise ParameterError("no cycle in progress")
+            return records.record(i, int(self._steps[i]))
+        return records.histories[i].record(index)
+
+    def last_cycle_log(self, i: int) -> Any:
+        """Sub-env ``i``'s :meth:`BucketLoadingEnv.last_cycle_log`."""
+        records = self._recorder()
+        if not records.histories[i]:
+            raise ParameterError("no finished cycle yet: step until termination (or reset) first")
+        return records.log(i, -1, self.cfg, _SOURCE)
+
+    def cycle_logs(self, i: int) -> list[Any]:
+        """Sub-env ``i``'s :meth:`BucketLoadingEnv.cycle_logs` (oldest first)."""
+        records = self._recorder()
+        return [records.log(i, k, self.cfg, _SOURCE) for k in range(len(records.histories[i]))]
 
     def get_attr(self, name: str) -> tuple[Any, ...]:
         """The attribute ``name`` of every sub-env (as ``SyncVectorEnv.get_attr``).
 
-        :data:`PER_ENV_ATTRIBUTES` (``soil``, ``np_random``, ``start_pile``) differ between sub-envs;
-        any other attribute of the batched env (``cfg``, ``render_mode``, ``metadata``, ...) is shared
-        and repeated ``num_envs`` times.
+        :data:`PER_ENV_ATTRIBUTES` (``soil``, ``np_random``, ``np_random_seed``, ``start_pile``,
+        ``cycle_ends``) differ between sub-envs; any other attribute of the batched env (``cfg``,
+        ``render_mode``, ``metadata``, ...) is shared and repeated ``num_envs`` times.
         """
         if name in PER_ENV_ATTRIBUTES:
             return tuple(self._per_env(name, i) for i in range(self.num_envs))
@@ -531,8 +677,9 @@ class BucketLoadingVectorEnv(VectorEnv):
         """Set ``name`` in every sub-env: ``values`` is a list of one value per sub-env, or one value for all.
 
         Per sub-env: ``soil`` (the simulator soil from now on, e.g. calibrated parameters) and
-        ``np_random`` (a :class:`numpy.random.Generator`). Any other existing attribute is shared by
-        the batch, so every sub-env must get the same value.
+        ``np_random`` (a :class:`numpy.random.Generator`; its ``np_random_seed`` becomes -1, as in
+        Gymnasium's envs). Any other existing attribute is shared by the batch, so every sub-env must get
+        the same value.
         """
         n = self.num_envs
         if isinstance(values, (list, tuple)):
@@ -553,7 +700,8 @@ class BucketLoadingVectorEnv(VectorEnv):
                     raise ParameterError(f"set_attr('np_random'): expected numpy.random.Generator, "
                                          f"got {type(v).__name__}")
             self._rngs = per
-        elif name == "start_pile" or not hasattr(self, name):
+            self._rng_seeds = [-1] * n
+        elif name in PER_ENV_ATTRIBUTES or not hasattr(self, name):
             raise ParameterError(f"set_attr: {name!r} cannot be set on the batched env")
         else:
             if any(v is not per[0] and v != per[0] for v in per[1:]):
@@ -564,19 +712,35 @@ class BucketLoadingVectorEnv(VectorEnv):
     def call(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
         """Call ``name`` in every sub-env (as ``SyncVectorEnv.call``); results one per sub-env.
 
-        ``"render"`` draws each sub-env; a per-sub-env attribute (:meth:`get_attr`) is returned as is;
-        another method of the batched env acts on the whole batch, so it is called once and its result
-        repeated; a non-callable attribute is returned like :meth:`get_attr`.
+        The single env's methods in :data:`PER_ENV_METHODS` (``last_cycle_log``, ``cycle_logs``,
+        ``episode_record``, ``render_state``, ``render``) run per sub-env with the arguments given; a
+        per-sub-env attribute (:meth:`get_attr`) is returned as is; another method of the batched env acts on
+        the whole batch, so it is called once and its result repeated; a non-callable attribute is returned
+        like :meth:`get_attr`. ``make_twin`` needs the single env (``vectorization_mode="sync"``).
         """
+        n = self.num_envs
         if name == "render":
             if self.render_mode is None:
-                return tuple(None for _ in range(self.num_envs))
-            return tuple(self._render_env(i) for i in range(self.num_envs))
+                return tuple(None for _ in range(n))
+            return tuple(self._render_env(i) for i in range(n))
+        if name == "render_state":
+            return tuple(self._render_state(i) for i in range(n))
+        if name in ("last_cycle_log", "cycle_logs", "episode_record"):
+            method = getattr(self, name)
+            return tuple(method(i, *args, **kwargs) for i in range(n))
+        if name == "make_twin":
+            raise ParameterError("make_twin needs the single env: build the vector env with "
+                                 "gym.make_vec(..., vectorization_mode='sync') or make a twin of a single env")
         if name in PER_ENV_ATTRIBUTES:
             return self.get_attr(name)
         attr = getattr(self, name)
         result = attr(*args, **kwargs) if callable(attr) else attr
-        return tuple(result for _ in range(self.num_envs))
+        return tuple(result for _ in range(n))
+
+    @property
+    def np_random_seed(self) -> tuple[int | None, ...]:
+        """The seed of each sub-env's generator (-1 where it was set directly), as ``SyncVectorEnv`` gives it."""
+        return tuple(self._rng_seeds)
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()

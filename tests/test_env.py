@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import pickle
 import subprocess
@@ -223,8 +224,9 @@ def test_keep_pile_relax_and_soil_options():
     env.reset(options={"soil": "lean_clay"})
     assert base.soil == preset("lean_clay")
     assert base.render_state()["start_pile"] == Pile.trapezoid()
-    soils = {env.reset(options={"soil": "resample"})[1]["soil"] for _ in range(12)}
-    assert len(soils) > 1
+    soils = [env.reset(options={"soil": "resample"})[1]["soil"] for _ in range(12)]
+    assert len({tuple(sorted(s.items())) for s in soils}) > 1
+    assert all(type(s) is dict and json.loads(json.dumps(s)) == s for s in soils)  # plain, loggable
     with pytest.raises(ParameterError, match="unknown key"):
         env.reset(options={"keep_piles": True})
 
