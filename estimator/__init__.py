@@ -23,9 +23,11 @@ from .force_model import (
     soil_forces,
     soil_forces_single,
 )
+from .force_models import DEFAULT_PAYLOAD, FORCE_MODELS
 from .kinematics import DEFAULT_SLOPE_WINDOW, ContactState, blade_length_in_soil, contact_single, contact_state
 from .machine import Bucket, Loader
 from .paths import BucketPath, bezier_path, default_path, paper_paths, polyline_path
+from .payload import PayloadOptions, fit_payload
 from .pile import CarveResult, Pile, SurfaceCarver
 from .soil import PAPER_BOUNDS, PARAMETER_NAMES, PRESET_NAMES, SoilParams, as_soil, preset
 from .soil_vector import SOIL_VECTOR_NAMES, soil_from_vector, soil_vector
@@ -73,12 +75,13 @@ def __dir__() -> list[str]:
 
 __all__ = [
     "Bucket", "BucketPath", "Calibration", "CalibrationError", "CalibrationOptions", "CarveResult", "ContactState",
-    "CycleLog", "CycleLogError", "DEFAULT_METHOD", "DEFAULT_OPTIONS", "DEFAULT_SLOPE_WINDOW", "FLAG_NAMES",
-    "FLAG_OUT_OF_SOIL", "FitQuality", "FitWarning", "GRAVITY", "Loader", "METHODS", "METHOD_ALIASES", "ModelOptions",
-    "PAPER_BOUNDS", "PARAMETER_NAMES", "PRESET_NAMES", "ParameterError", "Pile", "PlanningError", "Prediction",
-    "SOIL_VECTOR_NAMES", "SoilForces", "SoilParams", "StageResult", "SurfaceCarver", "Uncertainty", "WheelloaderError",
-    "as_soil", "bearing_factors", "bezier_path", "blade_length_in_soil", "calibrate", "canonical_method",
-    "contact_single", "contact_state", "default_path", "load_params", "load_path_csv", "optimal_beta", "paper_paths",
-    "polyline_path", "predict", "preset", "random_bezier_path", "random_soil", "save_path_csv", "soil_forces",
-    "soil_forces_single", "soil_from_vector", "soil_vector", "synthetic_cycle"
+    "CycleLog", "CycleLogError", "DEFAULT_METHOD", "DEFAULT_OPTIONS", "DEFAULT_PAYLOAD", "FORCE_MODELS",
+    "DEFAULT_SLOPE_WINDOW", "FLAG_NAMES", "FLAG_OUT_OF_SOIL", "FitQuality", "FitWarning", "GRAVITY", "Loader",
+    "METHODS", "METHOD_ALIASES", "ModelOptions", "PAPER_BOUNDS", "PARAMETER_NAMES", "PRESET_NAMES", "ParameterError",
+    "PayloadOptions", "Pile", "PlanningError", "Prediction", "SOIL_VECTOR_NAMES", "SoilForces", "SoilParams",
+    "StageResult", "SurfaceCarver", "Uncertainty", "WheelloaderError", "as_soil", "bearing_factors", "bezier_path",
+    "blade_length_in_soil", "calibrate", "canonical_method", "contact_single", "contact_state", "default_path",
+    "fit_payload", "load_params", "load_path_csv", "optimal_beta", "paper_paths", "polyline_path", "predict",
+    "preset", "random_bezier_path", "random_soil", "save_path_csv", "soil_forces", "soil_forces_single",
+    "soil_from_vector", "soil_vector", "synthetic_cycle"
 ]

@@ -36,7 +36,7 @@ from .cyclelog import CycleLog
 from .errors import CalibrationError, ParameterError
 from .kinematics import DEFAULT_SLOPE_WINDOW, ContactState
 
-__all__ = ["PayloadOptions", "fit_payload", "kept_fill", "kept_volume", "payload_contact_state"]
+__all__ = ["PayloadOptions", "fit_payload", "kept_fill", "kept_volume", "payload_contact_state", "with_kept_fill"]
 
 
 @dataclass(frozen=True)
@@ -110,8 +110,15 @@ def payload_contact_state(log: CycleLog, options: PayloadOptions,
     :func:`kept_volume` of the removed volume instead of the carved fill capped at the nominal capacity. A
     logged load or fill is not used: this is what the model predicts for the path.
     """
-    state = log.contact_state(slope_window=slope_window, fill="model")
-    fill = kept_volume(state.carve.removed_history, log.bucket.capacity, options)
+    return with_kept_fill(log.contact_state(slope_window=slope_window, fill="model"), log.bucket.capacity, options)
+
+
+def with_kept_fill(state: ContactState, capacity: float, options: PayloadOptions,
+                   initial: float = 0.0) -> ContactState:
+    """``state`` (computed by carving) with the payload's kept soil as its fill and no logged load."""
+    if state.carve is None:
+        raise ParameterError("the payload model needs the carved volume (a contact state computed by carving)")
+    fill = kept_volume(state.carve.removed_history, capacity, options, initial)
     return replace(state, fill_volume=np.asarray(fill, dtype=float), measured_load=None)
 
 

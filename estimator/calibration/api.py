@@ -37,6 +37,7 @@ from ..checks import check_range
 from ..cyclelog import CycleLog
 from ..errors import CalibrationError
 from ..force_model import DEFAULT_OPTIONS, FLAG_TENSION, ModelOptions, soil_forces
+from ..force_models import DEFAULT_FORCE_MODEL, cycle_contact_state
 from ..kinematics import ContactState
 from ..soil import PARAMETER_NAMES, SoilParams
 from ..soil_vector import SOIL_VECTOR_NAMES as FIT_NAMES
@@ -282,7 +283,7 @@ def calibrate(cycles: CycleLog | list[CycleLog] | None = None, *legacy_args: Any
         # gaussian_filter1d's kernel spans 8 sigma: a sigma of 1e9 samples asked for 60 GiB
         raise CalibrationError(f"sigma = {opts.sigma:g} samples is wider than the cycle ({len(logs[0])} samples); "
                                "the stage-2 filter needs sigma <= the number of samples")
-    states = [log.contact_state(opts.slope_window, opts.fill) for log in logs]
+    states = [cycle_contact_state(log, opts.force_model, opts.payload, opts.slope_window, opts.fill) for log in logs]
     parts = [_fit_data(log, st, opts, k if len(logs) > 1 else None) for k, (log, st) in enumerate(zip(logs, states,
                                                                                                       strict=True))]
     data = parts[0] if len(logs) == 1 else FitData.concat(parts, weights)
@@ -291,6 +292,9 @@ def calibrate(cycles: CycleLog | list[CycleLog] | None = None, *legacy_args: Any
     if opts.model_options != DEFAULT_OPTIONS or opts.fill != "log":  # recorded so that predict() uses the same model
         settings["model_options"] = dataclasses.asdict(opts.model_options)
         settings["fill"] = opts.fill
+    if opts.force_model != DEFAULT_FORCE_MODEL:
+        settings["force_model"] = opts.force_model
+        settings["payload"] = opts.payload.to_dict()
     data = _decimated(data, settings)
     _log.info("calibrate: method %s on %d in-soil samples of %d", opts.method, len(data), len(logs[0]))
     fit = FIT_FUNCTIONS[opts.method](data, logs[0], opts, lo, hi)

@@ -14,7 +14,9 @@ from typing import Any
 from ..checks import check_choice, check_int, check_optional_int, check_range
 from ..errors import CalibrationError, ParameterError
 from ..force_model import DEFAULT_OPTIONS, ModelOptions
+from ..force_models import DEFAULT_FORCE_MODEL, check_force_model, model_options_for
 from ..kinematics import DEFAULT_SLOPE_WINDOW
+from ..payload import PayloadOptions
 from ..soil import SoilParams, as_soil, validate_bounds
 from .fitmodel import MIN_SAMPLES
 from .priors import class_prior
@@ -127,6 +129,14 @@ class CalibrationOptions:
         ``"granular"`` or ``"cohesive"`` (paper Tables A1, A2;
         :mod:`wheelloader.estimator.calibration.priors`), or ``{name: (low, high)}`` ranges of your own
         over the fit vector; it replaces the weak prior of ``regularize``.
+    force_model : str
+        The model fitted (:data:`~wheelloader.estimator.force_models.FORCE_MODELS`): ``"fee"`` (default, the
+        paper's FEE) or ``"fee-payload"`` (the FEE with the payload as a state and its carried load; varpro
+        method; the fill is the payload model's kept soil, whatever ``fill`` says).
+    payload : PayloadOptions, optional
+        The payload's parameters for ``"fee-payload"`` (default
+        :data:`~wheelloader.estimator.force_models.DEFAULT_PAYLOAD`; fit your own with
+        :func:`~wheelloader.estimator.payload.fit_payload`).
     band_noise : {"training", "cross-cycle"}
         Residual noise model of the prediction band (:mod:`~.bands`): ``"training"`` (default) fits it to the
         training residuals; ``"cross-cycle"`` (several cycles) to the residuals of each cycle predicted by a
@@ -157,6 +167,8 @@ class CalibrationOptions:
     fill: str = "log"
     prior: str | dict | None = None
     band_noise: str = "training"
+    force_model: str = DEFAULT_FORCE_MODEL
+    payload: PayloadOptions | None = None
 
     def __post_init__(self) -> None:
         err = CalibrationError
@@ -164,8 +176,10 @@ class CalibrationOptions:
         set_(self, "method", canonical_method(self.method))
         set_(self, "cycle_weights", _check_weights(self.forgetting, self.cycle_weights))
         check_choice("fill", self.fill, FILL_SOURCES, error=err)
+        set_(self, "payload", check_force_model(self.force_model, self.payload, error=err))
         if not isinstance(self.model_options, ModelOptions):
             raise err(f"model_options must be a ModelOptions, got {type(self.model_options).__name__}")
+        set_(self, "model_options", model_options_for(self.force_model, self.model_options))
         if self.model_options.extra_terms and self.method != "varpro":
             raise err(f"the paper's methods fit the paper's model only; the opt-in term(s) "
                       f"{list(self.model_options.extra_terms)} need the varpro method")

@@ -12,9 +12,11 @@ from ..checks import check_choice
 from ..cyclelog import CycleLog
 from ..errors import ParameterError
 from ..force_model import DEFAULT_OPTIONS, ModelOptions, SoilForces, soil_forces
+from ..force_models import DEFAULT_FORCE_MODEL, check_force_model, model_options_for
 from ..kinematics import DEFAULT_SLOPE_WINDOW, ContactState, contact_state
 from ..machine import Bucket
 from ..paths import BucketPath
+from ..payload import PayloadOptions, with_kept_fill
 from ..pile import Pile
 from ..soil import SoilParams
 from .bands import BandModel, PredictionBand, prediction_band
@@ -100,6 +102,8 @@ def predict(
     fill: str | None = None,
     band: float | None = None,
     band_model: BandModel | None = None,
+    force_model: str | None = None,
+    payload: PayloadOptions | None = None,
 ) -> Prediction:
     """Forces of the calibrated model along a path.
 
@@ -138,16 +142,32 @@ def predict(
         The band's inputs when ``params`` is not a :class:`Calibration` (e.g. read from a
         params.json: ``BandModel.from_dict(data["calibration"]["settings"]["band_model"])``).
 
+    force_model : str, optional
+        :data:`~wheelloader.estimator.force_models.FORCE_MODELS`; default: the calibration's
+        (:attr:`Calibration.force_model`), else ``"fee"``. With ``"fee-payload"`` the fill is the payload model's
+        kept soil along the path (``fill`` is not used) and the carried load is on.
+    payload : PayloadOptions, optional
+        The payload's parameters for ``"fee-payload"``; default: the calibration's, else
+        :data:`~wheelloader.estimator.force_models.DEFAULT_PAYLOAD`.
+
     Returns
     -------
     Prediction
     """
     soil = load_params(params)
+    if force_model is None:
+        force_model = params.force_model if isinstance(params, Calibration) else DEFAULT_FORCE_MODEL
+    if payload is None and isinstance(params, Calibration) and force_model == params.force_model:
+        payload = params.payload
+    payload = check_force_model(force_model, payload)
     if options is None:
         options = params.model_options if isinstance(params, Calibration) else DEFAULT_OPTIONS
+    options = model_options_for(force_model, options)
     if fill is None:
         fill = params.fill_source if isinstance(params, Calibration) else "log"
     check_choice("fill", fill, ("log", "model"))
+    if payload is not None:
+        fill = "model"  # the payload's kept soil follows from the carving
     observed_t = observed_n = None
     acceleration = None
     if isinstance(path_or_cycle, CycleLog):
@@ -177,6 +197,8 @@ def predict(
     state = contact_state(path.x, path.z, path.blade_angle, pile, bucket, slope_window=slope_window,
                           initial_fill=initial_fill, fill_volume=fill_volume, measured_load=load,
                           acceleration=acceleration, velocity=velocity)
+    if payload is not None:
+        state = with_kept_fill(state, bucket.capacity, payload, initial_fill)
     forces = soil_forces(soil, state, bucket, options)
     pband = None
     if band is not None:

@@ -219,6 +219,19 @@ class Calibration:
         return str(self.settings.get("fill", "log"))
 
     @property
+    def force_model(self) -> str:
+        """The force model fitted (:data:`~wheelloader.estimator.force_models.FORCE_MODELS`; ``"fee"`` unless set)."""
+        return str(self.settings.get("force_model", "fee"))
+
+    @property
+    def payload(self):
+        """The :class:`~wheelloader.estimator.payload.PayloadOptions` of a ``"fee-payload"`` calibration, else None."""
+        from ..payload import PayloadOptions
+
+        stored = self.settings.get("payload")
+        return None if stored is None else PayloadOptions(**stored)
+
+    @property
     def band_model(self):
         """What :func:`predict` needs for a prediction band (:class:`~.bands.BandModel`): covariance,
         residual autocorrelation time and residual noise model of this calibration."""

@@ -1,0 +1,66 @@
+"""The force models one argument selects: ``force_model=`` in calibrate, predict, the env and the planner.
+
+========================  ===================================================================================
+name                      model
+========================  ===================================================================================
+``"fee"``                 the paper's modified FEE (eqs 1-17); the bucket fill is the carved area capped at the
+                          nominal capacity (or the logged fill); no force once the tip leaves the soil
+``"fee-payload"``         the FEE with the payload as a state (:mod:`~wheelloader.estimator.payload`): the fill
+                          is the kept soil (retention, smooth heaped capacity) and its weight and inertia stay
+                          on the bucket in and out of soil (the opt-in carried-load term)
+========================  ===================================================================================
+
+:data:`DEFAULT_PAYLOAD` is the payload fitted to the project's continuum cycles except the held-out soil
+(dirt) and pile (25 deg): 254 MPM cycles of ``data/mpm`` and ``data/results/adaptation_mpm*/cycles``, by
+``fit_payload`` (command in ``docs/guide/force_models.md``). It is a default for users; benchmarks that judge
+the model refit it on their own training split.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from .checks import check_choice
+from .cyclelog import CycleLog
+from .errors import ParameterError
+from .kinematics import ContactState
+from .payload import PayloadOptions, payload_contact_state
+from .validity import ModelOptions
+
+__all__ = ["DEFAULT_FORCE_MODEL", "DEFAULT_PAYLOAD", "FORCE_MODELS", "check_force_model", "cycle_contact_state",
+           "model_options_for"]
+
+#: Names accepted by ``force_model=``.
+FORCE_MODELS: tuple[str, ...] = ("fee", "fee-payload")
+DEFAULT_FORCE_MODEL = "fee"
+#: The payload fitted to the continuum training cycles (module docstring); rounded to 4 digits.
+DEFAULT_PAYLOAD = PayloadOptions(retention=0.9649, heap_factor=0.6059, sharpness=1.926)
+
+
+def check_force_model(name: object, payload: PayloadOptions | None, error: type[Exception] = ParameterError
+                      ) -> PayloadOptions | None:
+    """Validate ``force_model``/``payload``; return the payload options the model uses (None for ``"fee"``)."""
+    check_choice("force_model", name, FORCE_MODELS, error=error)
+    if name == "fee":
+        if payload is not None:
+            raise error('payload options need force_model="fee-payload"')
+        return None
+    if payload is None:
+        return DEFAULT_PAYLOAD
+    if not isinstance(payload, PayloadOptions):
+        raise error(f"payload must be a PayloadOptions, got {type(payload).__name__}")
+    return payload
+
+
+def model_options_for(name: str, options: ModelOptions) -> ModelOptions:
+    """The force-model options ``name`` needs on top of ``options`` (the payload's carried load)."""
+    return replace(options, carried_load=True) if name == "fee-payload" else options
+
+
+def cycle_contact_state(log: CycleLog, name: str, payload: PayloadOptions | None, slope_window: float,
+                        fill: str) -> ContactState:
+    """A logged cycle's contact state under force model ``name`` (``fill`` applies to ``"fee"`` only)."""
+    if name == "fee-payload":
+        return payload_contact_state(log, payload, slope_window)
+    return log.contact_state(slope_window, fill)
+
