@@ -29,13 +29,23 @@ COMMAND_MODULES: tuple[str, ...] = (
 )
 
 
+def _one_line(text: object) -> str:
+    """``text`` on one line: control characters (a newline in a file name) written as escapes."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(text))
+
+
+def _error(text: object) -> int:
+    print(f"wheelloader: error: {_one_line(text)}", file=sys.stderr)
+    return 2
+
+
 class _Parser(argparse.ArgumentParser):
     """An argument parser whose usage errors are one ``wheelloader: error:`` line (exit status 2)."""
 
     def error(self, message: str) -> NoReturn:
         command = self.prog.removeprefix("wheelloader").strip()
         where = f"{command}: " if command else ""
-        self.exit(2, f"wheelloader: error: {where}{message} (see '{self.prog} --help')\n")
+        self.exit(2, f"wheelloader: error: {_one_line(where + message)} (see '{self.prog} --help')\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -82,18 +92,15 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except WheelloaderError as exc:
-        print(f"wheelloader: error: {exc}", file=sys.stderr)
-        return 2
+        return _error(exc)
     except BrokenPipeError:  # output piped into a reader that closed early (e.g. `| head`): stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except FileNotFoundError as exc:
-        print(f"wheelloader: error: file not found: {exc.filename}", file=sys.stderr)
-        return 2
+        return _error(f"file not found: {exc.filename}")
     except OSError as exc:
         where = f": {exc.filename}" if exc.filename else ""
-        print(f"wheelloader: error: {exc.strerror or exc}{where}", file=sys.stderr)
-        return 2
+        return _error(f"{exc.strerror or exc}{where}")
     except KeyboardInterrupt:  # Ctrl-C: every output was staged and is discarded (wheelloader.cli.staging)
         print("wheelloader: interrupted", file=sys.stderr)
         return 130

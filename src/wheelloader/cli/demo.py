@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import math
 import shutil
 from typing import Any
@@ -66,8 +65,11 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(f"--window must be a positive number of cycles, got {args.window}")
     if args.mpc and args.plant != "fee-env":
         raise ParameterError("--mpc needs the env's feedback and runs only with the fee-env plant")
-    if args.plant == "mpm" and importlib.util.find_spec("taichi") is None:
-        raise ParameterError("--plant mpm needs the mpm extra (Taichi): pip install 'wheelloader[mpm]'")
+    if args.plant == "mpm":
+        try:
+            import taichi  # noqa: F401
+        except ImportError:
+            raise ParameterError("--plant mpm needs the mpm extra (Taichi): pip install 'wheelloader[mpm]'") from None
     run = OutputRun(force=args.force)
     out = run.directory("-o/--out", args.out, fresh=not args.force)
     with run:

@@ -76,6 +76,10 @@ def is_cycle_log(path: Path) -> bool:
 
 def sidecar_of(csv_path: str | Path) -> Path:
     """The JSON sidecar of a cycle-log CSV (same stem)."""
+    from wheelloader.estimator import ParameterError
+
+    if not Path(csv_path).name:
+        raise ParameterError(f"{str(csv_path)!r} is not a file name")
     return Path(csv_path).with_suffix(".json")
 
 

@@ -122,6 +122,8 @@ def run_plan(args: argparse.Namespace) -> int:
     _validate(args)
     weights = _parse_weights(args.weights) if args.pareto else ()
     output = Path(args.output)
+    if output.name in ("", ".", ".."):
+        raise ParameterError(f"-o/--output {args.output!r} is not a file name")
     if output.name.lower().endswith(SUMMARY_SUFFIX) or output.suffix.lower() == ".json":
         raise ParameterError(f"output {output} should be a .csv file (the JSON summary is written beside it)")
     summary_path = output.with_name(output.stem + SUMMARY_SUFFIX)

@@ -212,6 +212,8 @@ class OutputRun:
         if value is None:
             return None
         path = Path(value)
+        if path.name in ("", ".", ".."):
+            raise _error(f"{flag} {str(value)!r} is not a file name")
         if path.is_dir():
             raise _error(f"{flag} {path} is a directory; give a file name")
         if path.exists() and not stat.S_ISREG(path.stat().st_mode):
@@ -229,6 +231,10 @@ class OutputRun:
         instead; otherwise the outputs are merged into it (files of the same name replaced).
         """
         path = Path(value)
+        if path.name in ("", ".", ".."):  # "." or "..": the folder by its own name
+            path = Path(os.path.abspath(path))
+            if not path.name:
+                raise _error(f"{flag} {str(value)!r} is not a directory an output can go to")
         if path.exists() and not path.is_dir():
             raise _error(f"output directory {path} exists and is not a directory; choose another name")
         if fresh and path.is_dir() and any(path.iterdir()):
