@@ -407,7 +407,11 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
     def _move(self, action: np.ndarray) -> tuple[float, float, float, float, float, float]:
         """Kinematics: the action (clipped to [-1, 1], NaN counts as 0) moves the rate-limited velocity;
         the new pose is clipped to the workspace. Returns ``(x, z, theta, vx, vz, omega)`` (not yet stored)."""
-        a0, a1, a2 = np.asarray(action, dtype=np.float64).reshape(3).tolist()
+        try:
+            a0, a1, a2 = np.asarray(action, dtype=np.float64).reshape(3).tolist()
+        except (ValueError, TypeError):
+            raise ParameterError(f"action must be 3 numbers (x, z and blade-angle rate commands in [-1, 1]), got "
+                                 f"{np.shape(action)} {action!r:.60}") from None
         a0 = 0.0 if a0 != a0 else (-1.0 if a0 < -1.0 else (1.0 if a0 > 1.0 else a0))
         a1 = 0.0 if a1 != a1 else (-1.0 if a1 < -1.0 else (1.0 if a1 > 1.0 else a1))
         a2 = 0.0 if a2 != a2 else (-1.0 if a2 < -1.0 else (1.0 if a2 > 1.0 else a2))

@@ -397,7 +397,11 @@ class BucketLoadingVectorEnv(VectorEnv):
         if not self._started:
             raise ParameterError("call reset() before step()")
         n = self.num_envs
-        acts = np.asarray(actions, dtype=np.float64).reshape(n, 3)
+        try:
+            acts = np.asarray(actions, dtype=np.float64).reshape(n, 3)
+        except (ValueError, TypeError):
+            raise ParameterError(f"actions must be {n} x 3 numbers (one x, z, blade-angle rate command per env), "
+                                 f"got shape {np.shape(actions)}") from None
         mode = self.autoreset_mode
         pending = self._prev_done
         any_pending = bool(pending.any())

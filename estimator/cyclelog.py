@@ -60,6 +60,9 @@ FORMAT_VERSION = 1
 PATH_COLUMNS = ("t", "x", "z", "blade_angle")
 FORCE_COLUMNS = ("F_T", "F_N")
 OPTIONAL_COLUMNS = ("fill_volume", "W_load")
+#: A log whose F_N is negative in more than this share of its in-soil samples has the column flipped
+#: (the most negative shipped log: 74 %; sensor offsets and the curl-out give real logs a negative share).
+FLIPPED_FN_SHARE = 0.90
 #: Suffix of a compressed log (and of its sidecar), and the xz preset its writer uses.
 COMPRESSED_SUFFIX = ".xz"
 XZ_PRESET = 6
@@ -372,6 +375,16 @@ def _check_geometry(csv_path: Path, log: CycleLog) -> None:
     if np.all(log.normal <= 0.0) and np.any(log.normal < 0.0):
         raise CycleLogError(f"{csv_path}: F_N is never positive; check the sign convention (F_N > 0 presses "
                             "the blade away from the soil wedge, eq 17)")
+    in_soil = log.pile.surface_height(log.path.x) > log.path.z
+    if np.any(in_soil):
+        negative = float(np.mean(log.normal[in_soil] < 0.0))
+        if negative > FLIPPED_FN_SHARE:
+            raise CycleLogError(f"{csv_path}: F_N is negative in {negative:.0%} of the samples in soil (more than "
+                                f"{FLIPPED_FN_SHARE:.0%}); check the sign convention (F_N > 0 presses the blade "
+                                "away from the soil wedge, eq 17)")
     if log.fill_volume is not None and np.max(log.fill_volume) > 10.0 * log.bucket.capacity:
         raise CycleLogError(f"{csv_path}: fill_volume reaches {np.max(log.fill_volume):g} m^3, more than 10x the "
                             f"bucket capacity {log.bucket.capacity:g} m^3 (litres instead of m^3?)")
+    from .plausibility import check_log
+
+    check_log(log, str(csv_path))

@@ -168,7 +168,8 @@ class TrajectoryOptimizer:
                 windows = self._windows(pile, start, args["x0"])
                 args["p"] = p = np.concatenate([self._parameters(soil, pile, start, h, lam, windows), tail])
                 if checkpoint is not None:
-                    monitor.watch = _Watch(self, checkpoint, checkpoint_every, p, h, start, face, iterations)
+                    monitor.watch = _Watch(self, checkpoint, checkpoint_every, p, h, start, face, iterations,
+                                           tic)
                 sol = guarded(self._solver, **args)  # Ctrl-C is re-raised, never kept as a plan
                 stats = dict(self._solver.stats())
                 if isinstance(monitor.watch, _Watch) and monitor.watch.error is not None:
@@ -295,8 +296,9 @@ class _Watch:
     to ``checkpoint``; an exception it raises stops the solve and is re-raised after it."""
 
     def __init__(self, optimizer: TrajectoryOptimizer, checkpoint: Callable[[Plan], bool], every: int,
-                 p: np.ndarray, h: float, start: StartState, face: float, offset: int) -> None:
+                 p: np.ndarray, h: float, start: StartState, face: float, offset: int, started: float) -> None:
         self.optimizer, self.checkpoint, self.every = optimizer, checkpoint, max(int(every), 1)
+        self.started = started  # perf_counter() when the solve began: an iterate's solve_time counts from it
         self.p, self.h, self.start, self.face = p, h, start, face
         self.calls, self.offset = 0, offset
         self.error: BaseException | None = None
@@ -310,7 +312,7 @@ class _Watch:
         try:
             plan = self.optimizer._plan_from(w, self.p, self.h, self.start,
                                              {"return_status": f"iterate {it}", "iter_count": it, "success": False},
-                                             0.0, math.nan)
+                                             time.perf_counter() - self.started, math.nan)
             plan.raw["face"] = self.face
             return bool(self.checkpoint(plan))
         except Exception as exc:  # noqa: BLE001 - re-raised after the solve

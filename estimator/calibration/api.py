@@ -39,6 +39,7 @@ from ..errors import CalibrationError
 from ..force_model import DEFAULT_OPTIONS, FLAG_TENSION, ModelOptions, soil_forces
 from ..force_models import DEFAULT_FORCE_MODEL, cycle_contact_state
 from ..kinematics import ContactState
+from ..plausibility import plausibility_warnings
 from ..soil import PARAMETER_NAMES, SoilParams
 from ..soil_vector import SOIL_VECTOR_NAMES as FIT_NAMES
 from ..soil_vector import soil_from_vector, soil_vector, vector_bounds
@@ -50,7 +51,7 @@ from .priors import class_prior
 from .result import Calibration, FitQuality, StageResult
 from .uncertainty import analyse, integrated_autocorrelation_time
 from .varpro import fit_varpro, refine
-from .verdict import assess
+from .verdict import FitWarning, assess
 
 __all__ = ["DEFAULT_METHOD", "FIT_FUNCTIONS", "METHODS", "METHOD_ALIASES", "CalibrationOptions", "MethodFit",
            "calibrate", "canonical_method", "cycle_weights_for", "fit_paper_method", "fit_varpro_method"]
@@ -317,6 +318,7 @@ def calibrate(cycles: CycleLog | list[CycleLog] | None = None, *legacy_args: Any
         settings["cycles"] = _cycles_report(logs, data, weights, at_t, at_n, jac, resid, fit.x, lo, hi, force_scale)
     warns = assess(success=bool(fit.success), obs_t=data.y_t, obs_n=data.y_n, pred_t=at_t, pred_n=at_n,
                    percent_r=quality.percent_r, names=FIT_NAMES, values=fit.x, lower=lo, upper=hi)
+    warns += [FitWarning("implausible_log", w) for log in logs for w in plausibility_warnings(log)]
     return Calibration(params=fit.soil, method=opts.method, sinkage_modulus=float(fit.x[5]), cost=cost,
                        success=bool(fit.success), status=int(fit.status), message=fit.message, nfev=int(fit.nfev),
                        njev=int(fit.njev), time_s=fit.time_s, quality=quality, stages=fit.stages, uncertainty=unc,

@@ -15,6 +15,7 @@ The cost is eq 19a with lambda = 0.5 over the same samples.
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -371,6 +372,9 @@ def load_params(source: str | Path | dict | Calibration | SoilParams) -> SoilPar
     if isinstance(source, dict):
         data = source.get("soil", source) if "soil" in source else source
         return SoilParams.from_dict(data)
+    if not isinstance(source, (str, os.PathLike)):
+        raise ParameterError("soil parameters must be a params.json path, a preset name, a dict, a Calibration or "
+                             f"SoilParams, got {type(source).__name__}")
     path = Path(source)
     if path.suffix.lower() == ".json" or path.exists():
         if not path.exists():

@@ -76,6 +76,24 @@ def _check_sigma(sigma: float, samples: int) -> None:
                              f"got {sigma!r}")
 
 
+def _refuse_repeated_logs(logs: list[str]) -> None:
+    """The same cycle given twice (by name, symlink or hard link) would count as two cycles."""
+    import os
+
+    from wheelloader.estimator import ParameterError
+
+    seen: dict[object, str] = {}
+    for log in logs:
+        try:
+            st = os.stat(log)
+        except OSError:
+            continue  # the reader reports a missing file
+        key = (st.st_dev, st.st_ino)
+        if key in seen:
+            raise ParameterError(f"log {log} is the same file as {seen[key]}; each cycle counts once, give it once")
+        seen[key] = log
+
+
 def run_calibrate(args: argparse.Namespace) -> int:
     """Handler of ``wheelloader calibrate``."""
     from wheelloader.estimator import (
@@ -97,6 +115,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
         raise CalibrationError("--forgetting needs several logs")
     inputs = [*args.logs, *(sidecar_of(log) for log in args.logs), args.initial]
     check_input_files([("log", p) for p in inputs])
+    _refuse_repeated_logs(args.logs)
     run = OutputRun(force=args.force, inputs=inputs)
     run.file("-o/--output", args.output)
     run.file("--plot", args.plot)
@@ -127,7 +146,12 @@ def run_calibrate(args: argparse.Namespace) -> int:
         for k, (log, c) in enumerate(zip(args.logs, cycles, strict=True)):
             print(f"{log}: {len(c)} samples, {cal.settings['cycles']['per_cycle'][k]['samples']} in soil")
     else:
-        print(f"{args.logs[0]}: {len(cycle)} samples, {int(cal.in_soil.sum())} in soil")
+        decimation = cal.settings.get("decimation")
+        if decimation:  # the fit used every stride-th in-soil sample; the log's own count is the one printed
+            print(f"{args.logs[0]}: {len(cycle)} samples, {decimation['in_soil_samples']} in soil (every "
+                  f"{decimation['stride']}-th fitted: {int(cal.in_soil.sum())})")
+        else:
+            print(f"{args.logs[0]}: {len(cycle)} samples, {int(cal.in_soil.sum())} in soil")
     print(cal.summary())
     for other in others:
         flag = "converged" if other.success else "NOT CONVERGED"

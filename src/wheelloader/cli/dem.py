@@ -184,28 +184,42 @@ def register(subparsers: Any) -> None:
                                                "data's sanity figures.")
     parser.set_defaults(func=lambda args: parser.print_help() or 2)
     sub = parser.add_subparsers(title="dem commands", metavar="SUBCOMMAND")
-    p = sub.add_parser("reference", help="(re)generate the shipped reference cycles")
+    p = sub.add_parser("reference", help="(re)generate the shipped reference cycles",
+                       description="Regenerate the shipped DEM reference cycles in Yade (resumable: each finished "
+                                   "case is written at once; --skip-existing resumes).")
     p.add_argument("--only", nargs="+", metavar="NAME", help="case names (see 'list'); default: all")
     p.add_argument("--out", default=str(REFERENCE_DIR),
                    help="output directory (default: %(default)s, relative to the working directory)")
-    p.add_argument("--cache-dir", default=None, help="settled-pile cache (default ~/.cache/wheelloader/dem)")
-    p.add_argument("--skip-existing", action="store_true", help="skip cases whose files exist")
+    p.add_argument("--cache-dir", default=None,
+                   help="settled-pile cache directory (default ~/.cache/wheelloader/dem)")
+    p.add_argument("--skip-existing", action="store_true", help="skip cases whose files exist (resume)")
     add_ray_arguments(p)
     p.set_defaults(func=_cmd_reference)
     p = sub.add_parser("list", help="list the reference cases and their regeneration commands")
     p.set_defaults(func=_cmd_list)
-    p = sub.add_parser("cycle", help="run one scenario and write its cycle log(s)")
-    p.add_argument("--soil", default="gravel", help="gravel (default), sand, dirt or modified_sand")
-    p.add_argument("--path", default="1", choices=["1", "2", "3", "4", "dual"])
-    p.add_argument("--out", required=True, help="output directory")
-    p.add_argument("--scale", type=float, default=0.6)
-    p.add_argument("--slab-width", type=float, default=0.35)
-    p.add_argument("--radius", type=float, default=0.03)
-    p.add_argument("--young", type=float, default=5e7)
-    p.add_argument("--bulk-density", type=float, default=None)
-    p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--threads", type=int, default=1)
-    p.add_argument("--cache-dir", default=None)
+    p = sub.add_parser("cycle", help="run one scenario and write its cycle log(s)",
+                       description="Run one DEM scenario in Yade and write its cycle log(s) (CSV + JSON sidecar) "
+                                   "into --out as cycle1.csv, cycle2.csv, ...")
+    p.add_argument("--soil", default="gravel", choices=["gravel", "sand", "dirt", "modified_sand"],
+                   help="soil of the particles (default: %(default)s)")
+    p.add_argument("--path", default="1", choices=["1", "2", "3", "4", "dual"],
+                   help="the paper's path 1-4, or 'dual': two cycles on the same pile (default: %(default)s)")
+    p.add_argument("--out", required=True, help="output directory (made if missing; files of the same name in it "
+                                                "are replaced)")
+    p.add_argument("--scale", type=float, default=0.6,
+                   help="geometric scale of pile, bucket and paths against the 1 m pile [-] (default: %(default)s)")
+    p.add_argument("--slab-width", type=float, default=0.35, help="slab and bucket width in y [m] "
+                                                                  "(default: %(default)s)")
+    p.add_argument("--radius", type=float, default=0.03, help="mean particle radius [m] (default: %(default)s)")
+    p.add_argument("--young", type=float, default=5e7,
+                   help="Young's modulus of particles and bucket [Pa] (default: %(default)g)")
+    p.add_argument("--bulk-density", type=float, default=None,
+                   help="target bulk density of the soil [kg/m^3] (default: the soil's own)")
+    p.add_argument("--seed", type=int, default=1, help="seed of the particle deposition (default: %(default)s)")
+    p.add_argument("--threads", type=int, default=1,
+                   help="Yade OpenMP threads; 1 is bit-reproducible (default: %(default)s)")
+    p.add_argument("--cache-dir", default=None,
+                   help="settled-pile cache directory (default ~/.cache/wheelloader/dem)")
     p.set_defaults(func=_cmd_cycle)
     p = sub.add_parser("sanity", help="physical sanity checks of a reference directory (summary; full report "
                                       "as JSON)")
@@ -213,5 +227,6 @@ def register(subparsers: Any) -> None:
                    help="reference directory (default: %(default)s, relative to the working directory)")
     p.add_argument("--json", default="sanity.json",
                    help="where the full report (every cycle's figures) goes (default: %(default)s)")
-    p.add_argument("--force", "--overwrite", dest="force", action="store_true", help="replace an existing --json")
+    p.add_argument("--force", "--overwrite", dest="force", action="store_true",
+                   help="replace an existing --json (never a file of --data)")
     p.set_defaults(func=_cmd_sanity)

@@ -31,9 +31,14 @@ def load_pile(spec: str | None) -> Pile:
     if isinstance(data, dict) and isinstance(data.get("pile"), dict):
         data = data["pile"]  # a cycle-log sidecar
     try:
-        return Pile.from_dict(data)
+        pile = Pile.from_dict(data)
     except ParameterError as exc:
         raise ParameterError(f"{path}: {exc}") from None
+    from wheelloader.estimator.plausibility import check_pile
+
+    for warning in check_pile(pile, str(path)):
+        logging.getLogger("wheelloader.cli").warning("warning: %s: %s", path, warning)
+    return pile
 
 
 def load_soil(spec: str) -> SoilParams:

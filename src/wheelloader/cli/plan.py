@@ -153,7 +153,9 @@ def run_plan(args: argparse.Namespace) -> int:
         path = plan.path(args.rate)
         sim = path_energy(path, soil, pile, opt.bucket)
         solver_ok = plan.status in ACCEPTED_STATUSES
-        ok = check.ok
+        # the check judges forces, limits and poses; a plan can pass it and still load (almost) nothing, which
+        # plan_next_cycle does not accept (outcome.success false): usable needs both
+        ok = check.ok and outcome.success
         cap = opt.bucket.capacity
         retried = outcome.first_failures or None
 
@@ -217,8 +219,10 @@ def run_plan(args: argparse.Namespace) -> int:
           f"{'' if base_check.ok else '; fails: ' + '; '.join(base_check.failures)}")
     if retried is not None:
         print("first plan failed the NumPy check (" + "; ".join(retried) + "); re-planned with wider margins")
-    if check.ok:
+    if ok:
         print("check: passed (forces, speeds, accelerations, validity domain, capacity, forward motion, end pose)")
+    elif check.ok:
+        print(f"check: FAILED: {outcome.message}")
     else:
         print("check: FAILED: " + "; ".join(check.failures))
     if not solver_ok:
