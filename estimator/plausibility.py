@@ -19,7 +19,7 @@ share of samples in soil        --     --          --          0.98        --   
 peak measured |F_R|             N      --          10          2e6         1e8         forces in kN / in mN
 =============================  ======  ==========  ==========  ==========  ==========  =========================
 
-The repository's 341 logs (``data/``, ``docs/results/**/cycles``) lie inside every inner band: pile
+The repository's 341 logs (``data/``, ``data/results/**/cycles``) lie inside every inner band: pile
 heights 0.8-1.3 m, lengths 2.0-6.8 m, durations 4.7-6.5 s at 60 Hz, median depths in soil 0.05-0.31 m,
 34-91 % of samples in soil, peak |F_R| 1.6-133 kN (``tests/test_plausibility.py`` checks them all).
 """

@@ -140,15 +140,27 @@ def test_wrong_encodings(tmp_path, good, capsys, encoding, message):
     assert len(err) == 1 and message in err[0]
 
 
-@pytest.mark.parametrize("scale", [1e30, 0.0])
-def test_degenerate_forces_are_flagged_and_strict_fails(tmp_path, good, capsys, scale):
-    """Forces scaled by 1e30 or all zero: calibrated, but called untrustworthy; --strict exits 1."""
+def _scaled_forces(tmp_path, good, scale):
     header, rows, sidecar = good
     for name in ("F_T", "F_N"):
         k = _column(header, name)
         for r in rows:
             r[k] = repr(float(r[k]) * scale)
-    log = _write(tmp_path, header, rows, sidecar)
+    return _write(tmp_path, header, rows, sidecar)
+
+
+def test_forces_on_no_loader_s_scale_are_refused(tmp_path, good, capsys):
+    """Forces scaled by 1e30: refused naming the likely unit (estimator/plausibility.py), nothing written."""
+    log = _scaled_forces(tmp_path, good, 1e30)
+    assert main(["calibrate", str(log), "-o", str(tmp_path / "p.json")]) == 2
+    assert "forces look like mN" in capsys.readouterr().err
+    assert not (tmp_path / "p.json").exists()
+
+
+@pytest.mark.parametrize("scale", [0.0])
+def test_degenerate_forces_are_flagged_and_strict_fails(tmp_path, good, capsys, scale):
+    """Forces all zero: calibrated, but called untrustworthy; --strict exits 1."""
+    log = _scaled_forces(tmp_path, good, scale)
     code = main(["calibrate", str(log), "-o", str(tmp_path / "p.json")])
     out = capsys.readouterr().out
     assert "NOT trustworthy" in out and "--strict" in out

@@ -12,6 +12,7 @@ import pytest
 
 from wheelloader.cli import main
 from wheelloader.estimator import BucketPath, CycleLog, CycleLogError, ParameterError, Pile, calibrate, synthetic_cycle
+from wheelloader.estimator.cyclelog import sidecar_path
 from wheelloader.estimator.plausibility import LIMITS, check_pile, plausibility_warnings
 
 REPO = Path(__file__).resolve().parents[1]
@@ -102,10 +103,17 @@ def test_the_limits_table_is_ordered():
 
 
 def test_no_shipped_log_trips_the_limits():
-    files = [Path(p) for p in glob.glob(str(REPO / "data" / "**" / "*.csv"), recursive=True)
-             + glob.glob(str(REPO / "docs" / "results" / "**" / "cycles" / "**" / "*.csv"), recursive=True)]
-    logs = [f for f in files if f.with_suffix(".json").is_file()]
-    assert len(logs) > 50
+    files = [Path(p) for root in ("data", "docs") for suffix in ("csv", "csv.xz")
+             for p in glob.glob(str(REPO / root / "**" / f"*.{suffix}"), recursive=True)]
+    logs = [f for f in files if sidecar_path(f).is_file() and "F_N" in _header(f)]
+    assert len(logs) > 300
     for f in logs:
         loaded = CycleLog.load(f)  # refusals raise
         assert plausibility_warnings(loaded) == [], f
+
+
+def _header(path: Path) -> str:
+    import lzma
+
+    with (lzma.open(path, "rt") if path.name.endswith(".xz") else open(path)) as fh:
+        return fh.readline()

@@ -80,12 +80,13 @@ def is_cycle_log(path: Path) -> bool:
 
 
 def sidecar_of(csv_path: str | Path) -> Path:
-    """The JSON sidecar of a cycle-log CSV (same stem)."""
+    """The JSON sidecar of a cycle-log CSV (same stem; ``.json.xz`` beside a ``.csv.xz``)."""
     from wheelloader.estimator import ParameterError
+    from wheelloader.estimator.cyclelog import sidecar_path
 
     if not Path(csv_path).name:
         raise ParameterError(f"{str(csv_path)!r} is not a file name")
-    return Path(csv_path).with_suffix(".json")
+    return sidecar_path(csv_path)
 
 
 def add_strict_flag(parser: Any, help_text: str) -> None:
