@@ -112,14 +112,14 @@ class BucketLoadingVectorEnv(VectorEnv):
         The single env's settings (:class:`~wheelloader.envs.config.EnvConfig`; ``cycles_per_episode``
         must be 1).
 
+    Notes
+    -----
     RLlib's way works too: a mapping (a dict or RLlib's ``EnvContext``) as the
     first positional argument holds the same settings, ``num_envs`` included
     (RLlib's ``gym_env_vectorize_mode="vector_entry_point"`` with the class
     passes ``{**env_config, "num_envs": n}``); an unknown key, or a key given
     both ways with different values, raises ``ParameterError``.
 
-    Notes
-    -----
     ``reset(options=...)`` takes the single env's options (one parser,
     :func:`~wheelloader.envs.bookkeeping.parse_reset_options`) plus
     ``reset_mask``. Reset and step ``info`` carry the single env's keys, each

@@ -37,6 +37,9 @@ def _as_1d_finite(name: str, values: object) -> np.ndarray:
 class Pile:
     """A pile surface on a uniform grid.
 
+    Use :meth:`ideal_slope`, :meth:`trapezoid` or :meth:`from_polyline` to
+    build one. Instances are immutable; carving returns a new pile.
+
     Parameters
     ----------
     x0 : float
@@ -45,9 +48,6 @@ class Pile:
         Grid spacing [m].
     heights : array_like
         Surface height z_s at each node [m] (z up).
-
-    Use :meth:`ideal_slope`, :meth:`trapezoid` or :meth:`from_polyline` to
-    build one. Instances are immutable; carving returns a new pile.
     """
 
     x0: float
