@@ -118,7 +118,8 @@ SAVED_CYCLES = {"docs/results/plant_replay.md": ["adaptation_mpm"]}
 #: Files a page's blocks must have written (a block that silently did nothing fails here).
 WRITES = {
     "README.md": ["cycle.csv", "cycle.json", "params.json", "forces.png", "plan.png", "slope.csv"],
-    "docs/guide/calibration.md": ["params.json", "ms.json", "forces.png", "params3.json", "fit3.png"],
+    "docs/guide/calibration.md": ["params.json", "ms.json", "forces.png", "params3.json", "fit3.png", "my_cycle.csv",
+                                  "my_cycle.json"],
     "docs/guide/planner.md": ["plan.csv", "plan.png", "slope.csv", "pareto.png"],
     "docs/guide/gym.md": ["cycle.csv", "cycle.json"],
     "docs/guide/dem.md": ["sanity.json"],
