@@ -89,7 +89,8 @@ NOT_RUN = {
     "python benchmarks/paper_experiments.py --ray ray://": "Ray Client to a cluster (several machines)",
 }
 #: Python blocks that need an optional module (a block importing it runs only when it is installed).
-PY_NEEDS = {"ray": 'pip install -e ".[scale]"'}
+PY_NEEDS = {"ray": 'pip install -e ".[scale]"',
+            "stable_baselines3": 'pip install torch==2.13.0 && pip install -e ".[rl]"'}
 #: Commands run as written only in the slow test (``pytest -m slow``); the default suite smoke-runs them.
 SLOW = {
     "python3 -m venv .venv && . .venv/bin/activate && pip install . && wheelloader demo":
