@@ -10,9 +10,10 @@ equations of a bounded linear least-squares fit).
 :func:`solve_box_qp` runs a primal-dual active-set iteration on all problems at once: each variable is
 free, at its lower or at its upper bound; the free ones are solved for (one batched k x k solve per
 iteration), a free variable that leaves its box is put on the bound it crossed and a bound variable whose
-gradient points into the box is freed. When no variable changes side, the point satisfies the KKT
-conditions of the convex problem and is its minimiser. Most problems settle in a few iterations; the few
-that do not within :data:`ACTIVE_SET_ITERATIONS` (the active-set method can cycle) are solved by
+gradient points into the box is freed (all at once for :data:`SIMULTANEOUS_ITERATIONS`, then one at a
+time, which cannot cycle). When no variable changes side, the point satisfies the KKT conditions of the
+convex problem and is its minimiser. Most problems settle in a few iterations; any that do not within
+:data:`ACTIVE_SET_ITERATIONS` (a nearly singular problem can defeat the side tests) are solved by
 :func:`enumerate_faces`: the minimiser of a convex quadratic over a box lies in the relative interior of
 one face, where it is the unconstrained minimiser over that face's affine hull, so enumerating the ``3^k``
 faces (each variable free, at its lower or at its upper bound), keeping the feasible face minimisers and
@@ -26,8 +27,12 @@ import itertools
 
 import numpy as np
 
-#: Active-set iterations before a problem is handed to :func:`enumerate_faces`.
-ACTIVE_SET_ITERATIONS = 12
+#: Active-set iterations that change every violating variable at once; after them one variable changes per
+#: iteration (the first violating one, Murty's least-index rule, which cannot cycle on a positive-definite
+#: problem), so the iteration settles where the all-at-once steps would cycle.
+SIMULTANEOUS_ITERATIONS = 4
+#: Active-set iterations in all before a problem is handed to :func:`enumerate_faces`.
+ACTIVE_SET_ITERATIONS = 24
 
 
 def solve_box_qp(H: np.ndarray, g: np.ndarray, c: np.ndarray, lo: np.ndarray, hi: np.ndarray,
@@ -53,18 +58,26 @@ def solve_box_qp(H: np.ndarray, g: np.ndarray, c: np.ndarray, lo: np.ndarray, hi
     x = np.linalg.solve(Hr, gs[..., None])[..., 0]  # start: each variable on the side the free minimiser lies
     side = np.where(pinned | (x < los), -1, np.where(x > his, 1, 0))
     settled = np.zeros(G, dtype=bool)
-    for _ in range(ACTIVE_SET_ITERATIONS):
-        free = side == 0
-        x_bound = np.where(side < 0, los, np.where(side > 0, his, 0.0))
-        A = np.where(free[:, :, None] & free[:, None, :], Hr, 0.0) + (~free)[:, :, None] * eye
-        rhs = np.where(free, gs - (Hs @ x_bound[..., None])[..., 0], x_bound)
-        x = np.linalg.solve(A, rhs[..., None])[..., 0]
-        grad = (Hs @ x[..., None])[..., 0] - gs  # half the gradient of the objective
-        new = np.where(free & (x < los - tol), -1, np.where(free & (x > his + tol), 1, side))
-        new = np.where(~pinned & (((side < 0) & (grad < 0.0)) | ((side > 0) & (grad > 0.0))), 0, new)
-        settled = np.all(new == side, axis=1)  # no variable changes side: the KKT conditions hold
-        side = new
-        if settled.all():
+    work = np.arange(G)  # the problems still iterating (a settled problem's point is final)
+    for it in range(ACTIVE_SET_ITERATIONS):
+        H_w, g_w, lo_w, hi_w, tol_w, pin_w, side_w = (a[work] for a in (Hs, gs, los, his, tol, pinned, side))
+        free = side_w == 0
+        x_bound = np.where(side_w < 0, lo_w, np.where(side_w > 0, hi_w, 0.0))
+        A = np.where(free[:, :, None] & free[:, None, :], Hr[work], 0.0) + (~free)[:, :, None] * eye
+        rhs = np.where(free, g_w - (H_w @ x_bound[..., None])[..., 0], x_bound)
+        x_w = np.linalg.solve(A, rhs[..., None])[..., 0]
+        grad = (H_w @ x_w[..., None])[..., 0] - g_w  # half the gradient of the objective
+        new = np.where(free & (x_w < lo_w - tol_w), -1, np.where(free & (x_w > hi_w + tol_w), 1, side_w))
+        new = np.where(~pin_w & (((side_w < 0) & (grad < 0.0)) | ((side_w > 0) & (grad > 0.0))), 0, new)
+        change = new != side_w
+        done = ~change.any(axis=1)  # no variable changes side: the KKT conditions hold
+        if it >= SIMULTANEOUS_ITERATIONS:  # one change per iteration: the least index that violates
+            only = np.zeros_like(change)
+            only[np.arange(work.size), np.argmax(change, axis=1)] = True
+            new = np.where(change & only, new, side_w)
+        x[work], side[work], settled[work] = x_w, new, done
+        work = work[~done]
+        if work.size == 0:
             break
     x = np.clip(x, los, his)
     val = np.einsum("gi,gij,gj->g", x, Hs, x) - 2.0 * np.einsum("gi,gi->g", gs, x)

@@ -206,8 +206,10 @@ def factors(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS, der
         db_dd_in = np.where(loaded, wf_dd, db_dd_in)
     # on a bound beta* moves with it: pi - s - eps2 (s = rho_eff + delta + phi) or pi/2 - alpha_eff
     interior, rho_limit, slope_limit = where == BETA_INTERIOR, where == BETA_AT_RHO_LIMIT, where == BETA_AT_SLOPE_LIMIT
-    db_dp = np.select([interior, rho_limit, slope_limit], [db_dp_in, -(1.0 + drho), -dalpha], 0.0)
-    db_dd = np.select([interior, rho_limit], [db_dd_in, -(1.0 + drho)], 0.0)
+    # (nested where: the same choice as np.select over the exclusive codes, at a fraction of its overhead)
+    on_rho_limit = -(1.0 + drho)
+    db_dp = np.where(interior, db_dp_in, np.where(rho_limit, on_rho_limit, np.where(slope_limit, -dalpha, 0.0)))
+    db_dd = np.where(interior, db_dd_in, np.where(rho_limit, on_rho_limit, 0.0))
 
     def total(dd_b, dd_x, dd_r, db_dx, dd_a=0.0, da_dx=0.0):
         return dd_x + dd_b * db_dx + dd_r * drho + dd_a * da_dx
