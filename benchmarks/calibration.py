@@ -179,6 +179,29 @@ def print_table(results: dict) -> None:
                   f"(median RMSE/floor {v['median_ratio']:.3f}, median time {v['median_time_s'] * 1e3:.1f} ms)")
 
 
+def markdown_table(results: dict) -> str:
+    """The per-soil table of :func:`print_table` in Markdown (``table.md``), with the robustness summary."""
+    lines = ["| soil | method | time ms | evaluations | converged | train F_R % | floor % | unseen paths 2-4 F_R % |",
+             "|---|---|---|---|---|---|---|---|"]
+    for s in results["soils"]:
+        for m in METHODS:
+            r = s["methods"][m]
+            tests = " / ".join(f"{v[1]:.2f}" for v in r["test_rmse_r"])
+            lines.append(f"| {s['soil']} | {m} | {r['median_time_s'] * 1e3:.1f} | {r['nfev']} | {r['success']} | "
+                         f"{r['train_rmse']['F_R'][1]:.2f} | {s['floor_train_rmse_r_percent']:.2f} | {tests} |")
+    text = "\n".join(lines) + "\n"
+    if "robustness" in results:
+        rb = results["robustness"]
+        text += (f"\nRobustness over {rb['count']} random cycles ({rb['criterion']}): "
+                 + "; ".join(f"{m} {100 * v['fraction_at_noise_floor']:.0f} % (median time "
+                             f"{v['median_time_s'] * 1e3:.1f} ms)" for m, v in rb["summary"].items()) + ".\n")
+    la = results.get("loadavg")
+    load = f", load average {la[0]:.1f} before, {results['loadavg_after'][0]:.1f} after" if la else ""
+    text += (f"\n*`python benchmarks/calibration.py` ({results['settings']['repeats']} timed calibrations per "
+             f"method and soil, median wall time of the optimisation{load}).*\n")
+    return text
+
+
 def run_long_logs(rows: list[int], out: Path, seed: int) -> list[dict]:
     """Time and peak memory of ``wheelloader calibrate`` on resampled long logs (module docstring)."""
     import re
@@ -466,6 +489,7 @@ def main(argv: list[str] | None = None) -> int:
     from wheelloader.estimator.synthetic import synthetic_cycle
 
     calibrate(synthetic_cycle("dirt", noise=0.0))  # warm-up: imports, caches
+    load_before = os.getloadavg()
     soils = [run_soil(name, args, args.seed + 10 * i) for i, name in enumerate(args.soils)]
     per_soil = {s["soil"]: s["methods"]["multi-stage"]["median_time_s"] / s["methods"]["default"]["median_time_s"]
                 for s in soils}
@@ -477,6 +501,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.robustness > 0:
         results["robustness"] = run_robustness(args.robustness, args.seed + 999, args)
     results["wall_time_s"] = time.perf_counter() - t0
+    results["loadavg"], results["loadavg_after"] = load_before, os.getloadavg()
+    if speed is not None:
+        results["speed_against_baseline"] = "speed.json"
     plot(results, out)
     print_table(results)
     for s in soils:
@@ -484,6 +511,7 @@ def main(argv: list[str] | None = None) -> int:
         for m in s["methods"].values():
             m.pop("_cal")
     (out / "results.json").write_text(json.dumps(results, indent=1, default=float))
+    (out / "table.md").write_text(markdown_table(results))
     print(f"\nresults written to {out.resolve()}")
     return 0
 

@@ -113,6 +113,16 @@ GRID_MAX_SAMPLES_CYCLES = 600
 #: Largest number of (phi, delta) pair x sample elements the grid evaluates at once: the grid's memory is
 #: about 250 bytes per element, whatever the length of the cycle.
 GRID_CHUNK_ELEMENTS = 400_000
+#: A later grid start whose iterate comes within this distance of an earlier start's solution (in every free
+#: parameter, relative to that solution's magnitude, at least 1e-3 of the bound range) has joined its basin
+#: and is stopped there; it would end in (nearly) the same solution, which the near-tie rule gives to the
+#: earlier start (:func:`first_best`). Measured on 85 cycles (the calibration benchmark's training and
+#: robustness cycles, every ``data/mpm`` cycle, 12 ``data/reference`` ones) against no stopping: 15 % fewer
+#: refinement evaluations; every cost within 1e-9 and every parameter within 1e-6 but one cycle's, moved by
+#: 0.2 % along a flat valley at a cost 1e-11 higher.
+BASIN_RADIUS = 0.3
+#: Model evaluations a later start makes before the basin test applies (an iteration count, not a time).
+BASIN_CHECK_FROM = 3
 
 _log = logging.getLogger(__name__)
 
@@ -256,18 +266,22 @@ def weak_prior(lo: np.ndarray, hi: np.ndarray, nu: float, mean: np.ndarray | Non
 
 def refine(data: FitData, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5,
            counter: Evaluations | None = None, max_nfev: int = 100, xtol: float = 1e-8,
-           ftol: float = 1e-10, gtol: float = 1e-10, prior: Prior | None = None) -> SolverResult:
+           ftol: float = 1e-10, gtol: float = 1e-10, prior: Prior | None = None,
+           basins: list[np.ndarray] | None = None) -> SolverResult:
     """Joint bounded least squares on the seven fit parameters with the analytic Jacobian.
 
     Parameters whose bounds coincide are held fixed. With a ``prior`` the
     residual gets one row ``sqrt(nu) (x_i - mean_i) / scale_i`` per free
-    parameter (see :class:`Prior`).
+    parameter (see :class:`Prior`). With ``basins`` (earlier starts' solutions) the refinement stops
+    once an iterate, from the :data:`BASIN_CHECK_FROM`-th evaluation on, lies within
+    :data:`BASIN_RADIUS` of one of them.
 
     Returns
     -------
     SolverResult
         ``cost`` is eq 19a (sum of weighted squared residuals, data only) at ``x``; also ``start`` (the
-        start point) and ``objective`` (``cost`` plus the prior term, equal to ``cost`` without a prior).
+        start point) and ``objective`` (``cost`` plus the prior term, equal to ``cost`` without a prior);
+        a refinement stopped in a basin has ``success`` False and ``joined``, the index in ``basins``.
     """
     wt, wn = weights(lam)
     free = hi > lo
@@ -285,12 +299,16 @@ def refine(data: FitData, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, lam: f
         x[free] = z
         return x
 
+    span_all = hi - lo
+    evaluations = [0]
+
     def evaluate(z):
         key = z.tobytes()
         if cache.get("key") != key:
             f_t, f_n, jt, jn = data.forces_and_jacobian(full(z))
             counter.nfev += 1
             counter.njev += 1
+            evaluations[0] += 1
             cache["key"] = key
             r = [wt * (f_t - data.y_t), wn * (f_n - data.y_n)]
             jac = [wt * jt[:, free], wn * jn[:, free]]
@@ -303,6 +321,12 @@ def refine(data: FitData, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, lam: f
                 jac.append(prior_jac)
             cache["r"] = np.concatenate(r)
             cache["J"] = np.vstack(jac)
+            if basins and evaluations[0] >= BASIN_CHECK_FROM:
+                x = full(z)
+                for j, b in enumerate(basins):
+                    scale_b = np.maximum(np.abs(b), 1e-3 * span_all)[free]
+                    if np.all(np.abs(x - b)[free] < BASIN_RADIUS * scale_b):
+                        raise _JoinedBasin(j, x, float(cache["r"] @ cache["r"]), evaluations[0])
         return cache
 
     def fun(z):
@@ -318,13 +342,26 @@ def refine(data: FitData, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, lam: f
     scale = np.where(span > 0, span, 1.0)
     # scale: typical magnitude of each parameter (K's bound range is far larger than its typical values)
     typical = np.maximum(np.abs(z0), 1e-3 * scale)
-    res = least_squares(fun, z0, jac=jac, bounds=(lo[free], hi[free]), method="trf", x_scale=typical,
-                        xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev)
+    try:
+        res = least_squares(fun, z0, jac=jac, bounds=(lo[free], hi[free]), method="trf", x_scale=typical,
+                            xtol=xtol, ftol=ftol, gtol=gtol, max_nfev=max_nfev)
+    except _JoinedBasin as stop:
+        return SolverResult(stop.x, stop.cost, False, 0, f"stopped after {stop.evaluations} evaluations: joined the "
+                            f"basin of an earlier start", stop.evaluations, stop.evaluations,
+                            start=np.asarray(x0, float), objective=stop.cost, joined=stop.index)
     x = full(res.x)
     objective = float(2.0 * res.cost)
     cost = objective if prior is None else float(np.sum(res.fun[:2 * m] ** 2))
     return SolverResult(x, cost, bool(res.success), int(res.status), str(res.message), int(res.nfev),
                         int(res.njev), start=np.asarray(x0, float), objective=objective)
+
+
+class _JoinedBasin(Exception):
+    """Raised inside :func:`refine` when an iterate enters an earlier start's basin."""
+
+    def __init__(self, index: int, x: np.ndarray, cost: float, evaluations: int) -> None:
+        super().__init__(index)
+        self.index, self.x, self.cost, self.evaluations = index, x, cost, evaluations
 
 
 def polish_linear(data: FitData, x: np.ndarray, lo: np.ndarray, hi: np.ndarray, lam: float,
@@ -439,8 +476,11 @@ def fit_varpro(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5, 
     t1 = time.perf_counter()
     _log.info("varpro: %d grid points in %.2f s; refining %d start(s) on %d samples", cost.size, t1 - t0,
               len(starts), len(data))
-    results = [refine(data, x0, lo, hi, lam, counter, max_nfev=max_nfev) for x0 in starts]
-    best = first_best(results)
+    results: list[SolverResult] = []
+    for x0 in starts:  # a later start that joins an earlier one's basin stops there (BASIN_RADIUS)
+        basins = [r.x for r in results if "joined" not in r]
+        results.append(refine(data, x0, lo, hi, lam, counter, max_nfev=max_nfev, basins=basins))
+    best = first_best([r for r in results if "joined" not in r])
     if zoom > 1:
         zaxes = []
         for k, i in enumerate(nl[:2]):
