@@ -482,20 +482,7 @@ def fit_varpro(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5, 
         results.append(refine(data, x0, lo, hi, lam, counter, max_nfev=max_nfev, basins=basins))
     best = first_best([r for r in results if "joined" not in r])
     if zoom > 1:
-        zaxes = []
-        for k, i in enumerate(nl[:2]):
-            step = (hi[i] - lo[i]) / max(len(axes[k]) - 1, 1)
-            a, b = max(lo[i], best.x[i] - step), min(hi[i], best.x[i] + step)
-            zaxes.append(np.linspace(a, b, zoom) if b > a else np.array([a]))
-        zaxes.append(axes[2])
-        zcost, ztheta = projected_grid(grid_data, lo, hi, zaxes[0], zaxes[1], zaxes[2], lam)
-        counter.nfev += zcost.size
-        for c, x0 in _starts_from_grid(zcost, ztheta, zaxes, 2):
-            if better(c, best.cost):
-                r = refine(data, x0, lo, hi, lam, counter, max_nfev=max_nfev)
-                results.append(r)
-                if better(r.cost, best.cost):
-                    best = r
+        best = _zoom(data, grid_data, best, axes, lo, hi, lam, zoom, counter, max_nfev, results)
     polished = polish_linear(data, best.x, lo, hi, lam, counter)
     if polished is not None and better(polished[1], best.cost):
         best = SolverResult(polished[0], polished[1], best.success, best.status,
@@ -503,30 +490,60 @@ def fit_varpro(data: FitData, lo: np.ndarray, hi: np.ndarray, lam: float = 0.5, 
                             best.nfev, best.njev, start=best.start, objective=polished[1])
     exact, exact_cost, prior, tau = best.x, best.cost, None, float("nan")
     if regularize:
-        f_t, f_n, _ = data.forces(best.x)
-        counter.nfev += 1
-        wt, wn = weights(lam)
-        rw = data.root_weight
-        nu, tau = noise_per_effective_sample([rw * wt * (f_t - data.y_t), rw * wn * (f_n - data.y_n)],
-                                             int(np.sum(hi > lo)))
-        if nu > 0.0:
-            if prior_moments is None:
-                prior = weak_prior(lo, hi, nu, initial)
-                r = refine(data, best.x, lo, hi, lam, counter, max_nfev=max_nfev, prior=prior)
-            else:  # a literature prior (priors.py): also start from its mean, the exact fit may sit in another basin
-                mean, scale = (np.asarray(v, float) for v in prior_moments)
-                prior = Prior(np.where(scale > 0, np.clip(mean, lo, hi), best.x), scale, float(nu))
-                from_mean = best.x.copy()
-                from_mean[scale > 0] = np.clip(mean, lo, hi)[scale > 0]
-                runs = [refine(data, x0, lo, hi, lam, counter, max_nfev=max_nfev, prior=prior)
-                        for x0 in (best.x, from_mean)]
-                r = first_best(runs, "objective")
-            results.append(r)
-            best = SolverResult(r.x, r.cost, r.success, r.status,
-                                f"{r.message} (MAP under the weak prior, nu {nu:.4g} N^2, tau {tau:.3g})",
-                                r.nfev, r.njev, start=r.start, objective=r.objective)
+        best, prior, tau = _map_estimate(data, best, lo, hi, lam, initial, prior_moments, counter, max_nfev, results)
     t2 = time.perf_counter()
     return SolverResult(best.x, best.cost, best.success, best.status, best.message, counter.nfev, counter.njev,
                         time_s=t2 - t0, evaluations=counter, grid_time=t1 - t0, refine_time=t2 - t1,
                         grid_best=grid_best, grid_cost=grid_cost, refinements=results, exact=exact,
                         exact_cost=exact_cost, prior=prior, tau=tau)
+
+
+def _zoom(data: FitData, grid_data: FitData, best: SolverResult, axes: list[np.ndarray], lo: np.ndarray,
+          hi: np.ndarray, lam: float, zoom: int, counter: Evaluations, max_nfev: int,
+          results: list[SolverResult]) -> SolverResult:
+    """Step 4: a ``zoom x zoom`` grid over the coarse ``(phi, delta)`` cell around ``best``; its best local
+    minima that undercut ``best`` are refined (appended to ``results``). Returns the new best."""
+    zaxes = []
+    for k, i in enumerate((3, 4)):
+        step = (hi[i] - lo[i]) / max(len(axes[k]) - 1, 1)
+        a, b = max(lo[i], best.x[i] - step), min(hi[i], best.x[i] + step)
+        zaxes.append(np.linspace(a, b, zoom) if b > a else np.array([a]))
+    zaxes.append(axes[2])
+    zcost, ztheta = projected_grid(grid_data, lo, hi, zaxes[0], zaxes[1], zaxes[2], lam)
+    counter.nfev += zcost.size
+    for c, x0 in _starts_from_grid(zcost, ztheta, zaxes, 2):
+        if better(c, best.cost):
+            r = refine(data, x0, lo, hi, lam, counter, max_nfev=max_nfev)
+            results.append(r)
+            if better(r.cost, best.cost):
+                best = r
+    return best
+
+
+def _map_estimate(data: FitData, best: SolverResult, lo: np.ndarray, hi: np.ndarray, lam: float,
+                  initial: np.ndarray | None, prior_moments: tuple[np.ndarray, np.ndarray] | None,
+                  counter: Evaluations, max_nfev: int,
+                  results: list[SolverResult]) -> tuple[SolverResult, Prior | None, float]:
+    """Step 6: the MAP estimate from the exact fit ``best`` (module docstring); ``(best, prior, tau)``."""
+    f_t, f_n, _ = data.forces(best.x)
+    counter.nfev += 1
+    wt, wn = weights(lam)
+    rw = data.root_weight
+    nu, tau = noise_per_effective_sample([rw * wt * (f_t - data.y_t), rw * wn * (f_n - data.y_n)],
+                                         int(np.sum(hi > lo)))
+    if not nu > 0.0:
+        return best, None, tau
+    if prior_moments is None:
+        prior = weak_prior(lo, hi, nu, initial)
+        r = refine(data, best.x, lo, hi, lam, counter, max_nfev=max_nfev, prior=prior)
+    else:  # a literature prior (priors.py): also start from its mean, the exact fit may sit in another basin
+        mean, scale = (np.asarray(v, float) for v in prior_moments)
+        prior = Prior(np.where(scale > 0, np.clip(mean, lo, hi), best.x), scale, float(nu))
+        from_mean = best.x.copy()
+        from_mean[scale > 0] = np.clip(mean, lo, hi)[scale > 0]
+        runs = [refine(data, x0, lo, hi, lam, counter, max_nfev=max_nfev, prior=prior) for x0 in (best.x, from_mean)]
+        r = first_best(runs, "objective")
+    results.append(r)
+    return (SolverResult(r.x, r.cost, r.success, r.status,
+                         f"{r.message} (MAP under the weak prior, nu {nu:.4g} N^2, tau {tau:.3g})",
+                         r.nfev, r.njev, start=r.start, objective=r.objective), prior, tau)
