@@ -289,13 +289,7 @@ def calibrate(cycles: CycleLog | list[CycleLog] | None = None, *legacy_args: Any
                                                                                                       strict=True))]
     data = parts[0] if len(logs) == 1 else FitData.concat(parts, weights)
     lo, hi = vector_bounds(opts.bounds, logs[0].bucket.edge_thickness)
-    settings: dict[str, Any] = {"lambda": opts.lam}
-    if opts.model_options != DEFAULT_OPTIONS or opts.fill != "log":  # recorded so that predict() uses the same model
-        settings["model_options"] = dataclasses.asdict(opts.model_options)
-        settings["fill"] = opts.fill
-    if opts.force_model != DEFAULT_FORCE_MODEL:
-        settings["force_model"] = opts.force_model
-        settings["payload"] = opts.payload.to_dict()
+    settings = _model_settings(opts)
     data = _decimated(data, settings)
     _log.info("calibrate: method %s on %d in-soil samples of %d", opts.method, len(data), len(logs[0]))
     fit = FIT_FUNCTIONS[opts.method](data, logs[0], opts, lo, hi)
@@ -325,6 +319,18 @@ def calibrate(cycles: CycleLog | list[CycleLog] | None = None, *legacy_args: Any
                        initial=opts.initial, bounds=dict(opts.bounds), predicted_tangential=pred_t,
                        predicted_normal=pred_n, in_soil=in_soil, tension_samples=int(np.count_nonzero(
                            at_flags & FLAG_TENSION)), settings=settings, warnings=warns)
+
+
+def _model_settings(opts: CalibrationOptions) -> dict[str, Any]:
+    """The settings a calibration records first: lambda, and the model, so that predict() uses the same one."""
+    settings: dict[str, Any] = {"lambda": opts.lam}
+    if opts.model_options != DEFAULT_OPTIONS or opts.fill != "log":
+        settings["model_options"] = dataclasses.asdict(opts.model_options)
+        settings["fill"] = opts.fill
+    if opts.force_model != DEFAULT_FORCE_MODEL:
+        settings["force_model"] = opts.force_model
+        settings["payload"] = opts.payload.to_dict()
+    return settings
 
 
 def _fit_data(log: CycleLog, state: ContactState, opts: CalibrationOptions, k: int | None) -> FitData:
