@@ -19,7 +19,7 @@ Usage::
     python benchmarks/adaptation.py --out results/adaptation            # full run
     python benchmarks/adaptation.py --quick --out /tmp/adaptation        # smoke run
     python benchmarks/adaptation.py --plant mpm --out DIR                # the loop in the MPM continuum
-                                                                         # (benchmarks/plant_adaptation.py)
+                                                                         # (runs benchmarks/plant_adaptation.py)
     python benchmarks/adaptation.py --ray off --out results/adaptation   # serial, without Ray
 
 Each loop (soil x pile x seed x strategy) is one unit of :mod:`wheelloader.sweep`: ``--ray local`` (the
@@ -43,10 +43,9 @@ from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
-from _machine import machine_info  # noqa: E402
-from _planner_args import add_planner_physics_arguments, planner_physics  # noqa: E402
 
-from wheelloader.provenance import commit_label  # noqa: E402
+from wheelloader.arguments import add_planner_physics_arguments, planner_physics  # noqa: E402
+from wheelloader.provenance import commit_label, machine_info  # noqa: E402
 from wheelloader.sweep import add_ray_arguments  # noqa: E402
 
 SOILS = ("gravel", "dirt", "modified_sand")
@@ -96,15 +95,18 @@ def _plant_soil(name: str, seed: int):
 
 
 def main(argv: list[str] | None = None) -> int:
+    import subprocess
     import sys
 
-    argv = sys.argv[1:] if argv is None else list(argv)
-    if any(a == "--plant" or a.startswith("--plant=") for a in argv):
-        # the loop on a plant that is not the FEE env: benchmarks/plant_adaptation.py
-        import plant_adaptation
+    from wheelloader.references import PLANT_NAMES
 
-        return plant_adaptation.main(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--plant", choices=PLANT_NAMES, default=None,
+                        help="close the loop in this reference plant instead of the drifting FEE env below: runs "
+                             "benchmarks/plant_adaptation.py --plant PLANT with the other arguments, which its "
+                             "--help lists (--soils, --resolution, --threads, --fill-limit, --stale, --report, ...); "
+                             "the options below are then not used")
     parser.add_argument("--out", default="results/adaptation", help="output directory")
     parser.add_argument("--seeds", type=int, default=3, help="seeds per soil and pile")
     parser.add_argument("--cycles", type=int, default=5, help="cycles per loop")
@@ -132,6 +134,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--failure-angle", choices=("min_n_gamma", "min_weight_force"), default="min_n_gamma",
                         help="ours: how the model picks beta* (default: the paper's min N_gamma; "
                              "min_weight_force: the opt-in least weight force)")
+    plant_only = argparse.ArgumentParser(add_help=False)  # --plant first, so that --plant X --help is X's help
+    plant_only.add_argument("--plant", choices=PLANT_NAMES, default=None)
+    if plant_only.parse_known_args(argv)[0].plant is not None:
+        # a separate script, run as a program (benchmarks import the package only, never each other)
+        return subprocess.call([sys.executable, str(Path(__file__).with_name("plant_adaptation.py")), *argv])
     args = parser.parse_args(argv)
 
     from wheelloader.adaptation import strategy_loop

@@ -44,7 +44,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _machine import machine_info
+from wheelloader.provenance import machine_info
 
 METHODS = ("default", "single-stage", "multi-stage")
 DEFAULT_SOILS = ("gravel", "dirt", "modified_sand", "lean_clay")

@@ -23,7 +23,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _machine import machine_info
+
+from wheelloader.provenance import machine_info
 
 TARGET_SINGLE = 20_000.0
 TARGET_BATCHED = 500_000.0

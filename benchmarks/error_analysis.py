@@ -31,10 +31,9 @@ import math
 from pathlib import Path
 
 import numpy as np
-from _machine import machine_info
 
 from wheelloader.estimator import GRAVITY
-from wheelloader.provenance import commit_label
+from wheelloader.provenance import commit_label, machine_info
 
 PHASES = ("entry", "deep cut", "curl")
 TERMS = ("gamma", "cohesion", "adhesion", "surcharge", "penetration", "blade adhesion", "carried load (missing)")

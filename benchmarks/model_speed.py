@@ -16,9 +16,8 @@ import statistics
 import time
 from pathlib import Path
 
-from _machine import machine_info
-
 from wheelloader.estimator import Bucket, Pile, contact_state, default_path, preset, soil_forces, soil_forces_single
+from wheelloader.provenance import machine_info
 
 
 def _median_time(fn, repeats: int, inner: int) -> float:

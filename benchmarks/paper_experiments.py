@@ -4,7 +4,7 @@
 (``data/mpm``, ``python -m wheelloader.references.mpm.generate``). Which plant made it is read from the
 logs' metadata (``source``), and the reference material values come from there too.
 
-Data: ``data/reference`` (``python dem/run.py reference``; see dem/README.md). Every method
+Data: ``data/reference`` (``wheelloader dem reference``; see src/wheelloader/references/dem/README.md). Every method
 (``default``, ``single-stage``, ``multi-stage``) calibrates on the same filtered training cycle;
 the reference forces are filtered with a Gaussian (sigma ``--sigma`` s, default 0.1 s, mode
 'nearest'; ``wheelloader.references.dem.DEFAULT_FILTER``), as the paper compared with filtered forces. Every
@@ -31,14 +31,12 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from _machine import machine_info
-
-from wheelloader.provenance import commit_label
+from wheelloader.provenance import commit_label, machine_info
 from wheelloader.sweep import add_ray_arguments
 
 METHODS = ("default", "single-stage", "multi-stage")
 SOILS = ("gravel", "modified_sand", "dirt", "sand")
-#: DEM material values comparable with FEE parameters (Table 2 counterparts, see dem/README.md).
+#: DEM material values comparable with FEE parameters (Table 2 counterparts, see references/dem/README.md).
 DEM_VALUES = {
     "gravel": {"gamma": 1474.0, "cohesion": 0.0, "phi": 0.7679},
     "sand": {"gamma": 1474.0, "cohesion": 0.0, "phi": 0.6807},

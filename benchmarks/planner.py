@@ -56,17 +56,14 @@ import argparse  # noqa: E402
 import dataclasses  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
-import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _machine import machine_info  # noqa: E402
-
 from wheelloader.estimator.jsonable import to_jsonable  # noqa: E402
+from wheelloader.provenance import machine_info  # noqa: E402
 
 DEFAULT_SOILS = ("gravel", "sand", "dirt", "lean_clay", "modified_sand")
 QUICK_SOILS = ("gravel", "sand", "dirt")

@@ -5,7 +5,7 @@ For each soil x seed, in one run: (a) ``fixed`` Bezier path with nominal paramet
 loop), then (c) ``oracle``: one set of FEE parameters fitted afterwards to all of that soil's cycles of
 (a), (b) and (d), planned with from the first cycle (a hindsight bound on what calibration can give in
 this plant). Energy, fill and the next-cycle prediction error are measured by the plant for every
-strategy alike (:mod:`wheelloader.plant_loop`).
+strategy alike (:mod:`wheelloader.loop`).
 
 Each loop (soil x seed x strategy) is one unit of :mod:`wheelloader.sweep`: with Ray installed they run as
 Ray tasks on this machine (``--ray local``, one per CPU; ``--threads`` Taichi threads each), on a cluster with
@@ -39,32 +39,24 @@ import time
 from pathlib import Path
 from typing import Any
 
-from _machine import machine_info
-from _planner_args import add_planner_physics_arguments, planner_physics
-
-from wheelloader.provenance import commit_label, load_label
+from wheelloader.arguments import add_planner_physics_arguments, planner_physics
+from wheelloader.provenance import commit_label, load_label, machine_info
 from wheelloader.ray_mode import add_ray_arguments
+from wheelloader.references import PLANT_NAMES
 
-PLANTS = ("mpm", "fee-env", "dem")
 STRATEGIES = ("fixed", "ours", "paper", "oracle")
 
 
-def make_plant(name: str, resolution: float, threads: int, coarse: bool = False) -> Any:
-    """The plant by name; ``coarse``: the DEM's CI scenario (``--quick``)."""
-    if name == "mpm":
-        from wheelloader.references.mpm import MPMPlant
+def plant_from_args(args: argparse.Namespace) -> Any:
+    """The plant of the command line (:func:`wheelloader.references.make_plant`); ``--quick``: the DEM's CI
+    scenario."""
+    from wheelloader.references import make_plant
 
-        return MPMPlant(resolution=resolution, threads=threads)
-    if name == "fee-env":
-        from wheelloader.references.fee_env import FEEEnvPlant
-
-        return FEEEnvPlant()
-    if name == "dem":
-        from wheelloader.references.dem import DemConfig, DEMPlant, tiny_config
-
-        config = tiny_config(threads=threads) if coarse else DemConfig(threads=threads)
-        return DEMPlant(config, progress=lambda line: None)
-    raise SystemExit(f"--plant {name}: unknown plant")
+    if args.plant == "mpm":
+        return make_plant("mpm", resolution=args.resolution, threads=args.threads)
+    if args.plant == "dem":
+        return make_plant("dem", scenario="ci" if args.quick else "default", threads=args.threads)
+    return make_plant(args.plant)
 
 
 def planned_fill_limit(plant: Any, setting: str) -> float | None:
@@ -96,10 +88,10 @@ def cycles_dir(args: argparse.Namespace) -> Path:
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     from wheelloader.estimator import ModelOptions
-    from wheelloader.plant_loop import hindsight_parameters, plant_loop_unit
+    from wheelloader.loop import hindsight_parameters, plant_loop_unit
     from wheelloader.sweep import Unit, run_sweep
 
-    plant = make_plant(args.plant, args.resolution, args.threads, coarse=args.quick)
+    plant = plant_from_args(args)
     saved = cycles_dir(args)
     started = time.perf_counter()
     fill_limit = planned_fill_limit(plant, args.fill_limit)
@@ -144,7 +136,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                     rows += [dict(r, soil=soil, seed=seed) for r in by_key[(soil, seed, name)]["records"]]
     return {"benchmark": "plant_adaptation", "plant": args.plant, "settings": vars(args) | {"out": str(args.out)},
             "machine": machine_info(), "rows": rows, "oracle": oracles, "wall_s": time.perf_counter() - started,
-            "metrics": {"energy": "work of the plant's bucket force along the path (plant_loop, references.metrics)",
+            "metrics": {"energy": "work of the plant's bucket force along the path (loop, references.metrics)",
                         "fill": "plant's soil inside the bucket at the end",
                         "prediction": "F_R RMSE of the parameters planned with vs the plant's force filtered "
                                       "(sigma 0.1 s), % of mean |F_R| in soil"}}
@@ -194,18 +186,17 @@ def lifted_to_common_height(rows: list[dict[str, Any]], cycles: Path | None) -> 
     continuum's density where the log has one, else the soil preset's. Read from the saved cycles
     (``cycles/SOIL/seedN/STRATEGY/cycleK.csv.xz``); None without fixed-path cycles or when a cycle is missing.
     """
-    from wheelloader.estimator import CycleLog, preset
-    from wheelloader.estimator.cyclelog import find_cycle_log
+    from wheelloader.estimator import preset
     from wheelloader.estimator.force_model import GRAVITY
+    from wheelloader.saved_loops import load_saved_cycle
 
     if cycles is None or not any(r["strategy"] == "fixed" for r in rows):
         return None
     ends = []
     for r in rows:
-        csv = find_cycle_log(Path(cycles) / r["soil"] / f"seed{r['seed']}" / r["strategy"], f"cycle{r['cycle']}")
-        if csv is None:
+        log = load_saved_cycle(Path(cycles) / r["soil"] / f"seed{r['seed']}" / r["strategy"], r["cycle"])
+        if log is None:
             return None
-        log = CycleLog.load(csv)
         density = (log.metadata.get("continuum") or {}).get("density") or preset(r["soil"]).gamma
         ends.append((float(log.path.z[-1]), float(density)))
     z_ref = max(z for (z, _), r in zip(ends, rows, strict=True) if r["strategy"] == "fixed")
@@ -281,7 +272,8 @@ def markdown(result: dict[str, Any], cycles: Path | None = None) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--plant", choices=PLANTS, default="mpm")
+    parser.add_argument("--plant", choices=PLANT_NAMES, default="mpm",
+                        help="the plant that digs (wheelloader.references.make_plant; default: %(default)s)")
     parser.add_argument("--out", default="results/adaptation_mpm", help="output directory")
     parser.add_argument("--cycles-dir", default=None, metavar="DIR",
                         help="folder of the saved cycles (the resume cache; default OUT/cycles)")

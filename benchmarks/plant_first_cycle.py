@@ -28,9 +28,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from _machine import machine_info
-
-from wheelloader.provenance import commit_label, load_label
+from wheelloader.provenance import commit_label, load_label, machine_info
 from wheelloader.ray_mode import add_ray_arguments
 
 #: The variants: name -> PlannerOptions keywords (angles in degrees here); None is the fixed Bezier path.
@@ -67,9 +65,9 @@ def dig_variant(name: str, settings: dict[str, Any] | None, soil: str, resolutio
     from wheelloader.estimator import CycleLog, Pile, preset
     from wheelloader.estimator.cyclelog import find_cycle_log
     from wheelloader.planner import PlannerOptions, bezier_on_face, plan_next_cycle, verify_plan
-    from wheelloader.plant_loop import path_digest
     from wheelloader.references.metrics import cycle_work
     from wheelloader.references.mpm import MPMPlant
+    from wheelloader.saved_loops import path_digest
 
     pile = Pile.trapezoid()
     nominal = preset(NOMINAL_SOIL)

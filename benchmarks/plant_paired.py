@@ -28,26 +28,25 @@ import time
 from pathlib import Path
 from typing import Any
 
-from _machine import machine_info
-from plant_adaptation import make_plant
-from plant_replay import loops
-
-from wheelloader.provenance import commit_label, load_label
+from wheelloader.provenance import commit_label, load_label, machine_info
 from wheelloader.ray_mode import add_ray_arguments
+from wheelloader.references import make_plant
+from wheelloader.saved_loops import saved_loops
 
 
 def dig_fixed_on_piles(plant: Any, files: list[str], soil: str, seed: int, folder: str,
                        force: bool = False) -> list[dict[str, Any]]:
     """For each saved cycle (a CSV of the loop), the fixed path on its start pile: one row per cycle with both
     paths' plant-measured energy and fill. Each fixed-path cycle is a one-cycle plant loop of the fixed strategy
-    on that pile (:func:`wheelloader.plant_loop.run_plant_loop`: the same placement, digest, saved cycle and
+    on that pile (:func:`wheelloader.loop.run_loop`: the same placement, digest, saved cycle and
     measurement as the run's), saved under ``folder/cycleK`` and read back when present; one saved for another
     path is an error unless ``force``, which digs it again."""
     from wheelloader.adaptation import NOMINAL_SOIL, FixedBezier
     from wheelloader.estimator import CycleLog, WheelloaderError, preset
-    from wheelloader.estimator.cyclelog import find_cycle_log, log_stem
-    from wheelloader.plant_loop import run_plant_loop
+    from wheelloader.estimator.cyclelog import log_stem
+    from wheelloader.loop import run_loop
     from wheelloader.references.metrics import cycle_work
+    from wheelloader.saved_loops import load_saved_cycle
 
     settings = getattr(plant, "settings", None)
     expected = settings.to_dict() if settings is not None else None
@@ -60,10 +59,10 @@ def dig_fixed_on_piles(plant: Any, files: list[str], soil: str, seed: int, folde
         k = int(log_stem(csv).removeprefix("cycle"))
         cache = Path(folder) / f"cycle{k}"
         try:
-            records, _ = run_plant_loop(plant, FixedBezier(preset(NOMINAL_SOIL)), log.pile, soil, cycles=1,
-                                        seed=seed, cache=cache, stale="redig" if force else "error")
+            records, _ = run_loop(plant, FixedBezier(preset(NOMINAL_SOIL)), log.pile, soil, cycles=1,
+                                  seed=seed, cache=cache, stale="redig" if force else "error")
         except WheelloaderError as exc:
-            if force or find_cycle_log(cache, "cycle1") is None:
+            if force or load_saved_cycle(cache, 1) is None:
                 raise
             raise WheelloaderError(f"{exc} (the fixed path on {csv}'s pile: pass --force to dig it again)") from None
         fixed = records[0]
@@ -138,12 +137,18 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     root = Path(args.cycles)
     if not root.is_dir():
         raise SystemExit(f"--cycles {root}: no such folder (a run of benchmarks/adaptation.py --plant ... saves it)")
-    found = {k: v for k, v in loops(root).items() if k[2] in args.strategies}
+    from wheelloader.estimator import WheelloaderError
+
+    try:
+        loops = saved_loops(root)
+    except WheelloaderError as exc:
+        raise SystemExit(str(exc)) from None
+    found = {k: v for k, v in loops.items() if k[2] in args.strategies}
     if not found:
         raise SystemExit(f"--cycles {root}: no saved loop of {args.strategies}")
     if args.quick:
         found = {k: v[:1] for k, v in list(found.items())[:1]}
-    plant = make_plant(args.plant, args.resolution, threads=1)
+    plant = make_plant("mpm", resolution=args.resolution, threads=1) if args.plant == "mpm" else make_plant(args.plant)
     started = time.perf_counter()
     saved = Path(args.cycles_dir) if args.cycles_dir is not None else Path(args.out) / "cycles"
     keys = list(found)

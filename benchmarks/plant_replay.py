@@ -28,9 +28,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _machine import machine_info
 
-from wheelloader.provenance import commit_label, load_label
+from wheelloader.provenance import commit_label, load_label, machine_info
+from wheelloader.saved_loops import saved_loops
 
 #: name -> (method, window (None: every earlier cycle), failure-angle rule[, opt-in carried-load term])
 VARIANTS: dict[str, tuple[Any, ...]] = {
@@ -50,22 +50,6 @@ VARIANTS: dict[str, tuple[Any, ...]] = {
 #: Level of the prediction band whose coverage of the next cycle is measured.
 BAND_LEVEL = 0.9
 QUICK = ("ours, last cycle (loop default)", "ours + least weight force, all earlier cycles")
-
-
-def loops(root: Path) -> dict[tuple[str, str, str], list[Path]]:
-    """The saved loops under ``root`` (``SOIL/seedN/STRATEGY/cycleK.csv.xz``, or ``.csv``), cycles in order."""
-    from wheelloader.estimator.cyclelog import cycle_log_files, log_stem
-
-    found: dict[tuple[str, str, str], list[Path]] = {}
-    for csv in cycle_log_files(root, "*/seed*/*/cycle*"):
-        strategy, seed, soil = csv.parent.name, csv.parent.parent.name, csv.parent.parent.parent.name
-        found.setdefault((soil, seed, strategy), []).append(csv)
-    for key, files in found.items():
-        files.sort(key=lambda p: int(log_stem(p).removeprefix("cycle")))
-        numbers = [int(log_stem(p).removeprefix("cycle")) for p in files]
-        if numbers != list(range(1, len(numbers) + 1)):
-            raise SystemExit(f"{root}: loop {'/'.join(key)} has cycles {numbers}, not 1..{len(numbers)}")
-    return found
 
 
 def replay(files: list[Path], variant: str, sigma_s: float) -> list[dict[str, Any]]:
@@ -213,7 +197,13 @@ def main(argv: list[str] | None = None) -> int:
     root = Path(args.cycles)
     if not root.is_dir():
         raise SystemExit(f"--cycles {root}: no such folder (run benchmarks/adaptation.py --plant mpm first)")
-    found = {k: v for k, v in loops(root).items() if k[2] in args.strategies and len(v) >= 2}
+    from wheelloader.estimator import WheelloaderError
+
+    try:
+        loops = saved_loops(root)
+    except WheelloaderError as exc:
+        raise SystemExit(str(exc)) from None
+    found = {k: v for k, v in loops.items() if k[2] in args.strategies and len(v) >= 2}
     if not found:
         raise SystemExit(f"--cycles {root}: no saved loop of {args.strategies} with 2 or more cycles")
     variants = list(QUICK) if args.quick else args.variants

@@ -19,7 +19,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _machine import machine_info
+
+from wheelloader.provenance import machine_info
 
 #: Target frames per second of rgb_array rendering at 640 x 360.
 TARGET_FPS = 20.0

@@ -35,9 +35,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from _machine import machine_info
-
-from wheelloader.provenance import commit_label
+from wheelloader.provenance import commit_label, machine_info
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Wall-clock fields of an adaptation row (differ between runs); every other field must be equal.

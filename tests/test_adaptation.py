@@ -9,24 +9,38 @@ from wheelloader.adaptation import (
     LOOP_ENV_KWARGS,
     NOMINAL_SOIL,
     Calibrating,
+    CalibrationStep,
     FixedBezier,
     Oracle,
     PlanOutcome,
+    PolicyStrategy,
     bezier_on_face,
     format_table,
     hidden_default_soil,
     model_bezier_on_face,
-    run_loop,
 )
-from wheelloader.estimator import CalibrationError, Pile, default_path, preset
+from wheelloader.estimator import CalibrationError, Pile, WheelloaderError, default_path, preset
+from wheelloader.loop import run_loop
+from wheelloader.references.fee_env import FEEEnvPlant
+
+
+def _loop(strategy, cycles, seed=0, **env_kwargs):
+    """The demo's loop: one env digs every cycle (FEEEnvPlant with keep_env) in the hidden soil."""
+    return run_loop(FEEEnvPlant(keep_env=True, **env_kwargs), strategy, Pile.trapezoid(), hidden_default_soil(),
+                    cycles, seed=seed)
 
 
 def _env():
     return gym.make("wheelloader/BucketLoading-v0", soil=hidden_default_soil(), **LOOP_ENV_KWARGS)
 
 
+def _timeless(records):
+    """Records without their clock readings (calibration and planning seconds)."""
+    return [{k: v for k, v in r.to_dict().items() if not k.endswith("_s")} for r in records]
+
+
 def test_calibrating_loop_learns_the_plant():
-    records, logs = run_loop(_env(), Calibrating(preset(NOMINAL_SOIL)), cycles=3, seed=1)
+    records, logs = _loop(Calibrating(preset(NOMINAL_SOIL)), cycles=3, seed=1)
     assert [r.cycle for r in records] == [1, 2, 3] and len(logs) == 3
     assert all(r.calibration_ok for r in records)
     # nominal parameters predict cycle 1 badly; calibrated ones predict later cycles near the noise floor
@@ -39,8 +53,8 @@ def test_calibrating_loop_learns_the_plant():
 
 
 def test_fixed_and_oracle_strategies_run():
-    fixed, _ = run_loop(_env(), FixedBezier(preset(NOMINAL_SOIL)), cycles=2, seed=1)
-    oracle, _ = run_loop(_env(), Oracle(), cycles=2, seed=1)
+    fixed, _ = _loop(FixedBezier(preset(NOMINAL_SOIL)), cycles=2, seed=1)
+    oracle, _ = _loop(Oracle(), cycles=2, seed=1)
     assert fixed[1].params == preset(NOMINAL_SOIL).to_dict()
     assert oracle[1].params == hidden_default_soil().to_dict()
     assert oracle[1].prediction_rmse_percent < fixed[1].prediction_rmse_percent
@@ -53,7 +67,7 @@ def test_failed_calibration_keeps_previous_parameters(monkeypatch):
         raise CalibrationError("forced failure")
 
     monkeypatch.setattr(adaptation, "calibrate", broken)
-    records, _ = run_loop(_env(), Calibrating(preset(NOMINAL_SOIL)), cycles=2, seed=0)
+    records, _ = _loop(Calibrating(preset(NOMINAL_SOIL)), cycles=2, seed=0)
     assert not records[1].calibration_ok and "forced failure" in records[1].calibration_message
     assert records[1].params == preset(NOMINAL_SOIL).to_dict()
     assert "forced failure" in format_table(records)
@@ -63,7 +77,7 @@ def test_failed_plan_falls_back_and_is_reported():
     def failing_planner(params, pile):
         return PlanOutcome(None, False, "solver status Infeasible_Problem_Detected", 0.0)
 
-    records, _ = run_loop(_env(), Calibrating(preset(NOMINAL_SOIL), planner=failing_planner), cycles=2, seed=0)
+    records, _ = _loop(Calibrating(preset(NOMINAL_SOIL), planner=failing_planner), cycles=2, seed=0)
     assert not records[0].plan_ok and "Infeasible" in records[0].plan_message
     assert "fell back" in records[0].plan_message and records[0].fill_fraction > 0.5
 
@@ -102,7 +116,55 @@ def test_model_placed_bezier_keeps_the_fill_and_lowers_the_predicted_energy():
 
 def test_bad_cycle_count():
     with pytest.raises(Exception, match="positive integer"):
-        run_loop(_env(), FixedBezier(preset(NOMINAL_SOIL)), cycles=0)
+        _loop(FixedBezier(preset(NOMINAL_SOIL)), cycles=0)
+    with pytest.warns(DeprecationWarning), pytest.raises(Exception, match="positive integer"):
+        from wheelloader.adaptation import run_loop as old_loop
+
+        old_loop(_env(), FixedBezier(preset(NOMINAL_SOIL)), cycles=0)
+
+
+def test_the_deprecated_env_loop_is_the_one_loop():
+    """``adaptation.run_loop(env, ...)`` (deprecated, one release) gives the one loop's records on the same env."""
+    from wheelloader.adaptation import run_loop as old_loop
+
+    truth = {"drift": 0.05, "stone_rate": 0.5}
+    with pytest.warns(DeprecationWarning, match="wheelloader.loop.run_loop"):
+        old, old_logs = old_loop(_env_with(truth), Calibrating(preset(NOMINAL_SOIL)), cycles=3, seed=2)
+    new, new_logs = _loop(Calibrating(preset(NOMINAL_SOIL)), cycles=3, seed=2, truth=truth)
+    assert _timeless(old) == _timeless(new)
+    assert all(np.array_equal(a.tangential, b.tangential) for a, b in zip(old_logs, new_logs, strict=True))
+
+
+def _env_with(truth):
+    return gym.make("wheelloader/BucketLoading-v0", soil=hidden_default_soil(), truth=truth, **LOOP_ENV_KWARGS)
+
+
+class _Steady:
+    """A stand-in for a trained policy: a fixed function of the observation."""
+
+    def predict(self, obs, deterministic=True):
+        action = np.array([0.6, 0.15 - 0.3 * float(obs[1]), 0.2 * np.tanh(float(obs[0]))], dtype=np.float32)
+        return np.clip(action, -1.0, 1.0), None
+
+
+def test_a_controller_strategy_digs_through_the_kept_env_and_is_refused_elsewhere():
+    records, logs = _loop(PolicyStrategy(_Steady()), cycles=2, seed=3)
+    assert [r.path for r in records] == ["controller", "controller"] and len(logs) == 2
+    assert all(r.fill_m3 > 0.0 and r.calibration_message in ("prior parameters", "no calibration") for r in records)
+    with pytest.raises(WheelloaderError, match="digs paths only"):
+        run_loop(FEEEnvPlant(), PolicyStrategy(_Steady()), Pile.trapezoid(), "gravel", 1)
+
+
+def test_an_update_returning_the_old_tuple_still_counts_with_a_warning():
+    class OldStyle(FixedBezier):
+        def update(self, log, true_soil):
+            return 0.25, False, "old style"
+
+    with pytest.warns(DeprecationWarning, match="CalibrationStep"):
+        records, _ = _loop(OldStyle(preset(NOMINAL_SOIL)), cycles=2)
+    assert (records[1].calibration_s, records[1].calibration_ok, records[1].calibration_message) == (
+        0.25, False, "old style")
+    assert CalibrationStep.of(CalibrationStep(1.0, True, "x")) == CalibrationStep(1.0, True, "x")
 
 
 def test_the_loops_planner_checks_midpoints_and_replans_within_its_budget():

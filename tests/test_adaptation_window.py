@@ -17,7 +17,7 @@ def _logs(count, soil="dirt"):
 
 def test_window_calibrates_on_the_last_cycles():
     strategy = Calibrating(preset("sand"), window=2)
-    messages = [strategy.update(log, preset("dirt"))[2] for log in _logs(3)]
+    messages = [strategy.update(log, preset("dirt")).message for log in _logs(3)]
     assert messages[0].endswith("on 1 cycle") and messages[1].endswith("on 2 cycles")
     assert messages[2].endswith("on 2 cycles") and len(strategy.recent) == 2
     assert strategy.previous.cycle_count == 2
@@ -30,13 +30,13 @@ def test_untrustworthy_fit_keeps_the_previous_one_when_asked():
     flat = synthetic_cycle("dirt", noise=0.0, force_scale=1.0)
     flat = type(flat)(flat.path, np.full(len(flat), 1.0), np.full(len(flat), 1.0), flat.pile, flat.bucket)
     strict = Calibrating(preset("sand"), keep_untrustworthy=False)
-    assert strict.update(good, preset("dirt"))[1]
+    assert strict.update(good, preset("dirt")).ok
     kept = strict.params
-    ok, message = strict.update(flat, preset("dirt"))[1:]
-    assert not ok and "not trustworthy" in message and strict.params == kept
+    step = strict.update(flat, preset("dirt"))
+    assert not step.ok and "not trustworthy" in step.message and strict.params == kept
     lenient = Calibrating(preset("sand"))
     lenient.update(good, preset("dirt"))
-    assert lenient.update(flat, preset("dirt"))[1] and lenient.params != kept
+    assert lenient.update(flat, preset("dirt")).ok and lenient.params != kept
 
 
 def test_bad_windows_are_rejected():

@@ -123,3 +123,61 @@ def test_benchmark_scripts_define_everything_before_running_main():
         body = ast.parse(script.read_text(encoding="utf-8")).body
         guards = [i for i, node in enumerate(body) if isinstance(node, ast.If) and "__main__" in ast.unparse(node.test)]
         assert guards in ([], [len(body) - 1]), f"{script.name}: the __main__ block must be the last statement"
+
+
+BENCHMARKS = ROOT / "benchmarks"
+
+
+def benchmark_import_violations(folder: Path = BENCHMARKS) -> list[str]:
+    """Every import of one benchmark script by another (``folder/*.py``; helpers such as ``_x.py`` count too):
+    benchmarks are leaf scripts that import the package only, so that each can be read, run and moved alone."""
+    scripts = {file.stem for file in folder.glob("*.py")}
+    problems = []
+    for file in sorted(folder.glob("*.py")):
+        tree = ast.parse(file.read_text(encoding="utf-8"), filename=str(file))
+        for line, target in imported_modules(tree, file.stem, is_package=False):
+            if target.split(".")[0] in scripts:
+                problems.append(f"{file.name}:{line}: imports the benchmark {target.split('.')[0]}")
+    return problems
+
+
+def sys_path_edits(folders: tuple[Path, ...] = (ROOT / "tests", BENCHMARKS)) -> list[str]:
+    """Every use of ``sys.path`` in ``folders``' Python files (an edit makes a file importable only from one
+    place; pytest's ``pythonpath`` setting and installed packages are the ways in)."""
+    problems = []
+    for folder in folders:
+        for file in sorted(folder.rglob("*.py")):
+            tree = ast.parse(file.read_text(encoding="utf-8"), filename=str(file))
+            for node in ast.walk(tree):
+                if (isinstance(node, ast.Attribute) and node.attr == "path" and isinstance(node.value, ast.Name)
+                        and node.value.id == "sys"):
+                    problems.append(f"{file.relative_to(folder.parent)}:{node.lineno}: uses sys.path")
+    return problems
+
+
+def test_no_benchmark_imports_another():
+    assert benchmark_import_violations() == []
+
+
+def test_no_sys_path_edits_in_tests_or_benchmarks():
+    assert sys_path_edits() == []
+
+
+@pytest.mark.parametrize("source", ["import plant_replay\n", "from plant_replay import loops\n",
+                                    "def f():\n    from _helper import x\n"])
+def test_the_leaf_rule_fails_on_a_benchmark_importing_another(tmp_path, source):
+    (tmp_path / "plant_replay.py").write_text('"""A benchmark."""\n')
+    (tmp_path / "_helper.py").write_text("x = 1\n")
+    (tmp_path / "sneaky.py").write_text(source)
+    found = benchmark_import_violations(tmp_path)
+    assert len(found) == 1 and found[0].startswith("sneaky.py:")
+
+
+@pytest.mark.parametrize("source", ["import sys\nsys.path.insert(0, 'x')\n", "import sys\nsys.path.append('x')\n",
+                                    "import sys\nsys.path = ['x']\n",
+                                    "import sys\n\ndef f():\n    sys.path[:0] = ['x']\n"])
+def test_the_sys_path_rule_fails_on_an_edit(tmp_path, source):
+    (tmp_path / "tests").mkdir()
+    (tmp_path / "tests" / "test_sneaky.py").write_text(source)
+    found = sys_path_edits((tmp_path / "tests",))
+    assert len(found) == 1 and "test_sneaky.py" in found[0]

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import pytest
@@ -16,8 +15,7 @@ BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "planner.py"
 
 
 def _load_benchmark():
-    """Import ``benchmarks/planner.py`` as a module (it imports ``_machine`` from its own folder)."""
-    sys.path.insert(0, str(BENCH.parent))
+    """Import ``benchmarks/planner.py`` as a module (a leaf script: it imports only the package)."""
     spec = importlib.util.spec_from_file_location("wheelloader_benchmark_planner", BENCH)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

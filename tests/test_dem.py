@@ -1,4 +1,4 @@
-"""Tests of the DEM driver (wheelloader.dem) that do not need Yade, and of the shipped reference data."""
+"""Tests of the DEM driver (wheelloader.references.dem) that do not need Yade, and of the shipped reference data."""
 
 from __future__ import annotations
 
@@ -150,7 +150,7 @@ def test_reference_cases_have_unique_documented_commands():
 def _manifest():
     fname = REFERENCE / "manifest.json"
     if not fname.exists():
-        pytest.skip("no reference data generated yet (python dem/run.py reference)")
+        pytest.skip("no reference data generated yet (wheelloader dem reference)")
     return json.loads(fname.read_text())
 
 
@@ -180,7 +180,7 @@ def test_reference_has_three_soils_four_paths_and_dual_pair():
 
 
 def test_reference_physical_sanity():
-    """Physical sanity of the shipped reference set (figures: ``python dem/run.py sanity``)."""
+    """Physical sanity of the shipped reference set (figures: ``wheelloader dem sanity``)."""
     _manifest()
     report = dem.sanity_report(REFERENCE)
     cycles = report["cycles"]
@@ -194,7 +194,7 @@ def test_reference_physical_sanity():
     # carried mass vs the geometric carve x bulk density, within the stated tolerance
     assert report["mass"]["within_tolerance"], report["mass"]
     # zero force out of contact: the force is a sum of contact forces; in contact-free sample windows it is
-    # exactly 0 except for rare brief touches between sample instants (reported, see dem/README.md)
+    # exactly 0 except for rare brief touches between sample instants (reported, see references/dem/README.md)
     for name, c in cycles.items():
         assert c["no_contact_windows"] > 10, name
         assert c["no_contact_zero_fraction"] >= 0.9, (name, c)

@@ -66,7 +66,7 @@ PAGES = ["README.md", *(str(p.relative_to(ROOT)) for p in sorted((ROOT / "docs")
                         and "/results/" not in str(p)),
          "docs/results/plant_replay.md"]
 #: Other documents whose Python import lines must work (their blocks need optional extras to run).
-IMPORT_ONLY = ["dem/README.md", "train/README.md"]
+IMPORT_ONLY = ["src/wheelloader/references/dem/README.md", "train/README.md"]
 
 #: Commands that set up the environment the suite runs in, or are the suite itself.
 NOT_RUN = {

@@ -108,9 +108,7 @@ def test_ppo_by_id_with_two_env_runners_trains_one_iteration():
 
 
 def _train_modules():
-    train = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "train")
-    if train not in sys.path:
-        sys.path.insert(0, train)
+    # train/ is on pytest's pythonpath (pyproject.toml): its modules import by name, as the scripts see them
     import policies
     import rollouts
 

@@ -1,9 +1,9 @@
 """Smoke tests of the packaged SB3 adapter and the training and evaluation scripts in train/ (tiny budgets,
 no learning asserted).
 
-The scripts are not a package: they run as subprocesses, and their modules are imported by name with
-``train/`` on ``sys.path`` (as the scripts see them). Skipped without stable-baselines3 and torch, unless
-``WHEELLOADER_REQUIRE_RL=1`` (then a missing install fails).
+The scripts are not a package: they run as subprocesses, and their modules are imported by name, as the
+scripts see them (``train/`` is on pytest's ``pythonpath``, pyproject.toml). Skipped without stable-baselines3
+and torch, unless ``WHEELLOADER_REQUIRE_RL=1`` (then a missing install fails).
 """
 
 from __future__ import annotations
@@ -41,8 +41,6 @@ def _run(script: str, *args: str) -> subprocess.CompletedProcess:
 @pytest.fixture(scope="module")
 def common() -> SimpleNamespace:
     """The train/ modules' public names in one namespace (imported, not executed with runpy)."""
-    if str(TRAIN) not in sys.path:
-        sys.path.insert(0, str(TRAIN))
     names: dict = {}
     for module in ("common", "setups", "policies", "rollouts", "curves", "training"):
         names.update({k: v for k, v in vars(importlib.import_module(module)).items() if not k.startswith("_")})

@@ -24,8 +24,8 @@ cycle's record.
 from __future__ import annotations
 
 import functools
-import math
 import time
+import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
@@ -34,7 +34,6 @@ import numpy as np
 
 from wheelloader.estimator import (
     DEFAULT_OPTIONS,
-    FLAG_OUT_OF_SOIL,
     BucketPath,
     CalibrationOptions,
     CycleLog,
@@ -43,7 +42,6 @@ from wheelloader.estimator import (
     SoilParams,
     WheelloaderError,
     calibrate,
-    predict,
     preset,
 )
 from wheelloader.planner import (
@@ -103,6 +101,30 @@ class CycleRecord:
         return out
 
 
+@dataclass(frozen=True)
+class CalibrationStep:
+    """What a strategy did with the cycle just dug (:meth:`Strategy.update`): one row's calibration columns."""
+
+    seconds: float
+    """Time the calibration took [s]."""
+    ok: bool
+    """The strategy now believes parameters learnt from the cycle (False: it kept the previous ones)."""
+    message: str
+    """What happened, in words (the table's note when not ``ok``)."""
+
+    @classmethod
+    def of(cls, value: CalibrationStep | tuple[float, bool, str]) -> CalibrationStep:
+        """``value`` as a step; the ``(seconds, ok, message)`` tuple that ``update`` returned before 0.2 is still
+        taken, with a DeprecationWarning."""
+        if isinstance(value, CalibrationStep):
+            return value
+        warnings.warn("Strategy.update returning (seconds, ok, message) is deprecated and will be refused in the "
+                      "next release; return a wheelloader.adaptation.CalibrationStep", DeprecationWarning,
+                      stacklevel=3)
+        seconds, ok, message = value
+        return cls(float(seconds), bool(ok), str(message))
+
+
 class Strategy:
     """Decides which parameters to believe and which path to dig next.
 
@@ -119,9 +141,9 @@ class Strategy:
         self.rate = rate
         self.last_good_path: BucketPath | None = None
 
-    def update(self, log: CycleLog, true_soil: SoilParams) -> tuple[float, bool, str]:
-        """Learn from the cycle just dug; return ``(seconds, ok, message)``."""
-        return 0.0, True, "no calibration"
+    def update(self, log: CycleLog, true_soil: SoilParams) -> CalibrationStep:
+        """Learn from the cycle just dug (``true_soil``: the plant's truth, which only an oracle reads)."""
+        return CalibrationStep(0.0, True, "no calibration")
 
     def plan(self, pile: Pile) -> PlanOutcome:
         """Choose the next path on ``pile``."""
@@ -191,7 +213,7 @@ class Calibrating(Strategy):
         self.fill = fill
         self.recent: list[CycleLog] = []
 
-    def update(self, log: CycleLog, true_soil: SoilParams) -> tuple[float, bool, str]:
+    def update(self, log: CycleLog, true_soil: SoilParams) -> CalibrationStep:
         self.recent = [*self.recent, log][-self.window:]
         start = time.perf_counter()
         cycles = self.recent if len(self.recent) > 1 else log
@@ -200,18 +222,20 @@ class Calibrating(Strategy):
                 method=self.method, initial=self.previous, forgetting=self.forgetting if len(self.recent) > 1 else None,
                 model_options=self.model_options, fill=self.fill))
         except WheelloaderError as exc:
-            return time.perf_counter() - start, False, f"calibration failed, previous parameters kept: {exc}"
+            return CalibrationStep(time.perf_counter() - start, False,
+                                   f"calibration failed, previous parameters kept: {exc}")
         seconds = time.perf_counter() - start
         if not result.success:
-            return seconds, False, f"calibration did not converge, previous parameters kept: {result.message}"
+            return CalibrationStep(seconds, False,
+                                   f"calibration did not converge, previous parameters kept: {result.message}")
         used = f"{len(self.recent)} cycles" if len(self.recent) > 1 else "1 cycle"
         if (not result.trustworthy and not self.keep_untrustworthy and self.previous is not None
                 and self.previous.trustworthy):
             codes = ", ".join(w.code for w in result.warnings)
-            return seconds, False, f"fit on {used} not trustworthy ({codes}), previous parameters kept"
+            return CalibrationStep(seconds, False, f"fit on {used} not trustworthy ({codes}), previous parameters kept")
         self.previous = result
         self.params = result.params
-        return seconds, True, f"F_R fit {result.quality.percent_r:.1f} % on {used}"
+        return CalibrationStep(seconds, True, f"F_R fit {result.quality.percent_r:.1f} % on {used}")
 
     def plan(self, pile: Pile) -> PlanOutcome:
         if self.planner is None:
@@ -238,9 +262,9 @@ class Oracle(Calibrating):
     def __init__(self, planner: Any = None, rate: float = 60.0) -> None:
         super().__init__(preset(NOMINAL_SOIL), "oracle", planner, rate, name="oracle")
 
-    def update(self, log: CycleLog, true_soil: SoilParams) -> tuple[float, bool, str]:
+    def update(self, log: CycleLog, true_soil: SoilParams) -> CalibrationStep:
         self.params = true_soil
-        return 0.0, True, "true soil"
+        return CalibrationStep(0.0, True, "true soil")
 
 
 class PolicyStrategy(Strategy):
@@ -262,59 +286,24 @@ class PolicyStrategy(Strategy):
 
 def run_loop(env: Any, strategy: Strategy, cycles: int = 5, seed: int = 0,
              progress: Callable[[str], None] | None = None) -> tuple[list[CycleRecord], list[CycleLog]]:
-    """Run ``cycles`` digging cycles of ``strategy`` on ``env`` (a ``BucketLoadingEnv``).
+    """Deprecated: run ``cycles`` cycles of ``strategy`` on ``env`` (a ``BucketLoadingEnv``).
 
-    Between cycles the strategy calibrates on the cycle just dug and plans
-    the next one on the carved pile. The first cycle starts from the env's
-    pile with the strategy's prior parameters.
-
-    Returns
-    -------
-    records, logs
-        One :class:`CycleRecord` and one :class:`~wheelloader.estimator.CycleLog` per cycle.
+    Use :func:`wheelloader.loop.run_loop` with the env behind the plant interface,
+    ``run_loop(FEEEnvPlant(keep_env=True, **env_kwargs), strategy, pile, soil, cycles, seed=seed)``; this
+    function is that loop on ``FEEEnvPlant(env=env)`` (the records are the same) and will be removed in the
+    next release.
     """
-    from wheelloader.envs.scripted import PathTracker
+    from wheelloader.loop import run_loop as one_loop
+    from wheelloader.references.fee_env import FEEEnvPlant
 
-    if not isinstance(cycles, int) or cycles < 1:
+    warnings.warn("wheelloader.adaptation.run_loop(env, ...) is deprecated and will be removed in the next release; "
+                  "use wheelloader.loop.run_loop(FEEEnvPlant(keep_env=True, ...), strategy, pile, soil, cycles)",
+                  DeprecationWarning, stacklevel=2)
+    if not isinstance(cycles, int) or isinstance(cycles, bool) or cycles < 1:
         raise WheelloaderError(f"cycles must be a positive integer, got {cycles!r}")
     base = env.unwrapped
-    records: list[CycleRecord] = []
-    logs: list[CycleLog] = []
-    calib = (0.0, True, "prior parameters")
-    obs, info = env.reset(seed=seed)
-    for k in range(1, cycles + 1):
-        if k > 1:
-            obs, info = env.reset(options={"keep_pile": True, "soil": "keep"})
-        pile = base.start_pile
-        plan = strategy.plan(pile)
-        controller = plan.controller or PathTracker(plan.path, base.cfg.loader, base.cfg.control_rate)
-        params_used = strategy.params
-        terminated = truncated = False
-        violations = 0
-        while not (terminated or truncated):
-            obs, _, terminated, truncated, info = env.step(controller(obs))
-            if int(info["flags"]) & ~FLAG_OUT_OF_SOIL and info["depth"] > 0.0:
-                violations += 1
-        log = base.last_cycle_log() if terminated else finish_cycle(env)
-        logs.append(log)
-        quality = predict(params_used, log, options=strategy.model_options, fill=strategy.fill).quality
-        fill = float(info["fill_volume"])
-        energy = float(info["energy_soil"] + info["energy_payload"])
-        records.append(CycleRecord(
-            cycle=k, strategy=strategy.name, path=plan.path.name if plan.path is not None else "controller",
-            calibration_s=calib[0], planning_s=plan.seconds,
-            prediction_rmse_N=quality.rmse_r if quality else math.nan,
-            prediction_rmse_percent=quality.percent_r if quality else math.nan,
-            fill_m3=fill, fill_fraction=float(info["fill_fraction"]), energy_J=energy,
-            energy_per_m3=energy / fill if fill > 0 else math.inf, stalled=bool(info["stalled"]),
-            validity_violations=violations, end=log.metadata.get("end", ""),
-            calibration_ok=calib[1], calibration_message=calib[2], plan_ok=plan.success,
-            plan_message=plan.message, params=params_used.to_dict()))
-        if progress is not None:
-            progress(_progress_line(records[-1]))
-        if k < cycles:
-            calib = strategy.update(log, base.soil)
-    return records, logs
+    return one_loop(FEEEnvPlant(env=env), strategy, base.cfg.pile, "the env's", cycles, seed=seed,
+                    progress=progress)
 
 
 #: Strategy names of :func:`make_strategy` (``rl`` needs a trained policy).
@@ -362,7 +351,9 @@ def strategy_loop(*, soil: SoilParams, pile: Mapping[str, Any] | Pile, truth: Ma
                   end_blade_angle: float | None = None, curl_out_intervals: int = 0,
                   midpoints: bool | None = None) -> list[dict[str, Any]]:
     """One loop of the adaptation benchmark, self-contained so that it can run in another process (a
-    :class:`wheelloader.sweep.Unit`): build the plant env and a fresh strategy, run :func:`run_loop`.
+    :class:`wheelloader.sweep.Unit`): build the plant env and a fresh strategy, run
+    :func:`wheelloader.loop.run_loop` on the env (:class:`~wheelloader.references.fee_env.FEEEnvPlant` with
+    ``keep_env``).
 
     Parameters
     ----------
@@ -393,9 +384,8 @@ def strategy_loop(*, soil: SoilParams, pile: Mapping[str, Any] | Pile, truth: Ma
     list of dict
         :meth:`CycleRecord.to_dict` of every cycle.
     """
-    import gymnasium as gym
-
-    import wheelloader.envs  # noqa: F401  (registers the env ids in this process)
+    from wheelloader.loop import run_loop
+    from wheelloader.references.fee_env import FEEEnvPlant
 
     if planner not in ("plan", "mpc", None):
         raise WheelloaderError(f"planner must be 'plan', 'mpc' or None, got {planner!r}")
@@ -404,12 +394,12 @@ def strategy_loop(*, soil: SoilParams, pile: Mapping[str, Any] | Pile, truth: Ma
     rule = model.failure_angle if model is not None else "min_n_gamma"
     plan_fn = None if planner is None else _process_planner(planner == "mpc", cut_angle, rule, heel_clearance,
                                                             end_blade_angle, curl_out_intervals, midpoints)
-    env = gym.make("wheelloader/BucketLoading-v0", soil=soil, pile=pile, truth=dict(truth), **LOOP_ENV_KWARGS)
+    plant = FEEEnvPlant(keep_env=True, truth=dict(truth))
     try:
-        records, _ = run_loop(env, make_strategy(strategy, plan_fn, rl_policy, ours_options), cycles=cycles,
-                              seed=seed)
+        records, _ = run_loop(plant, make_strategy(strategy, plan_fn, rl_policy, ours_options), pile, soil,
+                              cycles=cycles, seed=seed)
     finally:
-        env.close()
+        plant.close()
     return [r.to_dict() for r in records]
 
 
@@ -417,13 +407,6 @@ def finish_cycle(env: Any) -> CycleLog:
     """Close a cycle that hit the time limit (the pile kept, as carved) and return its log."""
     env.reset(options={"keep_pile": True, "soil": "keep"})
     return env.unwrapped.cycle_logs()[-1]
-
-
-def _progress_line(r: CycleRecord) -> str:
-    flag = "" if r.calibration_ok and r.plan_ok else "  [!] " + "; ".join(
-        m for ok, m in ((r.calibration_ok, r.calibration_message), (r.plan_ok, r.plan_message)) if not ok)
-    return (f"  {r.strategy:>7} cycle {r.cycle}: fill {r.fill_fraction:5.0%}, energy {r.energy_J / 1e3:6.2f} kJ, "
-            f"prediction F_R RMSE {r.prediction_rmse_percent:5.1f} %{flag}")
 
 
 def format_table(records: list[CycleRecord]) -> str:

@@ -27,7 +27,9 @@ MAX_SEEDS = 20
 REPRODUCE_TOLERANCE = {"prediction_rmse_percent": 0.05, "fill_fraction": 0.005, "energy_per_m3": 50.0}
 
 
-#: Plants the demo can dig in: the FEE env (the model's own world, fast) and the MPM continuum reference.
+#: Plants the demo can dig in (names of :func:`wheelloader.references.make_plant`): the FEE env (the model's own
+#: world, fast) and the MPM continuum reference (the DEM plant digs only its own soil presets, not the demo's
+#: hidden soil).
 DEMO_PLANTS = ("fee-env", "mpm")
 
 
@@ -39,9 +41,9 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     ``seeds`` runs of both strategies, with plant seeds ``seed, seed + 1, ...``: ``table.md`` gives each
     cycle's median over them with the min-max beside it (:func:`markdown_table`); the figures show the first
     seed. ``plant="mpm"`` digs every cycle in the plane-strain MPM continuum (grid ``resolution`` [m]; about 3
-    minutes per cycle at 2 cm) with the same hidden soil, through :func:`wheelloader.plant_loop.run_plant_loop`
-    (each cycle saved under ``out/cycles/`` as it finishes, ``out/cycles/seedS/`` with several seeds; a second
-    run into the same folder resumes).
+    minutes per cycle at 2 cm) with the same hidden soil (each cycle saved under ``out/cycles/`` as it finishes,
+    ``out/cycles/seedS/`` with several seeds; a second run into the same folder resumes). Both plants run
+    :func:`wheelloader.loop.run_loop` on the plant :func:`wheelloader.references.make_plant` makes.
     ``window``: ours calibrates on the last ``window`` cycles together (default
     :data:`wheelloader.adaptation.DEFAULT_WINDOW`).
     """
@@ -101,29 +103,25 @@ def _run_seed(cache: Path, cycles: int, seed: int, planner: Any, plant: str, hid
               window: int | None, say: Any) -> dict[str, Any]:
     """Both strategies' loops with one plant seed: ``{name: (records, logs)}`` (MPM cycles saved under
     ``cache / name``)."""
-    import gymnasium as gym
+    from wheelloader.adaptation import NOMINAL_SOIL, Calibrating, FixedBezier
+    from wheelloader.estimator import Pile, preset
+    from wheelloader.loop import run_loop
+    from wheelloader.references import make_plant
 
-    import wheelloader.envs  # noqa: F401  (registers the env ids)
-    from wheelloader.adaptation import LOOP_ENV_KWARGS, NOMINAL_SOIL, Calibrating, FixedBezier, run_loop
-    from wheelloader.estimator import preset
-
+    # the FEE env digs every cycle in one env (its sensor noise seen raw); the MPM continuum saves each cycle
+    settings = {"keep_env": True} if plant == "fee-env" else {"resolution": resolution}
     results = {}
     for strategy in (Calibrating(preset(NOMINAL_SOIL), planner=planner, window=window),
                      FixedBezier(preset(NOMINAL_SOIL))):
         say(f"running {cycles} cycles, strategy '{strategy.name}', plant {plant} ...")
-        if plant == "fee-env":
-            env = gym.make("wheelloader/BucketLoading-v0", soil=hidden, **LOOP_ENV_KWARGS)
-            records, logs = run_loop(env, strategy, cycles=cycles, seed=seed, progress=say)
-            env.close()
-        else:
-            from wheelloader.estimator import Pile
-            from wheelloader.plant_loop import run_plant_loop
-            from wheelloader.references.mpm import MPMPlant
-
-            records, logs = run_plant_loop(MPMPlant(resolution=resolution), strategy, Pile.trapezoid(), hidden,
-                                           cycles=cycles, seed=seed, cache=cache / strategy.name,
-                                           progress=say)
-        results[strategy.name] = (records, logs)
+        digger = make_plant(plant, **settings)
+        try:
+            results[strategy.name] = run_loop(digger, strategy, Pile.trapezoid(), hidden, cycles=cycles, seed=seed,
+                                              cache=None if plant == "fee-env" else cache / strategy.name,
+                                              progress=say)
+        finally:
+            if hasattr(digger, "close"):
+                digger.close()
     return results
 
 

@@ -13,7 +13,7 @@ from .staging import OutputRun
 
 def register(subparsers: Any) -> None:
     """Add the ``demo`` subcommand."""
-    from wheelloader.demo import DEFAULT_CYCLES, DEFAULT_SEEDS
+    from wheelloader.demo import DEFAULT_CYCLES, DEFAULT_SEEDS, DEMO_PLANTS
 
     p = subparsers.add_parser("demo", help="run the cycle-to-cycle adaptation demo on the built-in default",
                               description="Run the cycle-to-cycle adaptation loop (calibrate, predict, plan, dig) "
@@ -33,7 +33,7 @@ def register(subparsers: Any) -> None:
                         "wheelloader.adaptation.DEFAULT_WINDOW)")
     p.add_argument("--mpc", action="store_true",
                    help="execute each plan with the receding-horizon MPC instead of tracking it (slower)")
-    p.add_argument("--plant", choices=("fee-env", "mpm"), default="fee-env",
+    p.add_argument("--plant", choices=DEMO_PLANTS, default="fee-env",
                    help="where the cycles are dug: the FEE env (default, seconds) or the MPM continuum reference "
                         "(needs the mpm extra; about 3 minutes per cycle at 2 cm, 2 x CYCLES cycles; resumable)")
     p.add_argument("--resolution", type=float, default=None,

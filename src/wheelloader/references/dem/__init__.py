@@ -1,7 +1,7 @@
 """The Yade DEM reference: a quasi-2D slab pile of spheres dug by a kinematically driven rigid bucket.
 
 Yade is a system package (``bash dem/install_yade.sh``); without it :func:`run_scenario` raises
-:class:`YadeNotFoundError` naming the install command. See ``dem/README.md`` for the scenario, and
+:class:`YadeNotFoundError` naming the install command. See ``README.md`` in this folder for the scenario, and
 ``wheelloader dem --help`` for the command line.
 
 * :mod:`.config`: :class:`DemConfig`, the scaled paths, the tiny CI scenario;

@@ -21,7 +21,7 @@ from wheelloader.estimator import Bucket, BucketPath, ParameterError, Wheelloade
 
 #: Command that installs Yade on Debian/Ubuntu.
 YADE_INSTALL = "sudo apt-get update && sudo apt-get install -y yade"
-#: Soils the scenario knows (counterparts of the paper's Table 2; see dem/README.md).
+#: Soils the scenario knows (counterparts of the paper's Table 2; see the README beside this module).
 SOILS: tuple[str, ...] = ("gravel", "sand", "dirt", "modified_sand")
 
 
@@ -50,7 +50,7 @@ class DemConfig:
         Mean particle radius [m] and relative half-width of the uniform radius range.
     young : float
         Young's modulus of particles and bucket [Pa] (reduced from steel/rock
-        values so that the time step is ~2e-4 s; see dem/README.md).
+        values so that the time step is ~2e-4 s; see the README beside this module).
     seed : int
         Seed of the particle deposition.
     slope_deg : float
@@ -125,7 +125,7 @@ class DemConfig:
                       mass=ref.mass * area_scale)
 
     def yade_args(self) -> list[str]:
-        """Scenario options for ``dem/yade_scenario.py``."""
+        """Scenario options for ``yade_scenario.py``."""
         ref = Bucket()
         args = ["--soil", self.soil, "--radius", repr(self.radius), "--radius-spread", repr(self.radius_spread),
                 "--young", repr(self.young), "--seed", str(self.seed), "--slab-width", repr(self.slab_width),

@@ -14,7 +14,7 @@ similarity: per metre of width a force of the soil's weight grows with the squar
 ``F = F_slab / slab_width * bucket.width / scale^2`` and the same for the fill volume. That holds for a
 cohesionless soil only (cohesion would scale with the length): a cohesive soil is refused unless
 ``scale`` is 1. The particles are not scaled: at scale 0.6 the plant is a full-scale pile of spheres of
-radius ``radius / scale`` (5 cm at the defaults), coarse beside the MPM plant (``dem/README.md``: the same
+radius ``radius / scale`` (5 cm at the defaults), coarse beside the MPM plant (the README beside this module: the same
 path on another packing differs from itself by 33-109 %).
 
 A cycle costs one settling and one dig (the deposit grows with how far the path reaches); each settled

@@ -168,7 +168,7 @@ def update_manifest(out_dir: Path, entries: list[dict[str, Any]]) -> Path:
     manifest["cycles"] = sorted(keep + entries, key=lambda e: (order.get(e["case"], 999), e["cycle"]))
     manifest["filter"] = DEFAULT_FILTER
     manifest["notes"] = ("Forces per simulated slab (bucket.width = slab width); geometry = project defaults x "
-                         "scale; see dem/README.md. Regenerate a case with its 'command'.")
+                         "scale; see src/wheelloader/references/dem/README.md. Regenerate a case with its 'command'.")
     manifest["generated_with"] = {"python": sys.version.split()[0], "platform": sys.platform}
     tmp = fname.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(manifest, indent=1))

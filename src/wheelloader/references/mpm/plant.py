@@ -170,7 +170,7 @@ class MPMPlant:
         The bucket rests at the path's first pose while the soil settles (``settle_time``), then follows
         the path, its pose interpolated linearly between samples at every MPM step. ``F_T``, ``F_N``
         are the mean force over each sample's interval (centred on the sample), in the blade frame of
-        ``dem/yade_scenario.py``; ``fill_volume`` is the volume (mass / density) of the particles inside
+        ``references/dem/yade_scenario.py``; ``fill_volume`` is the volume (mass / density) of the particles inside
         the bucket outline at each sample; ``pile_after`` is the start pile plus the change of the
         resting soil's surface within the simulated range.
 

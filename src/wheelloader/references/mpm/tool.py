@@ -4,7 +4,7 @@ Body frame: origin at the tool's reference point (the bucket's cutting-edge tip)
 from its back edge toward the tip, ``w`` along the floor's upper normal. A pose ``(x, z, a)`` puts the
 origin at (x, z) and turns the frame by the blade angle ``a`` [rad]: ``e = (cos a, sin a)``,
 ``n = (-sin a, cos a)``. This is the convention of :class:`~wheelloader.estimator.BucketPath` and
-``dem/yade_scenario.py``.
+``references/dem/yade_scenario.py``.
 """
 
 from __future__ import annotations
@@ -90,7 +90,7 @@ def bucket_shape(bucket: Bucket | None = None) -> ToolShape:
 
     Floor = ``bucket.floor_length`` L ending at the tip (body origin); back plate normal to the floor,
     ``BACK_PLATE_RATIO * L`` high; top plate from the back plate's top toward the tip,
-    ``TOP_PLATE_RATIO * L`` long (the proportions of ``dem/yade_scenario.py``). The fill outline is
+    ``TOP_PLATE_RATIO * L`` long (the proportions of ``references/dem/yade_scenario.py``). The fill outline is
     tip, back edge, back-plate top, top-plate end, closed by the strike line back to the tip.
     """
     bucket = bucket or Bucket()

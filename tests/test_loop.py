@@ -1,4 +1,4 @@
-"""The adaptation loop on a reference plant (plant_loop): the FEE env as plant, resume, metrics, a tiny MPM loop."""
+"""The adaptation loop (wheelloader.loop) on reference plants: the FEE env as plant, resume, metrics, an MPM loop."""
 
 from __future__ import annotations
 
@@ -11,11 +11,12 @@ import pytest
 
 from wheelloader.adaptation import NOMINAL_SOIL, Calibrating, FixedBezier
 from wheelloader.estimator import Bucket, BucketPath, CycleLog, Pile, WheelloaderError, preset
+from wheelloader.loop import Hindsight, hindsight_parameters, run_loop
 from wheelloader.planner import PlanOutcome
-from wheelloader.plant_loop import Hindsight, hindsight_parameters, path_digest, path_distance, run_plant_loop
 from wheelloader.references import Plant
 from wheelloader.references.fee_env import FEEEnvPlant
 from wheelloader.references.metrics import cycle_work, world_force
+from wheelloader.saved_loops import path_digest, path_distance
 
 
 def _log(tangential, normal, angle, x, z, t) -> CycleLog:
@@ -55,7 +56,7 @@ def test_fee_env_plant_is_a_plant_and_carves():
 def test_loop_on_the_fee_env_plant_resumes_from_its_cache(tmp_path):
     plant = FEEEnvPlant(sensor_noise=0.0)
     lines: list[str] = []
-    records, logs = run_plant_loop(plant, FixedBezier(preset(NOMINAL_SOIL)), Pile.trapezoid(), "gravel", cycles=2,
+    records, logs = run_loop(plant, FixedBezier(preset(NOMINAL_SOIL)), Pile.trapezoid(), "gravel", cycles=2,
                                    cache=tmp_path, progress=lines.append)
     assert [r.cycle for r in records] == [1, 2]
     assert len(lines) == 2 and all("resumed" not in line for line in lines)
@@ -64,7 +65,7 @@ def test_loop_on_the_fee_env_plant_resumes_from_its_cache(tmp_path):
     for r in records:
         assert r.fill_m3 > 0.0 and r.energy_J > 0.0 and math.isfinite(r.prediction_rmse_percent)
     # a second run reads the saved cycles and gives the same records
-    again, _ = run_plant_loop(plant, FixedBezier(preset(NOMINAL_SOIL)), Pile.trapezoid(), "gravel", cycles=2,
+    again, _ = run_loop(plant, FixedBezier(preset(NOMINAL_SOIL)), Pile.trapezoid(), "gravel", cycles=2,
                               cache=tmp_path, progress=lines.append)
     assert all("resumed" in line for line in lines[2:])
     for a, b in zip(records, again, strict=True):
@@ -74,13 +75,13 @@ def test_loop_on_the_fee_env_plant_resumes_from_its_cache(tmp_path):
     meta = logs[0].metadata
     assert meta["planned_path_sha256"] == path_digest(FixedBezier(preset(NOMINAL_SOIL)).plan(Pile.trapezoid()).path)
     with pytest.raises(WheelloaderError, match="another path"):
-        run_plant_loop(plant, FixedBezier(preset(NOMINAL_SOIL), rate=30.0), Pile.trapezoid(), "gravel", cycles=1,
+        run_loop(plant, FixedBezier(preset(NOMINAL_SOIL), rate=30.0), Pile.trapezoid(), "gravel", cycles=1,
                        cache=tmp_path)
     # ... unless asked to keep it (resuming on another machine): the saved cycle is the one dug, its plan's
     # record is read from the log, and the record says how far the plan made now lies from it
     assert meta["plan"]["ok"] == records[0].plan_ok and meta["plan"]["params"] == records[0].params
     kept_lines: list[str] = []
-    kept, _ = run_plant_loop(plant, FixedBezier(preset(NOMINAL_SOIL), rate=30.0), Pile.trapezoid(), "gravel",
+    kept, _ = run_loop(plant, FixedBezier(preset(NOMINAL_SOIL), rate=30.0), Pile.trapezoid(), "gravel",
                              cycles=2, cache=tmp_path, stale="keep", progress=kept_lines.append)
     assert all("kept saved cycle" in line for line in kept_lines)
     for a, b in zip(records, kept, strict=True):
@@ -93,11 +94,11 @@ def test_loop_on_the_fee_env_plant_resumes_from_its_cache(tmp_path):
     for name in ("cycle1.csv.xz", "cycle1.json.xz"):
         (tmp_path / name).unlink()
     old_log.save(tmp_path / "cycle1.csv")
-    older, _ = run_plant_loop(plant, FixedBezier(preset(NOMINAL_SOIL), rate=30.0), Pile.trapezoid(), "gravel",
+    older, _ = run_loop(plant, FixedBezier(preset(NOMINAL_SOIL), rate=30.0), Pile.trapezoid(), "gravel",
                               cycles=1, cache=tmp_path, stale="keep")
     assert older[0].end.endswith("its plan's record is that of the plan made now")
     with pytest.raises(WheelloaderError, match="stale"):
-        run_plant_loop(plant, FixedBezier(preset(NOMINAL_SOIL)), Pile.trapezoid(), "gravel", cache=tmp_path,
+        run_loop(plant, FixedBezier(preset(NOMINAL_SOIL)), Pile.trapezoid(), "gravel", cache=tmp_path,
                        stale="ignore")
 
 
@@ -114,17 +115,17 @@ def test_path_distance_known_answers():
 def test_loop_rejects_bad_input():
     plant = FEEEnvPlant()
     with pytest.raises(WheelloaderError, match="cycles"):
-        run_plant_loop(plant, FixedBezier(preset(NOMINAL_SOIL)), Pile.trapezoid(), "gravel", cycles=0)
+        run_loop(plant, FixedBezier(preset(NOMINAL_SOIL)), Pile.trapezoid(), "gravel", cycles=0)
     with pytest.raises(WheelloaderError, match="Pile"):
-        run_plant_loop(plant, FixedBezier(preset(NOMINAL_SOIL)), "trapezoid", "gravel")
+        run_loop(plant, FixedBezier(preset(NOMINAL_SOIL)), "trapezoid", "gravel")
     with pytest.raises(WheelloaderError, match="dig"):
-        run_plant_loop(object(), FixedBezier(preset(NOMINAL_SOIL)), Pile.trapezoid(), "gravel")
+        run_loop(object(), FixedBezier(preset(NOMINAL_SOIL)), Pile.trapezoid(), "gravel")
 
 
 def test_calibrating_strategy_and_hindsight_oracle_on_the_env_plant(tmp_path):
     plant = FEEEnvPlant(sensor_noise=0.0)
     ours = Calibrating(preset(NOMINAL_SOIL), "default", None)  # no planner: Bezier paths, calibration only
-    records, logs = run_plant_loop(plant, ours, Pile.trapezoid(), "gravel", cycles=2)
+    records, logs = run_loop(plant, ours, Pile.trapezoid(), "gravel", cycles=2)
     assert records[1].calibration_ok, records[1].calibration_message
     # calibrated on cycle 1 of the true gravel: cycle 2 is predicted better than with the nominal sand
     assert records[1].prediction_rmse_percent < records[0].prediction_rmse_percent
@@ -132,7 +133,7 @@ def test_calibrating_strategy_and_hindsight_oracle_on_the_env_plant(tmp_path):
     assert "cycles" in how
     oracle = Hindsight(params)
     assert oracle.name == "oracle"
-    assert oracle.update(logs[0], preset("gravel"))[2] == "hindsight parameters"
+    assert oracle.update(logs[0], preset("gravel")).message == "hindsight parameters"
     assert oracle.params == params
 
 
@@ -145,7 +146,7 @@ def test_tiny_mpm_loop():
         pytest.skip('taichi not installed: pip install "wheelloader[mpm]"')
     from wheelloader.references.mpm import MPMPlant
 
-    records, logs = run_plant_loop(MPMPlant(resolution=0.08), FixedBezier(preset(NOMINAL_SOIL)), Pile.trapezoid(),
+    records, logs = run_loop(MPMPlant(resolution=0.08), FixedBezier(preset(NOMINAL_SOIL)), Pile.trapezoid(),
                                    "gravel", cycles=1)
     assert logs[0].metadata["plant"] == "mpm"
     assert records[0].fill_m3 > 0.0 and records[0].energy_J > 0.0
@@ -179,7 +180,7 @@ def test_env_plant_digs_with_the_loops_end_of_cycle_rule():
 
 
 def test_plant_loop_unit_builds_ours_with_the_failure_angle_rule(tmp_path):
-    from wheelloader.plant_loop import plant_loop_unit
+    from wheelloader.loop import plant_loop_unit
 
     out = plant_loop_unit(FEEEnvPlant(sensor_noise=0.0), "ours", "gravel", cycles=2, seed=0, cache=tmp_path / "c",
                           planner=False, failure_angle="min_weight_force")
@@ -193,7 +194,7 @@ def test_plant_loop_unit_builds_ours_with_the_failure_angle_rule(tmp_path):
 
 def test_plant_loop_unit_passes_the_planner_settings_on(monkeypatch):
     import wheelloader.adaptation as adaptation
-    from wheelloader.plant_loop import plant_loop_unit
+    from wheelloader.loop import plant_loop_unit
 
     seen = {}
 
@@ -250,7 +251,7 @@ def test_replay_benchmark_reproduces_the_loops_own_predictions(tmp_path):
 
     plant = FEEEnvPlant(sensor_noise=0.0)
     ours = Calibrating(preset(NOMINAL_SOIL), "default", None)
-    records, _ = run_plant_loop(plant, ours, Pile.trapezoid(), "gravel", cycles=3,
+    records, _ = run_loop(plant, ours, Pile.trapezoid(), "gravel", cycles=3,
                                 cache=tmp_path / "cycles" / "gravel" / "seed0" / "ours")
     script = Path(__file__).resolve().parents[1] / "benchmarks" / "plant_replay.py"
     done = subprocess.run([sys.executable, str(script), "--cycles", str(tmp_path / "cycles"), "--out",
@@ -308,7 +309,7 @@ def test_plant_report_lifts_every_kept_load_to_the_fixed_paths_end_height(tmp_pa
     rows, ends = [], {}
     for name, strategy in (("fixed", FixedBezier(preset(NOMINAL_SOIL))),
                            ("ours", Calibrating(preset(NOMINAL_SOIL), "default", None))):
-        records, logs = run_plant_loop(plant, strategy, Pile.trapezoid(), "gravel", cycles=2,
+        records, logs = run_loop(plant, strategy, Pile.trapezoid(), "gravel", cycles=2,
                                        cache=tmp_path / "cycles" / "gravel" / "seed0" / name)
         rows += [dict(r.to_dict(), soil="gravel", seed=0) for r in records]
         ends[name] = [float(log.path.z[-1]) for log in logs]
@@ -363,7 +364,7 @@ def test_plant_paired_digs_the_fixed_path_on_each_saved_pile_and_resumes(tmp_pat
     plant = FEEEnvPlant()  # the benchmark's --plant fee-env
     measured = {}
     for strategy in (FixedBezier(preset(NOMINAL_SOIL)), _DeeperBezier(preset(NOMINAL_SOIL))):
-        records, _ = run_plant_loop(plant, strategy, Pile.trapezoid(), "gravel", cycles=2, seed=1,
+        records, _ = run_loop(plant, strategy, Pile.trapezoid(), "gravel", cycles=2, seed=1,
                                     cache=tmp_path / "run" / "gravel" / "seed1" / strategy.name)
         measured[strategy.name] = records
     script = Path(__file__).resolve().parents[1] / "benchmarks" / "plant_paired.py"

@@ -1,5 +1,8 @@
-"""The planner's opt-in physics on the command line, shared by the adaptation benchmarks
-(``benchmarks/adaptation.py`` and its ``--plant`` variant ``benchmarks/plant_adaptation.py``)."""
+"""Command-line arguments that scripts share (the ``wheelloader`` command's own are in :mod:`wheelloader.cli`).
+
+* the planner's opt-in physics of the adaptation benchmarks (``benchmarks/adaptation.py`` and
+  ``benchmarks/plant_adaptation.py``): :func:`add_planner_physics_arguments`, :func:`planner_physics`.
+"""
 
 from __future__ import annotations
 
