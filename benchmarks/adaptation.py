@@ -46,7 +46,7 @@ import numpy as np  # noqa: E402
 
 from wheelloader.arguments import add_planner_physics_arguments, planner_physics  # noqa: E402
 from wheelloader.provenance import commit_label, machine_info  # noqa: E402
-from wheelloader.sweep import add_ray_arguments  # noqa: E402
+from wheelloader.ray_mode import add_ray_arguments  # noqa: E402
 
 SOILS = ("gravel", "dirt", "modified_sand")
 PILES = {"trapezoid 30 deg": {"shape": "trapezoid"},

@@ -229,7 +229,8 @@ def relative_rmse(a: np.ndarray, b: np.ndarray) -> float:
 
 def part_cycle(args) -> dict:
     from wheelloader.estimator import Pile, default_path
-    from wheelloader.references.mpm import DEFAULT_RESOLUTION, MPMPlant
+    from wheelloader.references import make_plant
+    from wheelloader.references.mpm import DEFAULT_RESOLUTION
 
     pile, path = Pile.trapezoid(), default_path()
     runs = {}
@@ -250,7 +251,7 @@ def part_cycle(args) -> dict:
             log.save(cache, overwrite=True)
             progress(args, f"cycle {key}: reused {shipped}")
         else:
-            log = MPMPlant(dx, threads=args.threads).dig(path, pile, args.soil, seed=seed)
+            log = make_plant("mpm", resolution=dx, threads=args.threads).dig(path, pile, args.soil, seed=seed)
             log.save(cache, overwrite=True)
         runs[key] = log
         progress(args, f"cycle {key}: {log.metadata['wall_s']:.0f} s, {log.metadata['particles']} particles")

@@ -32,7 +32,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from wheelloader.provenance import commit_label, machine_info
-from wheelloader.sweep import add_ray_arguments
+from wheelloader.ray_mode import add_ray_arguments
 
 METHODS = ("default", "single-stage", "multi-stage")
 SOILS = ("gravel", "modified_sand", "dirt", "sand")

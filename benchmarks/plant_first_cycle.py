@@ -65,8 +65,8 @@ def dig_variant(name: str, settings: dict[str, Any] | None, soil: str, resolutio
     from wheelloader.estimator import CycleLog, Pile, preset
     from wheelloader.estimator.cyclelog import find_cycle_log
     from wheelloader.planner import PlannerOptions, bezier_on_face, plan_next_cycle, verify_plan
+    from wheelloader.references import make_plant
     from wheelloader.references.metrics import cycle_work
-    from wheelloader.references.mpm import MPMPlant
     from wheelloader.saved_loops import path_digest
 
     pile = Pile.trapezoid()
@@ -93,7 +93,7 @@ def dig_variant(name: str, settings: dict[str, Any] | None, soil: str, resolutio
         log, resumed = CycleLog.load(csv), True
     else:
         csv = folder / f"{digest[:16]}.csv.xz"
-        log, resumed = MPMPlant(resolution=resolution).dig(path, pile, soil, seed=seed), False
+        log, resumed = make_plant("mpm", resolution=resolution).dig(path, pile, soil, seed=seed), False
         log.save(csv, overwrite=True)
     energy, fill = cycle_work(log), float(log.fill_volume[-1])
     floor = log.bucket.floor_length

@@ -11,19 +11,16 @@ from __future__ import annotations
 import dataclasses
 import math
 
-import gymnasium as gym
 import numpy as np
 import pytest
 
 import wheelloader.envs  # noqa: F401  (registers the env ids)
 from wheelloader.adaptation import (
-    LOOP_ENV_KWARGS,
     NOMINAL_SOIL,
     Calibrating,
     default_planner,
     hidden_default_soil,
     model_bezier_on_face,
-    run_loop,
 )
 from wheelloader.demo import REPRODUCE_TOLERANCE, markdown_table
 from wheelloader.estimator import PAPER_BOUNDS, Pile, calibrate, preset
@@ -34,6 +31,8 @@ from wheelloader.estimator.quantise import (
     quantise_pile,
     quantise_soil,
 )
+from wheelloader.loop import run_loop
+from wheelloader.references.fee_env import FEEEnvPlant
 
 NOISE = 1e-12
 
@@ -64,11 +63,12 @@ class NoisyCalibrating(Calibrating):
 
 
 def _loop(strategy, cycles, seed=0):
-    env = gym.make("wheelloader/BucketLoading-v0", soil=hidden_default_soil(), **LOOP_ENV_KWARGS)
+    """The demo's loop: one env digs every cycle (FEEEnvPlant with keep_env) in the hidden soil."""
+    plant = FEEEnvPlant(keep_env=True)
     try:
-        return run_loop(env, strategy, cycles=cycles, seed=seed)
+        return run_loop(plant, strategy, Pile.trapezoid(), hidden_default_soil(), cycles, seed=seed)
     finally:
-        env.close()
+        plant.close()
 
 
 def assert_same_records(a, b):

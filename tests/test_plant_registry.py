@@ -71,3 +71,18 @@ def test_a_loop_with_a_missing_cycle_is_refused(tmp_path):
     with pytest.raises(WheelloaderError, match=r"cycles \[1, 3\]"):
         saved_loops(tmp_path)
 
+
+
+def test_the_adaptation_benchmark_lists_plant_in_its_help():
+    """``benchmarks/adaptation.py --help`` names ``--plant`` and its choices (the registry's); with a plant, the
+    help is that of the plant loop's script, which the option runs."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "adaptation.py"
+    own = subprocess.run([sys.executable, str(script), "--help"], capture_output=True, text=True, timeout=300)
+    assert own.returncode == 0 and "--plant {" + ",".join(PLANT_NAMES) + "}" in own.stdout
+    plant = subprocess.run([sys.executable, str(script), "--plant", "fee-env", "--help"], capture_output=True,
+                           text=True, timeout=300)
+    assert plant.returncode == 0 and "plant_adaptation.py" in plant.stdout and "--soils" in plant.stdout
