@@ -1,7 +1,7 @@
 """Basics shared by the SB3 training and evaluation scripts in ``train/`` (not a library module).
 
 The scripts import the modules of this folder by name (Python puts the
-script's folder first on ``sys.path``; the tests add it). By role:
+script's folder first on ``sys.path``; pytest has it on its ``pythonpath``). By role:
 
 * ``common``: the env id, set-up names, JSON output, torch threads, argparse types;
 * ``setups``: the training VecEnv (the packaged SB3 adapter
