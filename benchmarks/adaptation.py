@@ -104,8 +104,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--plant", choices=PLANT_NAMES, default=None,
                         help="close the loop in this reference plant instead of the drifting FEE env below: runs "
-                             "benchmarks/plant_adaptation.py --plant PLANT with the other arguments, which its "
-                             "--help lists (--soils, --resolution, --threads, --fill-limit, --stale, --report, ...); "
+                             "benchmarks/plant_adaptation.py --plant PLANT with the other arguments, whose options "
+                             "`adaptation.py --plant PLANT --help` lists (--soils, --resolution, --threads, "
+                             "--fill-limit, --stale, --cycles-dir, --report besides --out, --seeds, --cycles, "
+                             "--strategies, --quick, --no-planner, --failure-angle, the planner's physics and --ray); "
                              "the options below are then not used")
     parser.add_argument("--out", default="results/adaptation", help="output directory")
     parser.add_argument("--seeds", type=int, default=3, help="seeds per soil and pile")

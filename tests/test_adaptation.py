@@ -154,6 +154,16 @@ def test_a_controller_strategy_digs_through_the_kept_env_and_is_refused_elsewher
     with pytest.raises(WheelloaderError, match="digs paths only"):
         run_loop(FEEEnvPlant(), PolicyStrategy(_Steady()), Pile.trapezoid(), "gravel", 1)
 
+    class MPCLike(FixedBezier):
+        """A plan with a path and the controller that executes it (as the planner's mpc=True gives)."""
+
+        def plan(self, pile):
+            outcome = super().plan(pile)
+            return PlanOutcome(outcome.path, True, "path + controller", 0.0, controller=lambda obs: np.zeros(3))
+
+    with pytest.raises(WheelloaderError, match="digs paths only"):  # not silently dug along the path alone
+        run_loop(FEEEnvPlant(), MPCLike(preset(NOMINAL_SOIL)), Pile.trapezoid(), "gravel", 1)
+
 
 def test_an_update_returning_the_old_tuple_still_counts_with_a_warning():
     class OldStyle(FixedBezier):
