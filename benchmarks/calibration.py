@@ -22,7 +22,7 @@ gravel cycle resampled to that many rows, each run in its own process under ``/u
 
 Speed against an older version (issue #31 item 4): ``--baseline REV`` also times the default method of
 git revision ``REV`` (extracted with ``git archive`` into a temporary directory) against the current code
-and the multi-stage method, on the training cycles above and on the continuum set's path-1 cycles
+and the multi-stage method, on the training cycles above and on every path-1 cycle of the continuum set
 (``--mpm-dir``, default ``data/mpm``). Each version runs in its own worker process; the three are called in
 turn, repeat after repeat, so all see the same load. Reported per cycle: the median fit time (the
 calibration's ``time_s``, wall clock, as the table above) and CPU time of the whole call, and the training
@@ -74,15 +74,18 @@ def run_soil(name: str, args, rng_seed: int) -> dict:
     out = {"soil": name, "true": soil.to_dict(), "floor_train_rmse_r": floor_rmse(train, soil),
            "floor_train_rmse_r_percent": floor_rmse(train, soil, percent=True),
            "floor_test_rmse_r": [floor_rmse(c, soil) for c in tests], "methods": {}}
+    times: dict[str, list[float]] = {m: [] for m in METHODS}
+    cals: dict = {}
+    for _ in range(args.repeats):  # the methods in turn, repeat after repeat: all see the same load
+        for method in METHODS:
+            cals[method] = calibrate(train, options=CalibrationOptions(method=method))
+            times[method].append(cals[method].time_s)
     for method in METHODS:
-        times, cal = [], None
-        for _ in range(args.repeats):
-            cal = calibrate(train, options=CalibrationOptions(method=method))
-            times.append(cal.time_s)
+        cal = cals[method]
         test_q = [predict(cal, c).quality for c in tests]
         out["methods"][method] = {
-            "median_time_s": float(np.median(times)),
-            "times_s": times,
+            "median_time_s": float(np.median(times[method])),
+            "times_s": times[method],
             "nfev": cal.nfev,
             "success": cal.success,
             "message": cal.message,
@@ -197,8 +200,10 @@ def markdown_table(results: dict) -> str:
                              f"{v['median_time_s'] * 1e3:.1f} ms)" for m, v in rb["summary"].items()) + ".\n")
     la = results.get("loadavg")
     load = f", load average {la[0]:.1f} before, {results['loadavg_after'][0]:.1f} after" if la else ""
-    text += (f"\n*`python benchmarks/calibration.py` ({results['settings']['repeats']} timed calibrations per "
-             f"method and soil, median wall time of the optimisation{load}).*\n")
+    baseline = results["settings"].get("baseline")
+    command = "python benchmarks/calibration.py" + (f" --baseline {baseline}" if baseline else "")
+    text += (f"\n*`{command}` ({results['settings']['repeats']} timed calibrations per method and soil, the "
+             f"methods in turn; median wall time of the optimisation{load}).*\n")
     return text
 
 
@@ -348,11 +353,8 @@ def speed_against_baseline(args) -> dict:
     multi-stage method, interleaved per repeat (module docstring)."""
     specs = [{"name": f"{name} (synthetic)", "kind": "synthetic", "soil": name, "seed": args.seed + 10 * i,
               "noise": args.noise, "vibration": args.vibration} for i, name in enumerate(args.soils)]
-    mpm = Path(args.mpm_dir)
-    for name in args.soils:
-        log = mpm / f"{name}_path1.csv"
-        if log.is_file():
-            specs.append({"name": f"{name} path 1 (MPM)", "kind": "log", "path": str(log)})
+    for log in sorted(Path(args.mpm_dir).glob("*_path1.csv")):
+        specs.append({"name": f"{log.stem.removesuffix('_path1')} path 1 (MPM)", "kind": "log", "path": str(log)})
     script = str(Path(__file__).resolve())
     with tempfile.TemporaryDirectory(prefix="calibration-baseline-") as tmp:
         commit, pkg = _extract(args.baseline, Path(tmp))
@@ -446,12 +448,20 @@ def main(argv: list[str] | None = None) -> int:
                         help="also time the default method of git revision REV against the current code and the "
                              "multi-stage method (module docstring); writes speed.json and speed.md")
     parser.add_argument("--mpm-dir", default="data/mpm",
-                        help="continuum cycles <soil>_path1.csv timed with --baseline (default: %(default)s)")
+                        help="continuum cycles *_path1.csv timed with --baseline (default: %(default)s)")
     parser.add_argument("--speed-only", action="store_true", help="with --baseline: only the speed comparison")
+    parser.add_argument("--from-json", action="store_true",
+                        help="only rewrite table.md (and speed.md) in --out from its results.json (speed.json)")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker:
         return _worker()
+    if args.from_json:
+        out = Path(args.out)
+        (out / "table.md").write_text(markdown_table(json.loads((out / "results.json").read_text())))
+        if (out / "speed.json").is_file():
+            (out / "speed.md").write_text(speed_table(json.loads((out / "speed.json").read_text())))
+        return 0
     if args.speed_only and not args.baseline:
         parser.error("--speed-only needs --baseline REV")
     speed = None
