@@ -264,8 +264,11 @@ def soil_forces(soil: SoilParams, state: ContactState, bucket: Bucket,
     normal = fee * math.cos(delta)  # eq 17
     if options.carried_load:  # opt-in: the carried load's weight and inertia (module docstring)
         c_t, c_n = carried_load_factors(state.blade_angle, state.acceleration)
-        tangential = tangential + w_load * c_t
-        normal = normal + w_load * c_n
+        w_carried = state.carried_weight(soil.gamma)
+        if not options.carried_in_soil:  # handed over from the surcharge as the tip leaves (ModelOptions)
+            w_carried = (1.0 - ramp) * w_carried
+        tangential = tangential + w_carried * c_t
+        normal = normal + w_carried * c_n
     flags = np.where(out, FLAG_OUT_OF_SOIL, flags)  # out of soil: other flags are moot
     return SoilForces(tangential, normal, np.hypot(tangential, normal), fee, pressure, beta,
                       n_gamma, n_c, n_a, n_q, flags)
@@ -275,11 +278,14 @@ def soil_forces_single(soil: SoilParams, depth: float, rho: float, alpha: float,
                        load_weight: float, bucket: Bucket, options: ModelOptions = DEFAULT_OPTIONS,
                        beta_guess: float | None = None,
                        acceleration: tuple[float, float] = (0.0, 0.0),
-                       velocity: tuple[float, float] = (0.0, 0.0)) -> tuple[float, float, float, int]:
+                       velocity: tuple[float, float] = (0.0, 0.0),
+                       carried_weight: float | None = None) -> tuple[float, float, float, int]:
     """Fast scalar path for one sample (environment steps).
 
     ``acceleration`` (tip ``(a_x, a_z)`` [m/s^2]) is used only by the opt-in carried-load term,
-    ``velocity`` (tip ``(v_x, v_z)`` [m/s]) only by the opt-in slip-friction term.
+    ``velocity`` (tip ``(v_x, v_z)`` [m/s]) only by the opt-in slip-friction term. ``carried_weight`` [N] is
+    the carried load's weight when it differs from ``load_weight`` (the payload's kept soil,
+    :attr:`ContactState.carried_volume`); None: ``load_weight``.
 
     Returns
     -------
@@ -294,7 +300,10 @@ def soil_forces_single(soil: SoilParams, depth: float, rho: float, alpha: float,
         f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, blade_length, load_weight, bucket,
                                                    replace(options, carried_load=False), beta_guess,
                                                    velocity=velocity)
-        return f_t + load_weight * c_t, f_n + load_weight * c_n, beta, flags
+        w_carried = load_weight if carried_weight is None else carried_weight
+        if not options.carried_in_soil:  # handed over from the surcharge as the tip leaves (ModelOptions)
+            w_carried = (1.0 - min(max(depth, 0.0) / options.contact_depth, 1.0)) * w_carried
+        return f_t + w_carried * c_t, f_n + w_carried * c_n, beta, flags
     if depth <= 0.0:
         return 0.0, 0.0, options.eps1, FLAG_OUT_OF_SOIL
     alpha_in, rho_in = alpha, rho

@@ -5,9 +5,10 @@ name                      model
 ========================  ===================================================================================
 ``"fee"``                 the paper's modified FEE (eqs 1-17); the bucket fill is the carved area capped at the
                           nominal capacity (or the logged fill); no force once the tip leaves the soil
-``"fee-payload"``         the FEE with the payload as a state (:mod:`~wheelloader.estimator.payload`): the fill
-                          is the kept soil (retention, smooth heaped capacity) and its weight and inertia stay
-                          on the bucket in and out of soil (the opt-in carried-load term)
+``"fee-payload"``         the FEE with the payload as a state (:mod:`~wheelloader.estimator.payload`): in soil
+                          the FEE with the carved fill as its surcharge; the kept soil (retention, smooth heaped
+                          capacity) is the fill, and its weight and inertia take over from the surcharge as the
+                          tip leaves the soil (the opt-in carried-load term, ``carried_in_soil=False``)
 ========================  ===================================================================================
 
 :data:`DEFAULT_PAYLOAD` is the payload fitted to the project's continuum cycles except the held-out soil
@@ -54,7 +55,7 @@ def check_force_model(name: object, payload: PayloadOptions | None, error: type[
 
 def model_options_for(name: str, options: ModelOptions) -> ModelOptions:
     """The force-model options ``name`` needs on top of ``options`` (the payload's carried load)."""
-    return replace(options, carried_load=True) if name == "fee-payload" else options
+    return replace(options, carried_load=True, carried_in_soil=False) if name == "fee-payload" else options
 
 
 def cycle_contact_state(log: CycleLog, name: str, payload: PayloadOptions | None, slope_window: float,

@@ -64,6 +64,10 @@ class ContactState:
     velocity : numpy.ndarray or None
         Tip velocity ``(v_x, v_z)`` per sample, shape ``(n, 2)`` [m/s], when known (the opt-in
         ``ModelOptions.slip_friction``); None counts as standing still.
+    carried_volume : numpy.ndarray or None
+        The soil whose weight the opt-in carried-load term puts on the bucket [m^3] per sample, when it
+        differs from the fill the surcharge sees (the payload model's kept soil,
+        :func:`~wheelloader.estimator.payload.with_payload`); None: the load of :meth:`load_weight`.
     """
 
     depth: np.ndarray
@@ -75,6 +79,7 @@ class ContactState:
     carve: CarveResult | None = field(default=None, repr=False)
     acceleration: np.ndarray | None = field(default=None, repr=False)
     velocity: np.ndarray | None = field(default=None, repr=False)
+    carried_volume: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return int(self.depth.size)
@@ -90,13 +95,20 @@ class ContactState:
             return self.measured_load
         return gamma * GRAVITY * self.fill_volume
 
+    def carried_weight(self, gamma: float) -> np.ndarray:
+        """The carried load's weight [N]: ``gamma g`` times :attr:`carried_volume`, else :meth:`load_weight`."""
+        if self.carried_volume is None:
+            return self.load_weight(gamma)
+        return gamma * GRAVITY * self.carried_volume
+
     def subset(self, mask: np.ndarray) -> ContactState:
         """The samples where ``mask`` is true."""
         ml = None if self.measured_load is None else self.measured_load[mask]
         acc = None if self.acceleration is None else self.acceleration[mask]
         vel = None if self.velocity is None else self.velocity[mask]
+        cv = None if self.carried_volume is None else self.carried_volume[mask]
         return ContactState(self.depth[mask], self.rho[mask], self.alpha[mask], self.blade_length[mask],
-                            self.fill_volume[mask], ml, None, acc, vel)
+                            self.fill_volume[mask], ml, None, acc, vel, cv)
 
     @property
     def blade_angle(self) -> np.ndarray:

@@ -18,7 +18,8 @@ inertia where the acceleration is known) in the blade frame.
 
 "Fill" is this ``V`` wherever the payload model is selected: the predicted kept fill of a path is
 ``V`` at its end (:func:`kept_fill`), and :func:`payload_contact_state` gives the force model a contact state
-whose ``fill_volume`` is ``V`` along the path.
+whose ``carried_volume`` is ``V`` along the path (the surcharge keeps the FEE's carved fill; see
+:func:`with_payload`).
 
 The parameters ``(r, h, p)`` are calibrated from logs that carry the kept fill (the MPM plant's ``fill_volume``
 column) by :func:`fit_payload`.
@@ -36,7 +37,8 @@ from .cyclelog import CycleLog
 from .errors import CalibrationError, ParameterError
 from .kinematics import DEFAULT_SLOPE_WINDOW, ContactState
 
-__all__ = ["PayloadOptions", "fit_payload", "kept_fill", "kept_volume", "payload_contact_state", "with_kept_fill"]
+__all__ = ["PayloadOptions", "fit_payload", "kept_fill", "kept_volume", "payload_contact_state", "with_kept_fill",
+           "with_payload"]
 
 
 @dataclass(frozen=True)
@@ -104,13 +106,28 @@ def kept_fill(state: ContactState, capacity: float, options: PayloadOptions, ini
 
 def payload_contact_state(log: CycleLog, options: PayloadOptions,
                           slope_window: float = DEFAULT_SLOPE_WINDOW) -> ContactState:
-    """The log's contact state with the payload model's kept fill as ``fill_volume``.
+    """The log's contact state under the ``"fee-payload"`` force model (:func:`with_payload`).
 
-    The carving follows the log's pile and path (``fill='model'``); the fill the force model sees is
-    :func:`kept_volume` of the removed volume instead of the carved fill capped at the nominal capacity. A
-    logged load or fill is not used: this is what the model predicts for the path.
+    The carving follows the log's pile and path (``fill='model'``): the surcharge sees the carved fill, the
+    carried load the payload's kept soil. A logged load or fill is not used: this is what the model predicts
+    for the path.
     """
-    return with_kept_fill(log.contact_state(slope_window=slope_window, fill="model"), log.bucket.capacity, options)
+    return with_payload(log.contact_state(slope_window=slope_window, fill="model"), log.bucket.capacity, options)
+
+
+def with_payload(state: ContactState, capacity: float, options: PayloadOptions,
+                 initial: float = 0.0) -> ContactState:
+    """``state`` (computed by carving) with the payload's kept soil as its carried volume.
+
+    The surcharge ``W_load N_q`` keeps the FEE's carved fill; the carried-load term
+    (:attr:`~wheelloader.estimator.validity.ModelOptions.carried_in_soil` False) puts the kept soil's weight on
+    the bucket as the tip leaves the soil. Measured on ``data/mpm`` (``docs/guide/force_models.md``): the kept
+    soil as the surcharge's fill, or its weight added in soil, made unseen paths worse in soil.
+    """
+    if state.carve is None:
+        raise ParameterError("the payload model needs the carved volume (a contact state computed by carving)")
+    kept = kept_volume(state.carve.removed_history, capacity, options, initial)
+    return replace(state, carried_volume=np.asarray(kept, dtype=float), measured_load=None)
 
 
 def with_kept_fill(state: ContactState, capacity: float, options: PayloadOptions,

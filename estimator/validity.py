@@ -87,6 +87,12 @@ class ModelOptions:
         env's plant (the FEE world) and the planner's CasADi model do not implement it: the env
         always uses the paper's model, and a planner given these options must refuse them
         (:attr:`extra_terms` names the opt-in terms that are on).
+    carried_in_soil : bool
+        With ``carried_load``: True (default) puts the carried load on in and out of soil; False ramps it
+        in as the tip leaves the soil, by ``1 - min(d / contact_depth, 1)`` (the complement of the surcharge
+        ramp, so the two terms hand over continuously): in soil the FEE's surcharge ``W_load N_q`` already
+        stands for the soil in the bucket, and adding its weight again made unseen paths worse (measured in
+        ``docs/guide/force_models.md``). The ``"fee-payload"`` force model uses False.
     slip_friction : bool
         Opt-in term beyond the paper (default False): the blade friction and adhesion (the F_T
         share ``F sin(delta) + C_a w L_t`` of eq 16) are mobilised by the soil slipping along the
@@ -112,6 +118,7 @@ class ModelOptions:
     contact_depth: float = 0.02
     slope_margin: float = math.radians(5.0)
     carried_load: bool = False
+    carried_in_soil: bool = True
     slip_friction: bool = False
     slip_speed: float = 0.05
     failure_angle: str = "min_n_gamma"
@@ -124,7 +131,7 @@ class ModelOptions:
 
     def __post_init__(self) -> None:
         check_choice("ModelOptions.failure_angle", self.failure_angle, ("min_n_gamma", "min_weight_force"))
-        for name in ("carried_load", "slip_friction"):
+        for name in ("carried_load", "carried_in_soil", "slip_friction"):
             if not isinstance(getattr(self, name), bool):
                 raise ParameterError(f"ModelOptions.{name} must be True or False, got {getattr(self, name)!r}")
         for name in ("eps1", "eps2", "rho_min", "alpha_max", "contact_depth", "slope_margin", "slip_speed"):

@@ -452,8 +452,9 @@ def _forces_along(soil: SoilParams, state: ContactState, bucket, options: ModelO
         load = None if state.measured_load is None else np.asarray(state.measured_load)[sl]
         acc = None if state.acceleration is None else state.acceleration[sl]
         vel = None if state.velocity is None else state.velocity[sl]
+        cv = None if state.carried_volume is None else state.carried_volume[sl]
         part = ContactState(state.depth[sl], state.rho[sl], state.alpha[sl], state.blade_length[sl],
-                            state.fill_volume[sl], load, None, acc, vel)
+                            state.fill_volume[sl], load, None, acc, vel, cv)
         f = soil_forces(soil, part, bucket, options)
         f_t[sl], f_n[sl], flags[sl] = f.tangential, f.normal, f.flags
     return f_t, f_n, flags

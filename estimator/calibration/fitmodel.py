@@ -248,7 +248,11 @@ class FitData:
         (:meth:`concat`); None for one cycle.
     carried : tuple of numpy.ndarray or None
         ``(c_T, c_N)`` of :func:`~wheelloader.estimator.force_model.carried_load_factors` per sample
-        when ``options.carried_load`` is on (the opt-in carried-load term), else None.
+        when ``options.carried_load`` is on (the opt-in carried-load term), else None; times the hand-over
+        ``1 - ramp`` when ``options.carried_in_soil`` is False.
+    carried_volume : numpy.ndarray or None
+        The carried soil's volume per sample when it differs from ``fill_volume``
+        (:attr:`~wheelloader.estimator.kinematics.ContactState.carried_volume`), else None.
     slip : numpy.ndarray or None
         :func:`~wheelloader.estimator.force_model.slip_factor` per sample when ``options.slip_friction``
         is on (it scales the blade friction and adhesion in F_T), else None.
@@ -270,6 +274,7 @@ class FitData:
     cycle: np.ndarray | None = None
     carried: tuple[np.ndarray, np.ndarray] | None = None
     slip: np.ndarray | None = None
+    carried_volume: np.ndarray | None = None
 
     @classmethod
     def concat(cls, parts: list[FitData], cycle_weights: list[float] | None = None) -> FitData:
@@ -312,9 +317,12 @@ class FitData:
         if first.carried is not None:
             carried = (np.concatenate([p.carried[0] for p in parts]), np.concatenate([p.carried[1] for p in parts]))
         slip = None if first.slip is None else cat("slip")
+        if any(p.carried_volume is not None for p in parts) and not all(p.carried_volume is not None for p in parts):
+            raise CalibrationError("either every cycle or none must carry a payload volume")
+        cv = None if first.carried_volume is None else cat("carried_volume")
         return cls(cat("index"), cat("depth"), cat("alpha"), cat("rho"), cat("blade_length"), cat("fill_volume"), ml,
                    cat("y_t"), cat("y_n"), first.width, first.edge_thickness, first.options, weight, cycle, carried,
-                   slip)
+                   slip, cv)
 
     @property
     def root_weight(self) -> np.ndarray | float:
@@ -349,13 +357,17 @@ class FitData:
         if options.carried_load:
             acc = None if state.acceleration is None else state.acceleration[idx]
             carried = carried_load_factors(state.blade_angle[idx], acc)
+            if not options.carried_in_soil:  # handed over from the surcharge (ModelOptions.carried_in_soil)
+                hand_over = 1.0 - np.minimum(state.depth[idx] / options.contact_depth, 1.0)
+                carried = (carried[0] * hand_over, carried[1] * hand_over)
         slip = None
         if options.slip_friction:
             vel = None if state.velocity is None else state.velocity[idx]
             slip = slip_factor(state.blade_angle[idx], vel, options.slip_speed)
         return cls(idx, state.depth[idx], state.alpha[idx], state.rho[idx], state.blade_length[idx],
                    state.fill_volume[idx], ml, f_t[idx], f_n[idx], bucket.width, bucket.edge_thickness, options,
-                   carried=carried, slip=slip)
+                   carried=carried, slip=slip,
+                   carried_volume=None if state.carried_volume is None else state.carried_volume[idx])
 
     def __len__(self) -> int:
         return int(self.index.size)
@@ -371,7 +383,8 @@ class FitData:
                        self.options, None if self.weight is None else self.weight[sl],
                        None if self.cycle is None else self.cycle[sl],
                        None if self.carried is None else (self.carried[0][sl], self.carried[1][sl]),
-                       None if self.slip is None else self.slip[sl])
+                       None if self.slip is None else self.slip[sl],
+                       None if self.carried_volume is None else self.carried_volume[sl])
 
     # Geometry-only arrays: they depend on the path and the pile, not on the soil, so each is computed once
     # per data set (not once per model evaluation of every start); the products keep the order of the
@@ -427,8 +440,8 @@ class FitData:
         if self.carried is None:
             return None
         c_t, c_n = self.carried
-        if self.measured_load is None:
-            load = GRAVITY * self.fill_volume
+        if self.carried_volume is not None or self.measured_load is None:
+            load = GRAVITY * (self.fill_volume if self.carried_volume is None else self.carried_volume)
             zero = np.zeros_like(load)
             return load * c_t, load * c_n, zero, zero
         zero = np.zeros_like(c_t)

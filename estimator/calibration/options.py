@@ -131,8 +131,8 @@ class CalibrationOptions:
         over the fit vector; it replaces the weak prior of ``regularize``.
     force_model : str
         The model fitted (:data:`~wheelloader.estimator.force_models.FORCE_MODELS`): ``"fee"`` (default, the
-        paper's FEE) or ``"fee-payload"`` (the FEE with the payload as a state and its carried load; varpro
-        method; the fill is the payload model's kept soil, whatever ``fill`` says).
+        paper's FEE) or ``"fee-payload"`` (the FEE with the payload as a state: its kept soil is carried
+        once the tip leaves the soil; varpro method; the fill follows the carving, whatever ``fill`` says).
     payload : PayloadOptions, optional
         The payload's parameters for ``"fee-payload"`` (default
         :data:`~wheelloader.estimator.force_models.DEFAULT_PAYLOAD`; fit your own with

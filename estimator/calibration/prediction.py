@@ -16,7 +16,7 @@ from ..force_models import DEFAULT_FORCE_MODEL, check_force_model, model_options
 from ..kinematics import DEFAULT_SLOPE_WINDOW, ContactState, contact_state
 from ..machine import Bucket
 from ..paths import BucketPath
-from ..payload import PayloadOptions, with_kept_fill
+from ..payload import PayloadOptions, with_payload
 from ..pile import Pile
 from ..soil import SoilParams
 from .bands import BandModel, PredictionBand, prediction_band
@@ -144,8 +144,8 @@ def predict(
 
     force_model : str, optional
         :data:`~wheelloader.estimator.force_models.FORCE_MODELS`; default: the calibration's
-        (:attr:`Calibration.force_model`), else ``"fee"``. With ``"fee-payload"`` the fill is the payload model's
-        kept soil along the path (``fill`` is not used) and the carried load is on.
+        (:attr:`Calibration.force_model`), else ``"fee"``. With ``"fee-payload"`` the fill follows the carving
+        (``fill`` is not used) and the payload model's kept soil is carried once the tip leaves the soil.
     payload : PayloadOptions, optional
         The payload's parameters for ``"fee-payload"``; default: the calibration's, else
         :data:`~wheelloader.estimator.force_models.DEFAULT_PAYLOAD`.
@@ -198,7 +198,7 @@ def predict(
                           initial_fill=initial_fill, fill_volume=fill_volume, measured_load=load,
                           acceleration=acceleration, velocity=velocity)
     if payload is not None:
-        state = with_kept_fill(state, bucket.capacity, payload, initial_fill)
+        state = with_payload(state, bucket.capacity, payload, initial_fill)
     forces = soil_forces(soil, state, bucket, options)
     pband = None
     if band is not None:
