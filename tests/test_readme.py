@@ -102,6 +102,7 @@ SLOW = {
     "python benchmarks/plant_first_cycle.py": "planned cycles dug in the MPM plant (minutes)",
     "wheelloader demo --plant mpm": "the demo in the MPM plant (minutes)",
     "python benchmarks/plant_replay.py": "calibrations replayed over saved loops (minutes)",
+    "python benchmarks/force_models.py --fit-payload": "carves 254 saved MPM cycles (a minute or more)",
 }
 #: Commands that need an optional extra to run as written: (module or executable, how to install it).
 NEEDS = {
@@ -115,7 +116,8 @@ NEEDS = {
 #: Read-only commands about the checkout itself: run in the repository root.
 IN_REPO_ROOT = {"ruff check .": "lints the checkout"}
 #: Folders under data/results a page's commands read (the saved loop cycles; copied into its workspace).
-SAVED_CYCLES = {"docs/results/plant_replay.md": ["adaptation_mpm"]}
+SAVED_CYCLES = {"docs/results/plant_replay.md": ["adaptation_mpm"],
+                "docs/guide/force_models.md": ["adaptation_mpm", "adaptation_mpm_curlout", "adaptation_mpm_end55"]}
 #: Files a page's blocks must have written (a block that silently did nothing fails here).
 WRITES = {
     "README.md": ["cycle.csv", "cycle.json", "params.json", "forces.png", "plan.png", "slope.csv"],
