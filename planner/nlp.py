@@ -117,7 +117,8 @@ def build(bucket: Bucket, loader: Loader, options: PlannerOptions):
     if settings not in entry["solvers"]:
         solver, monitor = _make_solver(entry["problem"], settings, entry["derivatives"])
         if entry["derivatives"] is None:
-            entry["derivatives"] = {name: solver.get_function(own) for name, own in _DERIVATIVES}
+            entry["derivatives"] = {name: solver.get_function(own) for name, own in _DERIVATIVES
+                                    if solver.has_function(own)}
         entry["solvers"][settings] = (solver, {**entry["functions"], "monitor": monitor})
     solver, functions = entry["solvers"][settings]
     return solver, functions, entry["layout"]
