@@ -110,9 +110,12 @@ def main(argv: list[str] | None = None) -> int:
                              "--strategies, --quick, --no-planner, --failure-angle, the planner's physics and --ray); "
                              "the options below are then not used")
     parser.add_argument("--out", default="results/adaptation", help="output directory")
-    parser.add_argument("--seeds", type=int, default=3, help="seeds per soil and pile")
+    parser.add_argument("--seeds", type=int, default=None,
+                        help="seeds per soil and pile (default: 3; 1 with --quick); the seed table's median and "
+                             "min-max are over them")
     parser.add_argument("--cycles", type=int, default=5, help="cycles per loop")
-    parser.add_argument("--quick", action="store_true", help="1 seed, 1 soil, 1 pile, 3 cycles (smoke run)")
+    parser.add_argument("--quick", action="store_true",
+                        help="1 soil, 1 pile, 3 cycles and 1 seed unless --seeds is given (smoke run)")
     parser.add_argument("--no-planner", action="store_true", help="dig Bezier paths only (no CasADi planning)")
     parser.add_argument("--mpc", action="store_true", help="execute plans with the receding-horizon MPC")
     parser.add_argument("--rl-policy", help="a stable-baselines3 PPO .zip to include as strategy (e)")
@@ -146,9 +149,11 @@ def main(argv: list[str] | None = None) -> int:
     from wheelloader.adaptation import strategy_loop
     from wheelloader.sweep import Unit, run_sweep
 
-    soils, piles, seeds, cycles = SOILS, PILES, range(args.seeds), args.cycles
+    if args.seeds is not None and args.seeds < 1:
+        raise SystemExit(f"--seeds must be a positive integer, got {args.seeds}")
+    soils, piles, seeds, cycles = SOILS, PILES, range(args.seeds or 3), args.cycles
     if args.quick:
-        soils, piles, seeds, cycles = SOILS[:1], dict(list(PILES.items())[:1]), range(1), 3
+        soils, piles, seeds, cycles = SOILS[:1], dict(list(PILES.items())[:1]), range(args.seeds or 1), 3
     planner = None if args.no_planner else "mpc" if args.mpc else "plan"
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -187,13 +192,15 @@ def main(argv: list[str] | None = None) -> int:
                   "planner_curl_out_intervals": args.curl_out_intervals,
                   "planner_midpoints": args.midpoints},
         "summary": summary,
+        "summary_by_seed": summarise_by_seed(rows),
         "rows": rows,
         "wall_time_s": time.perf_counter() - start,
         "sweep": sweep.summary(),
         "machine": machine_info(),
     }
     (out / "adaptation.json").write_text(json.dumps(result, indent=2, default=float))
-    table = format_summary(summary) + "\n\n" + format_plan_passes(rows) + "\n\n" + provenance_line(result)
+    table = (format_summary(summary) + "\n\n" + format_seed_table(result["summary_by_seed"]) + "\n\n"
+             + format_plan_passes(rows) + "\n\n" + provenance_line(result))
     (out / "adaptation.md").write_text(table + "\n")
     plot(rows, out / "adaptation.png")
     print()
@@ -241,6 +248,46 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
             "between_cycles_max_s": float(max(between)) if between else 0.0,
         }
     return out
+
+
+#: The seed table's columns: (summary key, header, format, scale).
+SEED_COLUMNS = (("prediction_rmse_percent_mean", "next-cycle F_R RMSE [%]", "{:.1f}", 1.0),
+                ("fill_fraction_mean", "fill [%]", "{:.0f}", 100.0),
+                ("energy_per_m3_total", "energy per m³ [kJ/m³]", "{:.1f}", 1e-3),
+                ("plan_failures", "plan failures", "{:.0f}", 1.0))
+
+
+def summarise_by_seed(rows: list[dict[str, Any]]) -> dict[str, dict[str, dict[str, float]]]:
+    """Per strategy and column of :data:`SEED_COLUMNS`: each seed's aggregate (over soils, piles and cycles, as
+    :func:`summarise`), and their median, min and max: ``{strategy: {key: {"per_seed": [...], "median": ...,
+    "min": ..., "max": ...}}}``."""
+    seeds = sorted({r["seed"] for r in rows})
+    per_seed = {seed: summarise([r for r in rows if r["seed"] == seed]) for seed in seeds}
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    for name in dict.fromkeys(r["strategy"] for r in rows):
+        out[name] = {}
+        for key, *_ in SEED_COLUMNS:
+            values = [float(per_seed[seed][name][key]) for seed in seeds]
+            out[name][key] = {"seeds": seeds, "per_seed": values, "median": float(statistics.median(values)),
+                              "min": min(values), "max": max(values)}
+    return out
+
+
+def format_seed_table(by_seed: dict[str, dict[str, dict[str, float]]]) -> str:
+    """Markdown table: each strategy's headline figures as the median over seeds with the min–max beside it."""
+    first = next(iter(by_seed.values()))
+    seeds = first[SEED_COLUMNS[0][0]]["seeds"]
+    lines = [f"Over seeds ({', '.join(map(str, seeds))}; each seed aggregated over soils, piles and cycles): "
+             "median (min–max).", "",
+             "| strategy | " + " | ".join(head for _, head, _, _ in SEED_COLUMNS) + " |", "|" + "---|" * 5]
+    for name, cols in by_seed.items():
+        cells = []
+        for key, _, fmt, scale in SEED_COLUMNS:
+            c = cols[key]
+            cells.append(f"{fmt.format(c['median'] * scale)} ({fmt.format(c['min'] * scale)}–"
+                         f"{fmt.format(c['max'] * scale)})")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
 
 
 def format_summary(summary: dict[str, dict[str, float]]) -> str:
