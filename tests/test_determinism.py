@@ -9,7 +9,9 @@ settings are left as they are.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,7 +24,7 @@ from wheelloader.adaptation import (
     hidden_default_soil,
     model_bezier_on_face,
 )
-from wheelloader.demo import REPRODUCE_TOLERANCE, markdown_table
+from wheelloader.demo import REPRODUCE_TOLERANCE, markdown_table, run_demo
 from wheelloader.estimator import PAPER_BOUNDS, Pile, calibrate, preset
 from wheelloader.estimator.quantise import (
     PILE_STEP,
@@ -35,6 +37,7 @@ from wheelloader.loop import run_loop
 from wheelloader.references.fee_env import FEEEnvPlant
 
 NOISE = 1e-12
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def noisy_log(log, rng):
@@ -154,6 +157,18 @@ def test_demo_table_gives_the_median_and_the_spread_over_seeds():
     assert single[0] == "Each cell: seed 4." and single[4].startswith("| 1 | 10.0 % | 90% | 20.0 | planned |")
 
 
+def test_machine_info_names_the_vector_instruction_sets_and_kernel_settings(monkeypatch):
+    from wheelloader.provenance import CPU_FEATURES, machine_info
+
+    monkeypatch.setenv("OPENBLAS_CORETYPE", "Haswell")
+    monkeypatch.delenv("NPY_DISABLE_CPU_FEATURES", raising=False)
+    info = machine_info()
+    assert info["kernel_env"] == {"OPENBLAS_CORETYPE": "Haswell"}
+    assert set(info["cpu_features"]) <= set(CPU_FEATURES)
+    if Path("/proc/cpuinfo").is_file() and " avx2 " in Path("/proc/cpuinfo").read_text():
+        assert "avx2" in info["cpu_features"]
+
+
 # ------------------------------------------------------------------ plans and loops under last-bit noise
 
 
@@ -198,3 +213,23 @@ def test_five_cycle_loops_are_the_same_under_last_bit_noise(planner, seed):
     noisy, _ = _loop(NoisyCalibrating(preset(NOMINAL_SOIL), planner=planner, noise_seed=10 + seed), cycles=5,
                      seed=seed)
     assert_same_records(records, noisy)
+
+
+@pytest.mark.slow
+def test_demo_reproduces_the_committed_summary(tmp_path):
+    """The CI check: re-run the demo and compare every seed's every cycle with the committed
+    ``docs/results/demo/summary.json`` within :data:`wheelloader.demo.REPRODUCE_TOLERANCE`."""
+    committed = json.loads((ROOT / "docs" / "results" / "demo" / "summary.json").read_text(encoding="utf-8"))
+    seeds = committed["seeds"]
+    (tmp_path / "demo").mkdir()
+    summary = run_demo(tmp_path / "demo", cycles=len(committed["cycles"]["ours"]), seed=seeds[0],
+                       seeds=len(seeds))
+    assert summary["seeds"] == seeds
+    for seed in map(str, seeds):
+        for name, rows in committed["runs"][seed].items():
+            new = summary["runs"][seed][name]
+            assert len(new) == len(rows)
+            for a, b in zip(rows, new, strict=True):
+                assert a["plan_ok"] == b["plan_ok"] and a["path"] == b["path"], (seed, name, a["cycle"])
+                for column, tol in REPRODUCE_TOLERANCE.items():
+                    assert abs(a[column] - b[column]) <= tol, (seed, name, a["cycle"], column, a[column], b[column])

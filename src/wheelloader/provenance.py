@@ -13,10 +13,15 @@ from pathlib import Path
 PACKAGES = ("wheelloader", "numpy", "scipy", "casadi", "gymnasium", "matplotlib", "torch", "stable-baselines3")
 #: BLAS thread settings that change small-matrix timings.
 BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+#: Vector instruction sets that choose OpenBLAS's kernels and NumPy's SIMD loops (docs/reproducibility.md).
+CPU_FEATURES = ("sse4_2", "avx", "avx2", "fma", "avx512f", "asimd", "sve")
+#: Settings that make this CPU run another CPU's kernels (how docs/reproducibility.md emulates other CPUs).
+KERNEL_VARIABLES = ("OPENBLAS_CORETYPE", "NPY_DISABLE_CPU_FEATURES")
 
 
 def machine_info() -> dict[str, object]:
-    """Platform, CPU model and count, load average, BLAS thread settings and package versions of this run."""
+    """Platform, CPU model, its vector instruction sets and count, load average, BLAS thread and kernel settings
+    and package versions of this run."""
     versions: dict[str, str | None] = {}
     for pkg in PACKAGES:
         try:
@@ -24,11 +29,15 @@ def machine_info() -> dict[str, object]:
         except metadata.PackageNotFoundError:
             versions[pkg] = None
     cpu = platform.processor() or ""
+    flags: set[str] = set()
     try:
         with open("/proc/cpuinfo") as fh:
             for line in fh:
-                if line.startswith("model name"):
+                key = line.split(":", 1)[0].strip()
+                if key == "model name" and not flags:
                     cpu = line.split(":", 1)[1].strip()
+                elif key in ("flags", "Features"):  # x86-64, ARM
+                    flags = set(line.split(":", 1)[1].split())
                     break
     except OSError:
         pass
@@ -42,6 +51,8 @@ def machine_info() -> dict[str, object]:
         "python": sys.version.split()[0],
         "cpu": cpu,
         "cpu_count": os.cpu_count(),
+        "cpu_features": [f for f in CPU_FEATURES if f in flags],
+        "kernel_env": {k: os.environ[k] for k in KERNEL_VARIABLES if k in os.environ},
         "loadavg_1_5_15min": load,
         "blas_threads_env": {k: os.environ.get(k) for k in BLAS_THREAD_VARIABLES},
         "versions": versions,
