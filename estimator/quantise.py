@@ -2,8 +2,8 @@
 
 The calibrated soil differs between CPUs in its last bits: OpenBLAS picks other kernels (``SkylakeX``
 on AVX-512 machines, ``Haswell`` on AVX2 ones) and NumPy other SIMD loops, and a least-squares solve
-rounds differently. Measured on the demo: the soil differed by about 2e-12 (relative), and IPOPT
-grows such a difference about tenfold per iteration, so after 40-60 iterations another iterate passed
+rounds differently. Measured on the demo: the soil differed by up to 5e-14 (relative; 2e-12 on another
+cycle), and IPOPT grows such a difference about tenfold per iteration, so after 40-60 iterations another iterate passed
 the NumPy check and another path was dug. The planner therefore plans with the soil rounded to a fixed
 grid (:data:`SOIL_RELATIVE_STEP` of each parameter's upper paper bound) and on the pile rounded to
 :data:`PILE_STEP`: a difference of 1e-12 then crosses a grid line only with a probability of about
