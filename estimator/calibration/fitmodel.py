@@ -87,6 +87,59 @@ class Factors:
     d_delta: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
 
 
+def _beta_star_derivatives(alpha_e, rho_e, beta, where, phi, delta, A2, A2c, cot_b, drho, dalpha, depth, surcharge):
+    """``(d beta*/d phi, d beta*/d delta)`` of :func:`factors` (its docstring); ``depth`` None: the paper's
+    rule (min N_gamma), else the weight-force rule at these depths and surcharges."""
+    # d beta* / d phi and / d delta
+    s_tot = rho_e + delta + phi
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # sin(alpha + beta + phi) = 0 (N_gamma = 0 on a down-slope) makes these infinite; see below
+        csc2_s = 1.0 / np.sin(beta + s_tot) ** 2
+        csc2_p = 1.0 / np.sin(alpha_e + beta + phi) ** 2
+        t1 = np.tan(alpha_e + beta)
+        c2 = A2c / A2
+        c4 = np.cos(beta + s_tot) / np.sin(beta + s_tot)
+        dg_db = -t1 * t1 - c2 * c2 + cot_b * cot_b + c4 * c4
+        dg_dp = -csc2_p + csc2_s
+        dg_dd = csc2_s
+        dg_dr = csc2_s
+        dg_da = -1.0 - t1 * t1 - csc2_p
+        db_dp_in = -(dg_dp + dg_dr * drho + dg_da * dalpha) / dg_db
+        db_dd_in = -(dg_dd + dg_dr * drho) / dg_db
+    # where the implicit-function derivative is not finite (a pole of d ln N_gamma / d beta), hold beta*
+    # fixed: N_gamma is stationary in beta there (envelope theorem), so only N_c, N_a, N_q lose a term
+    db_dp_in = np.where(np.isfinite(db_dp_in), db_dp_in, 0.0)
+    db_dd_in = np.where(np.isfinite(db_dd_in), db_dd_in, 0.0)
+    if depth is not None:  # the weight-force rule: implicit function theorem on h'(beta) = 0
+        d2 = np.square(np.maximum(depth, 0.0))
+        q = np.maximum(surcharge, 0.0)
+        loaded = (d2 + q) > 0.0
+
+        def partial(shift_b=0.0, shift_a=0.0, shift_r=0.0, shift_p=0.0, shift_d=0.0):
+            up = weight_force_slope(beta + shift_b, alpha_e + shift_a, rho_e + shift_r, phi + shift_p,
+                                    delta + shift_d, d2, q)
+            down = weight_force_slope(beta - shift_b, alpha_e - shift_a, rho_e - shift_r, phi - shift_p,
+                                      delta - shift_d, d2, q)
+            return (up - down) / (2.0 * FD_STEP)
+
+        with np.errstate(divide="ignore", invalid="ignore"):
+            h_b = partial(shift_b=FD_STEP)
+            h_r = partial(shift_r=FD_STEP)
+            wf_dp = -(partial(shift_p=FD_STEP) + h_r * drho + partial(shift_a=FD_STEP) * dalpha) / h_b
+            wf_dd = -(partial(shift_d=FD_STEP) + h_r * drho) / h_b
+        wf_dp = np.where(np.isfinite(wf_dp), wf_dp, 0.0)
+        wf_dd = np.where(np.isfinite(wf_dd), wf_dd, 0.0)
+        db_dp_in = np.where(loaded, wf_dp, db_dp_in)  # an empty bucket: the paper's rule (above)
+        db_dd_in = np.where(loaded, wf_dd, db_dd_in)
+    # on a bound beta* moves with it: pi - s - eps2 (s = rho_eff + delta + phi) or pi/2 - alpha_eff
+    interior, rho_limit, slope_limit = where == BETA_INTERIOR, where == BETA_AT_RHO_LIMIT, where == BETA_AT_SLOPE_LIMIT
+    # (nested where: the same choice as np.select over the exclusive codes, at a fraction of its overhead)
+    on_rho_limit = -(1.0 + drho)
+    db_dp = np.where(interior, db_dp_in, np.where(rho_limit, on_rho_limit, np.where(slope_limit, -dalpha, 0.0)))
+    db_dd = np.where(interior, db_dd_in, np.where(rho_limit, on_rho_limit, 0.0))
+    return db_dp, db_dd
+
+
 def factors(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS, derivatives: bool = False,
             depth=None, surcharge=None) -> Factors:
     """Bearing factors (eqs 10-13) at beta* (eq 14) for broadcast ``phi``, ``delta``.
@@ -163,53 +216,8 @@ def factors(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS, der
     dalpha = np.where(clamps.alpha_at_phi, -1.0, 0.0)
     # d rho_eff / d phi = d rho_eff / d delta = -1 where clamped at the upper limit
     drho = np.where(rho_high, -1.0, 0.0)
-    # d beta* / d phi and / d delta
-    s_tot = rho_e + delta + phi
-    with np.errstate(divide="ignore", invalid="ignore"):
-        # sin(alpha + beta + phi) = 0 (N_gamma = 0 on a down-slope) makes these infinite; see below
-        csc2_s = 1.0 / np.sin(beta + s_tot) ** 2
-        csc2_p = 1.0 / np.sin(alpha_e + beta + phi) ** 2
-        t1 = np.tan(alpha_e + beta)
-        c2 = A2c / A2
-        c4 = np.cos(beta + s_tot) / np.sin(beta + s_tot)
-        dg_db = -t1 * t1 - c2 * c2 + cot_b * cot_b + c4 * c4
-        dg_dp = -csc2_p + csc2_s
-        dg_dd = csc2_s
-        dg_dr = csc2_s
-        dg_da = -1.0 - t1 * t1 - csc2_p
-        db_dp_in = -(dg_dp + dg_dr * drho + dg_da * dalpha) / dg_db
-        db_dd_in = -(dg_dd + dg_dr * drho) / dg_db
-    # where the implicit-function derivative is not finite (a pole of d ln N_gamma / d beta), hold beta*
-    # fixed: N_gamma is stationary in beta there (envelope theorem), so only N_c, N_a, N_q lose a term
-    db_dp_in = np.where(np.isfinite(db_dp_in), db_dp_in, 0.0)
-    db_dd_in = np.where(np.isfinite(db_dd_in), db_dd_in, 0.0)
-    if weight_rule:  # implicit function theorem on h'(beta) = 0 (the weight force's slope)
-        d2 = np.square(np.maximum(depth, 0.0))
-        q = np.maximum(surcharge, 0.0)
-        loaded = (d2 + q) > 0.0
-
-        def partial(shift_b=0.0, shift_a=0.0, shift_r=0.0, shift_p=0.0, shift_d=0.0):
-            up = weight_force_slope(beta + shift_b, alpha_e + shift_a, rho_e + shift_r, phi + shift_p,
-                                    delta + shift_d, d2, q)
-            down = weight_force_slope(beta - shift_b, alpha_e - shift_a, rho_e - shift_r, phi - shift_p,
-                                      delta - shift_d, d2, q)
-            return (up - down) / (2.0 * FD_STEP)
-
-        with np.errstate(divide="ignore", invalid="ignore"):
-            h_b = partial(shift_b=FD_STEP)
-            h_r = partial(shift_r=FD_STEP)
-            wf_dp = -(partial(shift_p=FD_STEP) + h_r * drho + partial(shift_a=FD_STEP) * dalpha) / h_b
-            wf_dd = -(partial(shift_d=FD_STEP) + h_r * drho) / h_b
-        wf_dp = np.where(np.isfinite(wf_dp), wf_dp, 0.0)
-        wf_dd = np.where(np.isfinite(wf_dd), wf_dd, 0.0)
-        db_dp_in = np.where(loaded, wf_dp, db_dp_in)  # an empty bucket: the paper's rule (above)
-        db_dd_in = np.where(loaded, wf_dd, db_dd_in)
-    # on a bound beta* moves with it: pi - s - eps2 (s = rho_eff + delta + phi) or pi/2 - alpha_eff
-    interior, rho_limit, slope_limit = where == BETA_INTERIOR, where == BETA_AT_RHO_LIMIT, where == BETA_AT_SLOPE_LIMIT
-    # (nested where: the same choice as np.select over the exclusive codes, at a fraction of its overhead)
-    on_rho_limit = -(1.0 + drho)
-    db_dp = np.where(interior, db_dp_in, np.where(rho_limit, on_rho_limit, np.where(slope_limit, -dalpha, 0.0)))
-    db_dd = np.where(interior, db_dd_in, np.where(rho_limit, on_rho_limit, 0.0))
+    db_dp, db_dd = _beta_star_derivatives(alpha_e, rho_e, beta, where, phi, delta, A2, A2c, cot_b, drho, dalpha,
+                                          depth if weight_rule else None, surcharge)
 
     def total(dd_b, dd_x, dd_r, db_dx, dd_a=0.0, da_dx=0.0):
         return dd_x + dd_b * db_dx + dd_r * drho + dd_a * da_dx
