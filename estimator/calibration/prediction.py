@@ -155,42 +155,9 @@ def predict(
     Prediction
     """
     soil = load_params(params)
-    if force_model is None:
-        force_model = params.force_model if isinstance(params, Calibration) else DEFAULT_FORCE_MODEL
-    if payload is None and isinstance(params, Calibration) and force_model == params.force_model:
-        payload = params.payload
-    payload = check_force_model(force_model, payload)
-    if options is None:
-        options = params.model_options if isinstance(params, Calibration) else DEFAULT_OPTIONS
-    options = model_options_for(force_model, options)
-    if fill is None:
-        fill = params.fill_source if isinstance(params, Calibration) else "log"
-    check_choice("fill", fill, ("log", "model"))
-    if payload is not None:
-        fill = "model"  # the payload's kept soil follows from the carving
-    observed_t = observed_n = None
+    _, payload, options, fill = _model_of(params, force_model, payload, options, fill)
+    path, pile, bucket, fill_volume, load, observed_t, observed_n = _path_inputs(path_or_cycle, pile, bucket, fill)
     acceleration = None
-    if isinstance(path_or_cycle, CycleLog):
-        cycle = path_or_cycle
-        path = cycle.path
-        same_surface = pile is None
-        pile = cycle.pile if pile is None else pile
-        bucket = cycle.bucket if bucket is None else bucket
-        logged = same_surface and fill == "log"
-        fill_volume = cycle.fill_volume if logged else None
-        load = cycle.measured_load if fill == "log" else None
-        observed_t, observed_n = cycle.tangential, cycle.normal
-    elif isinstance(path_or_cycle, BucketPath):
-        path = path_or_cycle
-        pile = Pile.trapezoid() if pile is None else pile
-        bucket = Bucket() if bucket is None else bucket
-        fill_volume = load = None
-    else:
-        raise ParameterError(f"path_or_cycle must be a BucketPath or a CycleLog, got {type(path_or_cycle).__name__}")
-    if not isinstance(pile, Pile):
-        raise ParameterError(f"pile must be a Pile, got {type(pile).__name__}")
-    if not isinstance(bucket, Bucket):
-        raise ParameterError(f"bucket must be a Bucket, got {type(bucket).__name__}")
     if options.carried_load:
         acceleration = np.column_stack(path.acceleration())
     velocity = np.column_stack(path.velocity()[:2]) if options.slip_friction else None
@@ -215,3 +182,48 @@ def predict(
             quality = FitQuality.from_forces(observed_t[mask], observed_n[mask], forces.tangential[mask],
                                              forces.normal[mask])
     return Prediction(path, forces, state, soil, observed_t, observed_n, quality, pband)
+
+
+def _model_of(params, force_model, payload, options, fill):
+    """``(force_model, payload, options, fill)`` of :func:`predict`: the given ones, else the calibration's."""
+    if force_model is None:
+        force_model = params.force_model if isinstance(params, Calibration) else DEFAULT_FORCE_MODEL
+    if payload is None and isinstance(params, Calibration) and force_model == params.force_model:
+        payload = params.payload
+    payload = check_force_model(force_model, payload)
+    if options is None:
+        options = params.model_options if isinstance(params, Calibration) else DEFAULT_OPTIONS
+    options = model_options_for(force_model, options)
+    if fill is None:
+        fill = params.fill_source if isinstance(params, Calibration) else "log"
+    check_choice("fill", fill, ("log", "model"))
+    if payload is not None:
+        fill = "model"  # the payload's kept soil follows from the carving
+    return force_model, payload, options, fill
+
+
+def _path_inputs(path_or_cycle, pile, bucket, fill):
+    """``(path, pile, bucket, fill_volume, load, observed_t, observed_n)`` of :func:`predict`."""
+    observed_t = observed_n = None
+    if isinstance(path_or_cycle, CycleLog):
+        cycle = path_or_cycle
+        path = cycle.path
+        same_surface = pile is None
+        pile = cycle.pile if pile is None else pile
+        bucket = cycle.bucket if bucket is None else bucket
+        logged = same_surface and fill == "log"
+        fill_volume = cycle.fill_volume if logged else None
+        load = cycle.measured_load if fill == "log" else None
+        observed_t, observed_n = cycle.tangential, cycle.normal
+    elif isinstance(path_or_cycle, BucketPath):
+        path = path_or_cycle
+        pile = Pile.trapezoid() if pile is None else pile
+        bucket = Bucket() if bucket is None else bucket
+        fill_volume = load = None
+    else:
+        raise ParameterError(f"path_or_cycle must be a BucketPath or a CycleLog, got {type(path_or_cycle).__name__}")
+    if not isinstance(pile, Pile):
+        raise ParameterError(f"pile must be a Pile, got {type(pile).__name__}")
+    if not isinstance(bucket, Bucket):
+        raise ParameterError(f"bucket must be a Bucket, got {type(bucket).__name__}")
+    return path, pile, bucket, fill_volume, load, observed_t, observed_n
