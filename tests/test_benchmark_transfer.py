@@ -1,0 +1,51 @@
+"""``benchmarks/transfer.py``: the split is by case family, and the shipped manifest is the split it makes."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _load(name: str):
+    spec = importlib.util.spec_from_file_location(f"wheelloader_benchmark_{name}", ROOT / "benchmarks" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _split():
+    cwd = os.getcwd()
+    os.chdir(ROOT)
+    try:
+        return _load("transfer").split(Path("data/mpm"), Path("data/results"))
+    finally:
+        os.chdir(cwd)
+
+
+def test_no_test_family_and_no_held_out_soil_or_pile_is_trained_on():
+    split = _split()
+    train = split["train"]
+    assert len(train) >= 200
+    test = [p for paths in split["test"].values() for p in paths]
+    assert set(train).isdisjoint(test)
+    for path in train:  # only the loops' soils, never a held-out soil or pile
+        name = Path(path).parts
+        assert "gravel" in name or "sand" in name
+        assert not any(s in path for s in ("dirt", "modified_sand", "slope25", "data/mpm"))
+    assert all(Path(p).is_file() for p in train + test)
+
+
+def test_the_shipped_manifest_is_the_split():
+    shipped = json.loads((ROOT / "docs" / "results" / "transfer" / "manifest.json").read_text())
+    assert shipped == _split()
+
+
+def test_the_force_models_benchmark_fits_the_default_payload_to_its_stated_cycles():
+    module = _load("force_models")
+    paths = module.payload_cycles(ROOT / "data" / "mpm", ROOT / "data" / "results")
+    assert len(paths) == 254
+    assert not any(p.name.startswith("dirt") or "slope25" in p.name for p in paths)
