@@ -16,15 +16,17 @@ def _variant(cycle: CycleLog, tangential, normal) -> CycleLog:
     return CycleLog(cycle.path, tangential, normal, cycle.pile, cycle.bucket, fill_volume=cycle.fill_volume)
 
 
-def test_200_random_cycles_calibrate_and_summarise():
-    """Random in-bounds soils and paths, some scaled x10 or with swapped F_T/F_N columns (7 of 150 crashed).
+def _random_cycles_fitted(count: int) -> int:
+    """Calibrate ``count`` random in-bounds soils and paths, some scaled x10 or with swapped F_T/F_N columns
+    (7 of 150 crashed); every summary and JSON report is written. Returns how many were fitted (a clear refusal,
+    e.g. of a path that barely enters the soil, is not a crash).
 
     Every fourth cycle runs with the default settings, the others with a coarser grid and one start (the
     crash was in the report after the fit, which every setting reaches), to keep the suite's time down.
     """
     rng = np.random.default_rng(2013)
     fitted = 0
-    for i in range(200):
+    for i in range(count):
         cycle = synthetic_cycle(random_soil(rng), random_bezier_path(rng), noise=float(rng.uniform(0.0, 0.2)),
                                 seed=rng)
         if i % 4 == 1:
@@ -35,11 +37,21 @@ def test_200_random_cycles_calibrate_and_summarise():
         try:
             cal = calibrate(cycle, options=CalibrationOptions(**cheap))
         except CalibrationError:
-            continue  # a clear refusal (e.g. a path that barely enters the soil) is not a crash
+            continue
         fitted += 1
         assert isinstance(cal.summary(), str)
         json.dumps(cal.to_dict(), allow_nan=False, default=float)
-    assert fitted >= 190
+    return fitted
+
+
+def test_random_cycles_calibrate_and_summarise():
+    """The slow test's first 24 cycles (each kind six times; all 24 fitted when this was written)."""
+    assert _random_cycles_fitted(24) >= 22
+
+
+@pytest.mark.slow
+def test_200_random_cycles_calibrate_and_summarise():
+    assert _random_cycles_fitted(200) >= 190
 
 
 def test_cli_calibrate_survives_scaled_forces(tmp_path, capsys):

@@ -56,7 +56,8 @@ def test_plans_are_bit_identical_built_loaded_and_without_cache(cache, monkeypat
     assert np.isfinite(built.x).all() and built.final_fill > 0.0
 
 
-@pytest.mark.parametrize("damage", ["truncate", "garbage", "other_key"])
+@pytest.mark.parametrize("damage", ["truncate", pytest.param("garbage", marks=pytest.mark.slow),
+                                    pytest.param("other_key", marks=pytest.mark.slow)])
 def test_a_bad_entry_is_rebuilt_not_a_crash(cache, monkeypatch, damage, caplog):
     reference = _plan()
     (entry,) = _entries(cache)

@@ -108,7 +108,9 @@ def test_solver_failure_is_reported_not_hidden(pile):
     assert plan.status == "Maximum_Iterations_Exceeded"
     # the loop's planner refuses an infeasible plan and says why: a loader too weak to dig
     weak = Loader(max_push_force=50.0, max_lift_force=50.0)
-    outcome = plan_next_cycle("gravel", pile, loader=weak, mpc=False)
+    # (10 intervals and no wider-margin re-plans: three NLPs fewer to build for the same refusal)
+    outcome = plan_next_cycle("gravel", pile, loader=weak, mpc=False, options=PlannerOptions(intervals=10),
+                              replan_within_iterations=0)
     assert not outcome.success
     assert outcome.path is None
     assert "NumPy check" in outcome.message or "IPOPT" in outcome.message
