@@ -14,6 +14,8 @@ the nodes it changed) and built as :class:`~wheelloader.estimator.Pile` only whe
 
 from __future__ import annotations
 
+import heapq
+import itertools
 from collections.abc import Sequence
 from typing import Any
 
@@ -48,11 +50,15 @@ class BatchedCycleRecorder:
     def __init__(self, n: int, max_steps: int, dt: float, keep: int) -> None:
         self.n, self.dt, self.keep = n, dt, keep
         self.tick = 0
-        self._ring = np.zeros((max_steps + 1, len(SAMPLE_KEYS), n))
-        self._first = np.zeros((len(SAMPLE_KEYS), n))
+        # (step, sub-env, column): a step's samples are one contiguous block (written with one np.stack), a
+        # cycle's are one short row per step. Filled now, so that the steps do not pay for first touches.
+        self._ring = np.full((max_steps + 1, n, len(SAMPLE_KEYS)), 0.0)
+        self._first = np.zeros((n, len(SAMPLE_KEYS)))
         self._start = np.zeros(n, dtype=np.int64)
         self._open = np.zeros(n, dtype=bool)
         self._meta: list[dict[str, Any] | None] = [None] * n
+        self._lazy: list[tuple] = []  # (first tick, order, entry) of kept cycles whose samples are in the ring
+        self._order = itertools.count()
         self.histories = [CycleHistory() for _ in range(n)]
 
     @property
@@ -66,7 +72,7 @@ class BatchedCycleRecorder:
         old = self._ring
         if size <= old.shape[0]:
             return
-        ring = np.zeros((size, *old.shape[1:]))
+        ring = np.full((size, *old.shape[1:]), 0.0)
         for tick in range(max(0, self.tick - old.shape[0] + 1), self.tick + 1):
             ring[tick % size] = old[tick % old.shape[0]]
         self._ring = ring
@@ -75,17 +81,26 @@ class BatchedCycleRecorder:
     def write_step(self, columns: Sequence[np.ndarray]) -> None:
         """One step of every sub-env: the columns of :data:`SAMPLE_KEYS`, each of shape ``(n,)``."""
         self.tick += 1
-        row = self._ring[self.tick % self._ring.shape[0]]
-        for c, values in enumerate(columns):
-            row[c] = values
+        size = self._ring.shape[0]
+        lazy = self._lazy
+        while lazy and lazy[0][0] + size <= self.tick:  # its first step's row is about to be overwritten
+            self._materialize(heapq.heappop(lazy)[2])
+        np.stack(columns, axis=1, out=self._ring[self.tick % size])
+
+    def _materialize(self, entry: dict[str, Any]) -> None:
+        """Copy a kept cycle's samples out of the ring (once; nothing for a dropped one)."""
+        if entry["record"] is None and entry["ring"] is not None:
+            start, steps, first = entry["ring"]
+            entry["record"] = self._samples(start, steps, first, entry["i"])
+            entry["ring"] = None
 
     def start_cycle(self, i: int, sample: Sequence[float], **meta: Any) -> None:
         """A new cycle of sub-env ``i`` with its first sample (:data:`SAMPLE_KEYS` order); ``meta``: what its
         log needs besides the samples (soil, seed, start pile)."""
-        self._first[:, i] = sample
+        self._first[i] = sample
         self._start[i] = self.tick
         self._open[i] = True
-        self._meta[i] = meta
+        self._meta[i] = {"i": i, **meta}
 
     def close(self, i: int, steps: int, reason: str, carved: np.ndarray, **energies: float) -> None:
         """Close sub-env ``i``'s open cycle of ``steps`` steps (``reason``: ``"exit"``, ``"stall"`` or ``"reset"``)
@@ -96,10 +111,14 @@ class BatchedCycleRecorder:
         if steps < 1:
             return
         meta = self._meta[i]
-        start = meta["start_heights"]
-        changed = np.nonzero(carved != start)[0]
-        self.histories[i].add(self.record(i, steps), self.keep, reason=reason, changed=changed,
-                              changed_heights=carved[changed], **meta, **energies)
+        changed = np.nonzero(carved != meta["start_heights"])[0]
+        # The samples stay in the ring until a step would overwrite them (or a log asks): most kept cycles are
+        # dropped for a newer one before that, and are never copied out.
+        entry = {"record": None, "ring": (int(self._start[i]), steps, self._first[i].copy()), "reason": reason,
+                 "changed": changed, "changed_heights": carved[changed], **meta, **energies}
+        heapq.heappush(self._lazy, (int(self._start[i]) + 1, next(self._order), entry))
+        for old in self.histories[i].append(entry, self.keep):
+            old["ring"] = None  # dropped: never needed
 
     # ------------------------------------------------------------------ reading
     def is_open(self, i: int) -> bool:
@@ -108,10 +127,19 @@ class BatchedCycleRecorder:
 
     def record(self, i: int, steps: int) -> dict[str, np.ndarray]:
         """The arrays of sub-env ``i``'s current cycle after ``steps`` steps (:data:`RECORD_KEYS`)."""
+        return self._samples(int(self._start[i]), steps, self._first[i], i)
+
+    def kept(self, i: int, index: int) -> dict[str, Any]:
+        """Kept cycle ``index`` of sub-env ``i`` (its samples copied out of the ring if not yet)."""
+        entry = self.histories[i][index]
+        self._materialize(entry)
+        return entry
+
+    def _samples(self, start: int, steps: int, first: np.ndarray, i: int) -> dict[str, np.ndarray]:
         if steps > self._ring.shape[0] - 1:
             raise ParameterError(f"a cycle of {steps} steps does not fit the record of {self._ring.shape[0] - 1}")
-        ticks = np.arange(self._start[i] + 1, self._start[i] + steps + 1) % self._ring.shape[0]
-        samples = np.concatenate([self._first[:, i][None, :], self._ring[ticks, :, i]])
+        ticks = np.arange(start + 1, start + steps + 1) % self._ring.shape[0]
+        samples = np.concatenate([first[None, :], self._ring[ticks, i]])
         out = {"t": np.arange(steps + 1) * self.dt}
         for c, key in enumerate(SAMPLE_KEYS):
             out[key] = samples[:, c].astype(np.int64) if key == "flags" else samples[:, c].copy()
@@ -119,7 +147,7 @@ class BatchedCycleRecorder:
 
     def log(self, i: int, index: int, cfg: Any, source: str) -> CycleLog:
         """Kept cycle ``index`` of sub-env ``i`` as a :class:`~wheelloader.estimator.CycleLog`."""
-        entry = self.histories[i][index]
+        entry = self.kept(i, index)
         start = entry["start_pile"]
         after = start.heights.copy()
         after[entry["changed"]] = entry["changed_heights"]

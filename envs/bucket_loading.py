@@ -24,6 +24,8 @@ from wheelloader.estimator import (
     soil_forces_single,
 )
 from wheelloader.estimator.checks import check_optional_int
+from wheelloader.estimator.kinematics import surface_contact
+from wheelloader.estimator.pile import node_heights
 
 from .bookkeeping import (
     RESET_OPTIONS,
@@ -46,7 +48,7 @@ from .config import (
     next_pile,
     settings_parameters,
 )
-from .cycle_history import RECORD_KEYS, CycleHistory, to_cycle_log
+from .cycle_history import CycleHistory, record_arrays, to_cycle_log
 from .rllib_env_config import accepts_env_config
 from .truth import as_truth, model_excess, stone_step
 
@@ -254,7 +256,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         self._cycles = CycleHistory()
         self.max_logged_cycles = 20
         self._seed: int | None = None
-        self._record: dict[str, list] | None = None
+        self._samples: list[tuple] | None = None  # the current cycle's samples (RECORD_KEYS order)
 
     @property
     def soil(self) -> SoilParams:
@@ -276,13 +278,13 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
             self._seed = int(seed)
         if request.config_changed:
             self.cfg = request.config
-        if self._record is not None and len(self._record["t"]) >= 2:
+        if self._samples is not None and len(self._samples) >= 2:
             self._finish_cycle("reset")
         carved = self._carver.pile() if self._carver is not None else None
         self._soil = choose_soil(self.cfg, self._soil, request.soil, self.np_random)
         self._start_cycle(next_pile(self.cfg, carved, request.keep_pile, request.relax, self._soil), new_episode=True)
         self._k = 0
-        self._noise_n, self._noise_u = draw_noise_chunk(self.np_random)
+        self._draw_noise()
         self._cycle_count = 0
         f_t, f_n = self._initial_forces(0)
         obs = self._observation(f_t, f_n)
@@ -302,7 +304,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         self._beta: float | None = None
         self._energy_soil = self._energy_payload = 0.0
         self._cycle_t = 0
-        self._record = {k: [] for k in RECORD_KEYS}
+        self._samples = []
         depth, rho, alpha, lt = contact_single(pile, self._x, self._z, self._th, cfg.bucket.floor_length,
                                                cfg.slope_window)
         self._depth, self._rho, self._alpha, self._lt = depth, rho, alpha, lt
@@ -315,82 +317,79 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
                                                    self.cfg.bucket, DEFAULT_OPTIONS)
         if self._depth > 0.0:
             self._beta = beta
-        j = k % NOISE_CHUNK
-        m_t = self._measure(f_t, self._noise_n[j, 0])
-        m_n = self._measure(f_n, self._noise_n[j, 1])
-        self._log_sample(m_t, m_n, f_t, f_n, flags)
+        noise = self._noise_n[k % NOISE_CHUNK]
+        m_t = self._measure(f_t, noise[0])
+        m_n = self._measure(f_n, noise[1])
+        if self._samples is not None:
+            self._samples.append((self._cycle_t * self.cfg.dt, self._x, self._z, self._th, m_t, m_n,
+                                  self._carver.fill, f_t, f_n, flags))
         self._mt, self._mn = m_t, m_n
         return m_t, m_n
 
+    def _draw_noise(self) -> None:
+        """The next :data:`NOISE_CHUNK` steps' noise, as lists of Python floats (cheap to index)."""
+        normal, uniform = draw_noise_chunk(self.np_random)
+        self._noise_n, self._noise_u = normal.tolist(), uniform.tolist()
+
     def _measure(self, force: float, z: float) -> float:
-        value = force + self.cfg.sensor_noise * float(z)
+        value = force + self.cfg.sensor_noise * z
         r = self.cfg.sensor_range
         return -r if value < -r else (r if value > r else value)
 
-    def _log_sample(self, m_t: float, m_n: float, f_t: float, f_n: float, flags: int) -> None:
-        rec = self._record
-        if rec is None:  # stepping after the end of an episode: nothing is logged
-            return
-        rec["t"].append(self._cycle_t * self.cfg.dt)
-        rec["x"].append(self._x)
-        rec["z"].append(self._z)
-        rec["blade_angle"].append(self._th)
-        rec["F_T"].append(m_t)
-        rec["F_N"].append(m_n)
-        rec["fill"].append(self._carver.fill)
-        rec["true_F_T"].append(f_t)
-        rec["true_F_N"].append(f_n)
-        rec["flags"].append(flags)
-
     # ------------------------------------------------------------------ step
     def step(self, action: np.ndarray):
-        if self._carver is None:
+        carver = self._carver
+        if carver is None:
             raise ParameterError("call reset() before step()")
         cfg = self.cfg
         ld = cfg.loader
         x, z, th = self._x, self._z, self._th
         xn, zn, thn, vx, vz, om = self._move(action)
-        undo = self._carve(x, z, xn, zn)
-        fill0 = undo[3]
-        self._k += 1
-        j = self._k % NOISE_CHUNK
+        before = fill0, _, _ = carver.fill, carver.spilled, carver.removed  # carver.state()
+        changes: list = []
+        carver.cut_segment(x, z, xn, zn, changes)
+        k = self._k = self._k + 1
+        j = k % NOISE_CHUNK
         if j == 0:
-            self._noise_n, self._noise_u = draw_noise_chunk(self.np_random)
-        depth, rho, alpha, w_load, f_t, f_n, beta, flags = self._plant(xn, zn, thn, math.hypot(xn - x, zn - z), j)
+            self._draw_noise()
+        depth, rho, alpha, height, w_load, f_t, f_n, beta, flags = self._plant(xn, zn, thn, x, z, j)
         stalled = f_t > ld.max_push_force or f_n > ld.max_lift_force
         if stalled:  # the bucket does not move: carving undone, pose held, velocity zeroed
-            self._undo_carve(undo)
+            carver.restore(changes, before)
             xn, zn, thn, vx, vz, om = x, z, th, 0.0, 0.0, 0.0
-            depth, rho, alpha, w_load, f_t, f_n, beta, flags = self._plant(x, z, th, 0.0, -1)
+            depth, rho, alpha, height, w_load, f_t, f_n, beta, flags = self._plant(x, z, th, x, z, -1)
             self._stall_count += 1
         else:
             self._stall_count = 0
         if depth > 0.0:
             self._beta = beta
-        fill = float(self._carver.fill)
+        fill = carver.fill
         e_soil, e_pay = step_work(f_t, f_n, xn - x, zn - z, thn, w_load, cos=math.cos, sin=math.sin)
         self._energy_soil += e_soil
         self._energy_payload += e_pay
-        m_t = self._measure(f_t, self._noise_n[j, 0])
-        m_n = self._measure(f_n, self._noise_n[j, 1])
+        sigma, r = cfg.sensor_noise, cfg.sensor_range
+        noise_t, noise_n = self._noise_n[j]
+        m_t = f_t + sigma * noise_t
+        m_t = -r if m_t < -r else (r if m_t > r else m_t)
+        m_n = f_n + sigma * noise_n
+        m_n = -r if m_n < -r else (r if m_n > r else m_n)
         self._x, self._z, self._th, self._vx, self._vz, self._om = xn, zn, thn, vx, vz, om
         self._depth, self._rho, self._alpha = depth, rho, alpha
         self._mt, self._mn = m_t, m_n
         self._cycle_t += 1
-        self._log_sample(m_t, m_n, f_t, f_n, flags)
+        if self._samples is not None:  # stepping after the end of an episode: nothing is logged
+            self._samples.append((self._cycle_t * cfg.dt, xn, zn, thn, m_t, m_n, fill, f_t, f_n, flags))
         cap = cfg.bucket.capacity
         terms = reward_terms(cfg.reward_weights, cap, ld.max_push_force, ld.max_lift_force, fill - fill0,
                              e_soil + e_pay, outside_validity(depth, flags), stalled, f_t, f_n)
-        reward = terms.total()
         # cycle end (one rule for every backend): out of the soil after loading
         self._touched, self._entered = cycle_progress(self._touched, self._entered, depth > 0.0, fill,
                                                       cfg.exit_fill_volume)
-        done = cycle_done(self._touched, self._entered, zn, zn - self._start_pile.height_at(xn), self._crest,
-                          cfg.exit_clearance)
+        done = cycle_done(self._touched, self._entered, zn, zn - height, self._crest, cfg.exit_clearance)
         info = {
             "reward_fill": terms.fill, "reward_energy": terms.energy, "reward_validity": terms.validity,
             "reward_stall": terms.stall, "reward_force": terms.force,
-            "fill_volume": fill, "fill_fraction": fill / cap, "spilled": float(self._carver.spilled),
+            "fill_volume": fill, "fill_fraction": fill / cap, "spilled": carver.spilled,
             "force_tangential": f_t, "force_normal": f_n, "measured_tangential": m_t, "measured_normal": m_n,
             "energy_soil": self._energy_soil, "energy_payload": self._energy_payload,
             "depth": depth, "flags": flags, "stalled": stalled, "cycle_done": done,
@@ -402,22 +401,23 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
             self.render()
         truncated = (not terminated and self.max_episode_steps is not None
                      and self._k >= self.max_episode_steps)
-        return obs, reward, terminated, truncated, info
+        return obs, terms[0] + terms[1] + terms[2] + terms[3] + terms[4], terminated, truncated, info  # total()
 
     def _move(self, action: np.ndarray) -> tuple[float, float, float, float, float, float]:
         """Kinematics: the action (clipped to [-1, 1], NaN counts as 0) moves the rate-limited velocity;
         the new pose is clipped to the workspace. Returns ``(x, z, theta, vx, vz, omega)`` (not yet stored)."""
-        try:
-            a0, a1, a2 = np.asarray(action, dtype=np.float64).reshape(3).tolist()
-        except (ValueError, TypeError):
-            raise ParameterError(f"action must be 3 numbers (x, z and blade-angle rate commands in [-1, 1]), got "
-                                 f"{np.shape(action)} {action!r:.60}") from None
+        if type(action) is np.ndarray and action.shape == (3,) and action.dtype.kind == "f":  # the common case
+            a0, a1, a2 = action.tolist()
+        else:
+            try:
+                a0, a1, a2 = np.asarray(action, dtype=np.float64).reshape(3).tolist()
+            except (ValueError, TypeError):
+                raise ParameterError(f"action must be 3 numbers (x, z and blade-angle rate commands in [-1, 1]), got "
+                                     f"{np.shape(action)} {action!r:.60}") from None
         a0 = 0.0 if a0 != a0 else (-1.0 if a0 < -1.0 else (1.0 if a0 > 1.0 else a0))
         a1 = 0.0 if a1 != a1 else (-1.0 if a1 < -1.0 else (1.0 if a1 > 1.0 else a1))
         a2 = 0.0 if a2 != a2 else (-1.0 if a2 < -1.0 else (1.0 if a2 > 1.0 else a2))
-        cfg = self.cfg
-        dt, dv, dw = cfg.dt, cfg.speed_step, cfg.tilt_rate_step
-        vmax, wmax = cfg.loader.max_speed, cfg.loader.max_tilt_rate
+        dt, dv, dw, vmax, wmax, (x0, x1), (z0, z1), (lo, hi) = self.cfg.motion
         x, z, th = self._x, self._z, self._th
         d = a0 * vmax - self._vx
         vx = self._vx + (-dv if d < -dv else (dv if d > dv else d))
@@ -425,48 +425,32 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         vz = self._vz + (-dv if d < -dv else (dv if d > dv else d))
         d = a2 * wmax - self._om
         om = self._om + (-dw if d < -dw else (dw if d > dw else d))
-        lo, hi = cfg.x_limits
         xn = x + vx * dt
-        xn = lo if xn < lo else (hi if xn > hi else xn)
-        lo, hi = cfg.z_limits
+        xn = x0 if xn < x0 else (x1 if xn > x1 else xn)
         zn = z + vz * dt
-        zn = lo if zn < lo else (hi if zn > hi else zn)
-        lo, hi = cfg.blade_angle_limits
+        zn = z0 if zn < z0 else (z1 if zn > z1 else zn)
         thn = th + om * dt
         thn = lo if thn < lo else (hi if thn > hi else thn)
         return xn, zn, thn, (xn - x) / dt, (zn - z) / dt, (thn - th) / dt
 
-    def _carve(self, x: float, z: float, xn: float, zn: float) -> tuple:
-        """Carve the segment into the surface; returns what :meth:`_undo_carve` needs."""
-        carver = self._carver
-        sp, x0 = carver.spacing, carver.x0
-        j0 = max(0, int(math.floor((min(x, xn) - x0) / sp)) - 1)
-        j1 = int(math.ceil((max(x, xn) - x0) / sp)) + 2
-        undo = (j0, j1, carver.heights[j0:j1].copy(), float(carver.fill), carver.spilled, carver.removed)
-        carver.cut_segment(x, z, xn, zn)
-        return undo
-
-    def _undo_carve(self, undo: tuple) -> None:
-        carver = self._carver
-        j0, j1, saved, fill, spilled, removed = undo
-        carver.heights[j0:j1] = saved
-        carver.fill, carver.spilled, carver.removed = fill, spilled, removed
-
-    def _plant(self, x: float, z: float, th: float, dist: float, j: int) -> tuple:
+    def _plant(self, x: float, z: float, th: float, x_before: float, z_before: float, j: int) -> tuple:
         """Contact and plant forces at a pose with the current fill: the shared model (depth to the
-        start-of-cycle surface), then the truth beyond the model (``j < 0``: no new stone).
+        start-of-cycle surface), then the truth beyond the model (``j < 0``: no new stone; the step came from
+        ``(x_before, z_before)``).
 
-        Returns ``(depth, rho, alpha, W_load, F_T, F_N, beta, flags)``.
+        Returns ``(depth, rho, alpha, surface height, W_load, F_T, F_N, beta, flags)``.
         """
         cfg = self.cfg
         soil, bucket = self._soil, cfg.bucket
-        depth, rho, alpha, lt = contact_single(self._start_pile, x, z, th, bucket.floor_length, cfg.slope_window)
-        w_load = soil.gamma * GRAVITY * float(self._carver.fill)
+        depth, rho, alpha, lt, height = surface_contact(self._start_pile, x, z, th, bucket.floor_length,
+                                                        cfg.slope_window)
+        w_load = soil.gamma * GRAVITY * self._carver.fill
         f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, lt, w_load, bucket, DEFAULT_OPTIONS,
                                                    self._beta)
-        if cfg.truth.active:
+        if cfg.truth_active:
+            dist = math.hypot(x - x_before, z - z_before)
             f_t, f_n = self._truth_forces(f_t, f_n, depth, dist / cfg.dt, dist, j)
-        return depth, rho, alpha, w_load, f_t, f_n, beta, flags
+        return depth, rho, alpha, height, w_load, f_t, f_n, beta, flags
 
     def _end_cycle(self, cycle_done: bool) -> bool:
         """Close a stalled or finished cycle (in the multi-cycle variant start the next); whether to terminate."""
@@ -491,41 +475,32 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         f_t, f_n = model_excess(tr, f_t, f_n, depth, speed, self.cfg.bucket.width, where=_pick)
         if j >= 0:
             u = self._noise_u[j]
-            self._stone = stone_step(tr, self._stone, depth, dist, u[0], float(u[1]), self.cfg.stone_decay, where=_pick,
+            self._stone = stone_step(tr, self._stone, depth, dist, u[0], u[1], self.cfg.stone_decay, where=_pick,
                                      log1p=math.log1p)
         return f_t + self._stone, f_n + 0.5 * self._stone
 
     # ------------------------------------------------------------------ observation
     def _observation(self, m_t: float, m_n: float) -> np.ndarray:
         x, z = self._x, self._z
-        heights = self._carver.heights
-        x0, sp = self._carver.x0, self._carver.spacing
-        last = heights.shape[0] - 1
+        carver = self._carver
+        cfg = self.cfg
         vals = [x, z, self._th, self._vx, self._vz, self._om, self._depth, self._rho, self._alpha,
-                self._carver.fill / self.cfg.bucket.capacity, m_t * 1e-3, m_n * 1e-3]
-        for dx in self.cfg.lookahead:
-            u = (x + dx - x0) / sp
-            if u <= 0.0:
-                h = heights[0]
-            elif u >= last:
-                h = heights[last]
-            else:
-                i = int(u)
-                h = heights[i] + (u - i) * (heights[i + 1] - heights[i])
-            vals.append(float(h) - z)
-        low, high = self.cfg.observation_limits
-        out = [lo if v < lo else (hi if v > hi else v) for v, lo, hi in zip(vals, low, high, strict=True)]
-        return np.array(out, dtype=np.float32)
+                carver.fill / cfg.bucket.capacity, m_t * 1e-3, m_n * 1e-3]
+        vals += node_heights(carver.nodes, carver.x0, carver.spacing, x, cfg.lookahead, z)  # surface minus tip z
+        obs = np.array(vals, dtype=np.float32)
+        low, high = cfg.observation_limits  # float32 bounds: clipping after the cast equals clipping before it
+        np.maximum(obs, low, out=obs)
+        return np.minimum(obs, high, out=obs)
 
     # ------------------------------------------------------------------ cycle logs
     def _finish_cycle(self, reason: str) -> None:
-        rec = self._record
-        self._record = None
-        if rec is None or len(rec["t"]) < 2:
+        samples = self._samples
+        self._samples = None
+        if samples is None or len(samples) < 2:
             return
-        self._cycles.add(rec, self.max_logged_cycles, pile=self._start_pile, pile_after=self._carver.pile(),
-                         soil=self._soil, reason=reason, seed=self._seed, cycle=self._cycle_count,
-                         energy_soil=self._energy_soil, energy_payload=self._energy_payload)
+        self._cycles.add(record_arrays(samples), self.max_logged_cycles, pile=self._start_pile,
+                         pile_after=self._carver.pile(), soil=self._soil, reason=reason, seed=self._seed,
+                         cycle=self._cycle_count, energy_soil=self._energy_soil, energy_payload=self._energy_payload)
 
     @property
     def cycle_ends(self) -> tuple[str, ...]:
@@ -539,9 +514,9 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         ``F_T, F_N`` (measured), ``fill`` [m^3], ``true_F_T, true_F_N`` (noise-free plant forces), ``flags``.
         """
         if current:
-            if self._record is None:
+            if self._samples is None:
                 raise ParameterError("no cycle in progress")
-            return {k: np.asarray(v) for k, v in self._record.items()}
+            return record_arrays(self._samples)
         return self._cycles.record(index)
 
     def last_cycle_log(self) -> CycleLog:

@@ -368,15 +368,29 @@ class EnvConfig:
         return self.exit_min_fill * self.bucket.capacity
 
     @functools.cached_property
+    def motion(self) -> tuple:
+        """What a step's kinematics reads, in one tuple: ``(dt, speed_step, tilt_rate_step, max_speed,
+        max_tilt_rate, x_limits, z_limits, blade_angle_limits)``."""
+        return (self.dt, self.speed_step, self.tilt_rate_step, self.loader.max_speed, self.loader.max_tilt_rate,
+                self.x_limits, self.z_limits, self.blade_angle_limits)
+
+    @functools.cached_property
+    def truth_active(self) -> bool:
+        """Whether an in-cycle effect beyond the model is on (``truth.active``)."""
+        return self.truth.active
+
+    @functools.cached_property
     def stone_decay(self) -> float:
         """Per-step decay factor of a stone spike (:func:`~wheelloader.envs.truth.stone_decay`)."""
         return stone_decay(self.truth, self.dt)
 
     @functools.cached_property
-    def observation_limits(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
-        """(low, high) of the observation as Python floats (the float32 bounds, for clipping)."""
+    def observation_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """(low, high) of the observation, float32 arrays marked read-only (:meth:`obs_bounds`, computed once;
+        the envs clip each observation to them)."""
         low, high = self.obs_bounds()
-        return tuple(float(v) for v in low), tuple(float(v) for v in high)
+        low.flags.writeable = high.flags.writeable = False
+        return low, high
 
     def obs_names(self) -> tuple[str, ...]:
         """Names of all observation entries."""

@@ -16,10 +16,18 @@ import numpy as np
 
 from wheelloader.estimator import BucketPath, CycleLog, ParameterError
 
-__all__ = ["RECORD_KEYS", "CycleHistory", "to_cycle_log"]
+__all__ = ["RECORD_KEYS", "CycleHistory", "record_arrays", "to_cycle_log"]
 
 #: Per-sample arrays of a cycle: path, measured forces, fill [m^3], noise-free plant forces, model flags.
 RECORD_KEYS: tuple[str, ...] = ("t", "x", "z", "blade_angle", "F_T", "F_N", "fill", "true_F_T", "true_F_N", "flags")
+
+
+def record_arrays(samples: list[tuple]) -> dict[str, np.ndarray]:
+    """A cycle's samples (tuples in :data:`RECORD_KEYS` order, as the single env appends them) as one array
+    per key (``flags`` as int64; the other columns are floats and stay exactly as given)."""
+    columns = np.array(samples, dtype=float).reshape(len(samples), len(RECORD_KEYS))
+    return {k: columns[:, c].astype(np.int64) if k == "flags" else columns[:, c].copy()
+            for c, k in enumerate(RECORD_KEYS)}
 
 
 class CycleHistory:
@@ -31,8 +39,14 @@ class CycleHistory:
     def add(self, record: Mapping[str, list], keep: int, **entry: Any) -> None:
         """Store a finished cycle (its ``record`` lists become arrays); keep the last ``keep`` cycles."""
         arrays = {k: np.asarray(v, dtype=np.int64 if k == "flags" else float) for k, v in record.items()}
-        self._entries.append({"record": arrays, **entry})
+        self.append({"record": arrays, **entry}, keep)
+
+    def append(self, entry: dict[str, Any], keep: int) -> list[dict[str, Any]]:
+        """Store a prepared entry as it is; keep the last ``keep`` cycles. Returns the entries dropped."""
+        self._entries.append(entry)
+        dropped = self._entries[:-keep]
         del self._entries[:-keep]
+        return dropped
 
     def __len__(self) -> int:
         return len(self._entries)

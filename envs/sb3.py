@@ -21,6 +21,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterable, Sequence
 from typing import Any
 
@@ -29,17 +30,17 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 
 from wheelloader.estimator import ParameterError
-from wheelloader.estimator.checks import check_int
+from wheelloader.estimator.checks import check_choice, check_int
 
 try:
-    from stable_baselines3.common.vec_env import VecEnv, VecMonitor
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecMonitor
 except ImportError as exc:  # pragma: no cover - depends on the installation
     raise ImportError('wheelloader.envs.sb3 needs stable-baselines3: pip install torch==2.13.0 && '
                       'pip install "wheelloader[rl]"', name=exc.name) from exc
 
 import wheelloader.envs  # noqa: F401,E402  (registers the env ids)
 
-__all__ = ["BatchedVecEnv", "make_sb3_vec_env"]
+__all__ = ["BATCHED_FROM", "BatchedVecEnv", "make_sb3_vec_env"]
 
 
 class BatchedVecEnv(VecEnv):
@@ -177,18 +178,30 @@ def _info_list(info: dict[str, Any], n: int) -> list[dict[str, Any]]:
     return out
 
 
+#: From this many envs on, ``make_sb3_vec_env(backend="auto")`` uses the batched adapter; below it SB3's
+#: ``DummyVecEnv`` of single envs, which is faster there (the crossover measured by
+#: ``benchmarks/env_speed.py --sb3``, docs/results/env_speed).
+BATCHED_FROM = 48
+
+
 def make_sb3_vec_env(env_id: str = "wheelloader/BucketLoading-v0", n_envs: int = 1, seed: int | None = None, *,
-                     monitor: bool = True, render_mode: str | None = None, **env_kwargs: Any) -> VecEnv:
-    """The batched env as an SB3 ``VecEnv``: :class:`BatchedVecEnv`, seeded, in ``VecMonitor``.
+                     backend: str = "auto", monitor: bool = True, render_mode: str | None = None,
+                     **env_kwargs: Any) -> VecEnv:
+    """The env as an SB3 ``VecEnv``, seeded, in ``VecMonitor``.
 
     Parameters
     ----------
     env_id : str
-        A registered id with a vector entry point.
+        A registered id (with a vector entry point for the batched backend).
     n_envs : int
         Number of sub-envs.
     seed : int, optional
         Sub-env ``i`` is seeded with ``seed + i`` at the first reset.
+    backend : {"auto", "batched", "dummy"}
+        ``"batched"``: :class:`BatchedVecEnv` over the NumPy-batched env; ``"dummy"``: SB3's ``DummyVecEnv``
+        of single envs; ``"auto"`` (default): batched from :data:`BATCHED_FROM` envs on, else dummy. Both
+        give the same episodes for the same seed and actions (same-step auto-reset, terminal observations,
+        the time-limit flag; ``tests/test_train.py``).
     monitor : bool
         Wrap in ``VecMonitor`` (episode returns and lengths in ``info["episode"]``; default True).
     render_mode : str, optional
@@ -196,7 +209,14 @@ def make_sb3_vec_env(env_id: str = "wheelloader/BucketLoading-v0", n_envs: int =
     **env_kwargs
         Keyword arguments of the env.
     """
-    env: VecEnv = BatchedVecEnv(env_id, n_envs, render_mode=render_mode, **env_kwargs)
+    backend = check_choice("backend", backend, ("auto", "batched", "dummy"))
+    count = check_int("n_envs", n_envs)
+    if backend == "auto":
+        backend = "batched" if count >= BATCHED_FROM else "dummy"
+    if backend == "batched":
+        env: VecEnv = BatchedVecEnv(env_id, count, render_mode=render_mode, **env_kwargs)
+    else:
+        env = DummyVecEnv([functools.partial(gym.make, env_id, render_mode=render_mode, **env_kwargs)] * count)
     if seed is not None:
         env.seed(seed)
     return VecMonitor(env) if monitor else env

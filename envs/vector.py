@@ -38,6 +38,7 @@ from wheelloader.estimator import (
     DEFAULT_OPTIONS,
     FLAG_OUT_OF_SOIL,
     GRAVITY,
+    PARAMETER_NAMES,
     ContactState,
     ParameterError,
     SoilParams,
@@ -178,6 +179,7 @@ class BucketLoadingVectorEnv(VectorEnv):
         self._start_piles: list[Any] = [self.cfg.pile] * n
         self._groups: list[tuple[SoilParams, np.ndarray | slice]] | None = None
         self._gamma = np.zeros(n)
+        self._beta = np.full(n, np.nan)  # each row's last failure angle in soil (the warm start)
         z = np.zeros
         self._x, self._z, self._th = z(n), z(n), z(n)
         self._vx, self._vz, self._om = z(n), z(n), z(n)
@@ -293,7 +295,7 @@ class BucketLoadingVectorEnv(VectorEnv):
         of parameter arrays with their masks)."""
         rows = np.nonzero(mask)[0]
         soil: dict[str, np.ndarray] = {}
-        for name in self._soils[rows[0]].to_dict():
+        for name in PARAMETER_NAMES:
             values = np.zeros(self.num_envs)
             values[rows] = [getattr(self._soils[i], name) for i in rows]
             soil[name], soil["_" + name] = values, mask.copy()
@@ -332,7 +334,8 @@ class BucketLoadingVectorEnv(VectorEnv):
         self._touched[i], self._entered[i] = cycle_progress(False, False, depth > 0.0, 0.0, cfg.exit_fill_volume)
         self._crest[i] = float(np.max(pile.heights))
         self._noise_n[i], self._noise_u[i] = draw_noise_chunk(rng)
-        f_t, f_n, _, flags = soil_forces_single(soil, depth, rho, alpha, lt, 0.0, cfg.bucket, DEFAULT_OPTIONS)
+        f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, lt, 0.0, cfg.bucket, DEFAULT_OPTIONS)
+        self._beta[i] = beta if depth > 0.0 else np.nan
         r = cfg.sensor_range
         self._mt[i] = m_t = min(max(f_t + cfg.sensor_noise * float(self._noise_n[i, 0, 0]), -r), r)
         self._mn[i] = m_n = min(max(f_n + cfg.sensor_noise * float(self._noise_n[i, 0, 1]), -r), r)
@@ -353,12 +356,16 @@ class BucketLoadingVectorEnv(VectorEnv):
         return self._groups
 
     def _forces(self, rows: np.ndarray, depth, rho, alpha, lt, fill):
-        """Model forces for the given rows, one soil_forces call per distinct soil."""
+        """Model forces for the given rows, one soil_forces call per distinct soil, the failure angle warm-started
+        from each row's last one in soil (as the single env does). Returns ``(F_T, F_N, flags, beta)`` (beta NaN
+        out of soil)."""
         n = rows.size
         # Out of soil the model returns zero forces and FLAG_OUT_OF_SOIL (as soil_forces_single does);
         # only rows in soil go through soil_forces.
         f_t, f_n = np.zeros(n), np.zeros(n)
         flags = np.full(n, FLAG_OUT_OF_SOIL, dtype=np.int64)
+        beta = np.full(n, np.nan)
+        guess = self._beta[rows]
         ins = depth > 0.0
         bucket = self.cfg.bucket
         groups = self._soil_groups()
@@ -370,9 +377,9 @@ class BucketLoadingVectorEnv(VectorEnv):
             if sel.size == 0:
                 continue
             state = ContactState(depth[sel], rho[sel], alpha[sel], lt[sel], fill[sel])
-            out = soil_forces(soil, state, bucket, DEFAULT_OPTIONS)
-            f_t[sel], f_n[sel], flags[sel] = out.tangential, out.normal, out.flags
-        return f_t, f_n, flags
+            out = soil_forces(soil, state, bucket, DEFAULT_OPTIONS, beta_guess=guess[sel])
+            f_t[sel], f_n[sel], flags[sel], beta[sel] = out.tangential, out.normal, out.flags, out.beta
+        return f_t, f_n, flags, beta
 
     def _truth(self, g, rows, f_t, f_n, depth, speed, dist, j, new_stones: bool):
         """The truth beyond the model (:mod:`.truth`) on the rows' forces (``new_stones``: the step moved)."""
@@ -504,7 +511,7 @@ class BucketLoadingVectorEnv(VectorEnv):
         fill = self._fill.copy()
         depth, rho, alpha, lt, h_surf = self._surf.contact(rows, xn, zn, thn, cfg.slope_window,
                                                            cfg.bucket.floor_length)
-        f_t, f_n, flags = self._forces(rows, depth, rho, alpha, lt, fill)
+        f_t, f_n, flags, beta = self._forces(rows, depth, rho, alpha, lt, fill)
         self._k += 1
         j = self._k % NOISE_CHUNK
         redraw = j == 0 if pending is None else (j == 0) & ~pending
@@ -526,13 +533,14 @@ class BucketLoadingVectorEnv(VectorEnv):
             d2, rho2, al2, lt2, h2 = self._surf.contact(s, x[s], z[s], th[s], cfg.slope_window,
                                                         cfg.bucket.floor_length)
             h_surf[s] = h2
-            ft2, fn2, fl2 = self._forces(s, d2, rho2, al2, lt2, fill0[s])
+            ft2, fn2, fl2, beta[s] = self._forces(s, d2, rho2, al2, lt2, fill0[s])
             if truth_on:
                 ft2, fn2 = self._truth(s, s, ft2, fn2, d2, 0.0, 0.0, None, False)
             depth[s], rho[s], alpha[s], f_t[s], f_n[s], flags[s] = d2, rho2, al2, ft2, fn2, fl2
             self._stall = np.where(stalled, self._stall + 1, 0)
         else:
             self._stall[:] = 0
+        self._beta = np.where(depth > 0.0, beta, self._beta)
         # energy (the shared bookkeeping)
         e_soil, e_pay = step_work(f_t, f_n, xn - x, zn - z, thn, self._gamma * GRAVITY * fill)
         self._e_soil += e_soil
@@ -651,7 +659,9 @@ class BucketLoadingVectorEnv(VectorEnv):
             if not records.is_open(i):
                 raise ParameterError("no cycle in progress")
             return records.record(i, int(self._steps[i]))
-        return records.histories[i].record(index)
+        if not records.histories[i]:
+            raise ParameterError("no finished cycle yet")
+        return dict(records.kept(i, index)["record"])
 
     def last_cycle_log(self, i: int) -> Any:
         """Sub-env ``i``'s :meth:`BucketLoadingEnv.last_cycle_log`."""

@@ -107,9 +107,13 @@ def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
     numpy.ndarray or tuple
         beta* [rad]; with ``return_where`` also the ``BETA_*`` code per sample.
     """
-    arrays = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (alpha, rho, phi, delta)))
-    shape = arrays[0].shape  # 0-d inputs are worked on as 1-d and given back in their shape
-    alpha, rho, phi, delta = (np.ravel(v) for v in arrays)
+    if (type(alpha) is np.ndarray and type(rho) is np.ndarray and alpha.ndim == 1 and alpha.shape == rho.shape
+            and alpha.dtype == rho.dtype == np.float64 and type(phi) is float and type(delta) is float):
+        shape = alpha.shape  # the batched env's case: one soil, 1-d angles (no broadcasting to do)
+    else:
+        arrays = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (alpha, rho, phi, delta)))
+        shape = arrays[0].shape  # 0-d inputs are worked on as 1-d and given back in their shape
+        alpha, rho, phi, delta = (np.ravel(v) for v in arrays)
     s = rho + delta + phi
     lo, hi = (np.broadcast_to(v, alpha.shape) for v in beta_bounds(alpha, rho, phi, delta, options))
     g_lo, _ = log_ngamma_slope(lo, alpha, phi, s)
@@ -119,7 +123,8 @@ def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
     inner = ~(at_lo | at_hi)
     beta = np.array(np.where(at_lo, lo, hi), dtype=float)
     if np.any(inner):
-        a, b, al, ph, ss = lo[inner], hi[inner], alpha[inner], phi[inner], s[inner]
+        a, b, al, ss = lo[inner], hi[inner], alpha[inner], s[inner]
+        ph = phi[inner] if isinstance(phi, np.ndarray) else phi
         x = 0.5 * (a + b)
         if guess is not None:
             g0 = np.broadcast_to(np.asarray(guess, dtype=float), alpha.shape)[inner]
@@ -127,23 +132,26 @@ def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
         # iterate only on the samples that have not converged yet (a batch is as slow as its slowest sample)
         out = np.empty_like(x)
         active = np.arange(x.size)
-        for _ in range(max_iter):
-            g, dg = log_ngamma_slope(x, al, ph, ss)
-            pos = g > 0.0
-            b = np.where(pos, x, b)
-            a = np.where(pos, a, x)
-            with np.errstate(divide="ignore", invalid="ignore"):
+        per_sample_phi = isinstance(ph, np.ndarray)
+        with np.errstate(divide="ignore", invalid="ignore"):  # only the Newton step divides
+            for _ in range(max_iter):
+                g, dg = log_ngamma_slope(x, al, ph, ss)
+                pos = g > 0.0
+                b = np.where(pos, x, b)
+                a = np.where(pos, a, x)
                 newton = x - g / dg
-            # a Newton step onto a bracket end is kept (the root then sits within rounding of that end)
-            ok = (dg > 0.0) & (newton >= a) & (newton <= b)
-            x_new = np.where(ok, newton, 0.5 * (a + b))
-            going = np.abs(x_new - x) >= tol
-            out[active] = x_new
-            if not going.any():
-                break
-            if not going.all():
-                active, x_new, a, b, al, ph, ss = (v[going] for v in (active, x_new, a, b, al, ph, ss))
-            x = x_new
+                # a Newton step onto a bracket end is kept (the root then sits within rounding of that end)
+                ok = (dg > 0.0) & (newton >= a) & (newton <= b)
+                x_new = np.where(ok, newton, 0.5 * (a + b))
+                going = np.abs(x_new - x) >= tol
+                out[active] = x_new
+                if not going.any():
+                    break
+                if not going.all():
+                    active, x_new, a, b, al, ss = (v[going] for v in (active, x_new, a, b, al, ss))
+                    if per_sample_phi:
+                        ph = ph[going]
+                x = x_new
         beta[inner] = out
     if not return_where:
         return beta.reshape(shape)
@@ -155,19 +163,41 @@ def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
 
 def optimal_beta_scalar(alpha: float, rho: float, phi: float, delta: float,
                         options: ModelOptions = DEFAULT_OPTIONS, guess: float | None = None) -> float:
-    """Scalar fast path of :func:`optimal_beta` (pure ``math``), optionally warm-started."""
+    """Scalar fast path of :func:`optimal_beta` (pure ``math``), optionally warm-started.
+
+    The bracket checks and :func:`_root_in_bracket`'s Newton loop on :func:`log_ngamma_slope`, written out
+    with the same expressions in the same order (the env steps through here; a function call per Newton step
+    cost as much as the step's arithmetic), so the result is bit for bit the loop's
+    (``tests/test_failure_angle.py`` checks it).
+    """
     s = rho + delta + phi
     lo = options.eps1
     hi = min(math.pi - s - options.eps2, 0.5 * math.pi - alpha)
     tan = math.tan
-    g, _ = log_ngamma_slope(lo, alpha, phi, s, tan)
-    if g >= 0.0:
-        return lo
-    g, _ = log_ngamma_slope(hi, alpha, phi, s, tan)
-    if g <= 0.0:
-        return hi
+    if -tan(alpha + lo) + 1.0 / tan(alpha + lo + phi) - 1.0 / tan(lo) - 1.0 / tan(lo + s) >= 0.0:
+        return lo  # g(lo) >= 0
+    if -tan(alpha + hi) + 1.0 / tan(alpha + hi + phi) - 1.0 / tan(hi) - 1.0 / tan(hi + s) <= 0.0:
+        return hi  # g(hi) <= 0
     x = guess if guess is not None and lo < guess < hi else 0.5 * (lo + hi)
-    return _root_in_bracket(lambda b: log_ngamma_slope(b, alpha, phi, s, tan), lo, hi, x, 1e-11)
+    a, b = lo, hi
+    for _ in range(60):
+        t1 = tan(alpha + x)
+        c2 = 1.0 / tan(alpha + x + phi)
+        c3 = 1.0 / tan(x)
+        c4 = 1.0 / tan(x + s)
+        g = -t1 + c2 - c3 - c4
+        dg = -t1 * t1 - c2 * c2 + c3 * c3 + c4 * c4
+        if g > 0.0:
+            b = x
+        else:
+            a = x
+        xn = x - g / dg if dg > 0.0 else a - 1.0
+        if not a <= xn <= b:
+            xn = 0.5 * (a + b)
+        if abs(xn - x) < 1e-11:
+            return xn
+        x = xn
+    return x
 
 
 def _root_in_bracket(slope_and_curvature, a: float, b: float, x: float, tol: float) -> float:

@@ -214,7 +214,7 @@ class SoilForces:
 
 
 def soil_forces(soil: SoilParams, state: ContactState, bucket: Bucket,
-                options: ModelOptions = DEFAULT_OPTIONS) -> SoilForces:
+                options: ModelOptions = DEFAULT_OPTIONS, beta_guess: np.ndarray | None = None) -> SoilForces:
     """Forces of the modified FEE along a path (vectorised).
 
     Parameters
@@ -228,6 +228,10 @@ def soil_forces(soil: SoilParams, state: ContactState, bucket: Bucket,
         Bucket (width w, edge thickness b).
     options : ModelOptions
         Validity-domain margins.
+    beta_guess : numpy.ndarray, optional
+        Warm start of the failure angle per sample (e.g. the previous step's; used where it lies inside the
+        bracket), as :func:`soil_forces_single` takes one: the same root within the solver's tolerance, in
+        fewer iterations.
 
     Returns
     -------
@@ -244,7 +248,7 @@ def soil_forces(soil: SoilParams, state: ContactState, bucket: Bucket,
     if options.failure_angle == "min_weight_force":  # opt-in (failure_angle module docstring)
         beta = optimal_beta_weight_force(alpha, rho, phi, delta, d, ramp * state.fill_volume / w, options)
     else:
-        beta = optimal_beta(alpha, rho, phi, delta, options)  # eq 14
+        beta = optimal_beta(alpha, rho, phi, delta, options, guess=beta_guess)  # eq 14
     n_gamma, n_c, n_a, n_q = bearing_factors(alpha, rho, beta, phi, delta)
     n_gamma = np.maximum(n_gamma, 0.0)
     w_load = state.load_weight(soil.gamma)

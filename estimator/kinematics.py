@@ -34,7 +34,7 @@ import numpy as np
 from .checks import check_range
 from .errors import ParameterError
 from .machine import Bucket
-from .pile import CarveResult, Pile
+from .pile import CarveResult, Pile, node_height
 
 GRAVITY = 9.81
 
@@ -43,6 +43,7 @@ DEFAULT_SLOPE_WINDOW = 0.1
 #: Blade angles below this (relative to the surface) count as "flat" when
 #: computing the blade length in soil [rad].
 _MIN_SIN_ANGLE = math.radians(10.0)
+_MIN_SIN = math.sin(_MIN_SIN_ANGLE)  # the floor of |sin(rho)| in the blade length
 
 
 @dataclass(frozen=True, eq=False)
@@ -205,15 +206,29 @@ def _optional_pairs(name: str, values: object | None, size: int) -> np.ndarray |
 
 def contact_single(pile: Pile, x: float, z: float, blade_angle: float, floor_length: float,
                    slope_window: float = DEFAULT_SLOPE_WINDOW) -> tuple[float, float, float, float]:
-    """Scalar fast path: ``(depth, rho, alpha, blade_length)`` for one tip pose."""
-    alpha = pile.slope_angle(x, slope_window)
-    vertical = pile.height_at(x) - z
+    """Scalar fast path: ``(depth, rho, alpha, blade_length)`` for one tip pose (:func:`surface_contact`
+    without the surface height)."""
+    return surface_contact(pile, x, z, blade_angle, floor_length, slope_window)[:4]
+
+
+def surface_contact(pile: Pile, x: float, z: float, blade_angle: float, floor_length: float,
+                    slope_window: float = DEFAULT_SLOPE_WINDOW) -> tuple[float, float, float, float, float]:
+    """Scalar contact of one tip pose: ``(depth, rho, alpha, blade_length, surface height at x)``.
+
+    The surface arithmetic of :meth:`Pile.slope_angle` and :meth:`Pile.height_at` on the pile's node list;
+    the surface height is what the env's cycle-end rule measures the tip's clearance to.
+    """
+    nodes, x0, sp = pile.nodes, pile.x0, pile.spacing
+    alpha = math.atan((node_height(nodes, x0, sp, x + slope_window) - node_height(nodes, x0, sp, x - slope_window))
+                      / (2.0 * slope_window))
+    height = node_height(nodes, x0, sp, x)
+    vertical = height - z
     if vertical <= 0.0:
-        return 0.0, alpha - blade_angle, alpha, 0.0
+        return 0.0, alpha - blade_angle, alpha, 0.0, height
     depth = vertical * math.cos(alpha)
     rho = alpha - blade_angle
-    sin_rho = max(abs(math.sin(rho)), math.sin(_MIN_SIN_ANGLE))
-    return depth, rho, alpha, min(depth / sin_rho, floor_length)
+    sin_rho = max(abs(math.sin(rho)), _MIN_SIN)
+    return depth, rho, alpha, min(depth / sin_rho, floor_length), height
 
 
 def _optional_series(name: str, values: object, size: int) -> np.ndarray:

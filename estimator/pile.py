@@ -9,7 +9,9 @@ end heights. Volumes are cross-section areas [m^2] times the bucket width.
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -31,6 +33,40 @@ def _as_1d_finite(name: str, values: object) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         raise ParameterError(f"{name} contains NaN or infinite values")
     return arr
+
+
+def node_height(nodes: list[float], x0: float, spacing: float, x: float) -> float:
+    """Height at ``x`` of the polyline through ``nodes`` (a list) on the grid ``x0 + k * spacing`` [m]: linear
+    between nodes, constant outside the grid. The one scalar interpolation of :meth:`Pile.height_at`,
+    :meth:`SurfaceCarver.height_at` and the env's look-ahead observation."""
+    u = (x - x0) / spacing
+    if u <= 0.0:
+        return nodes[0]
+    last = len(nodes) - 1
+    if u >= last:
+        return nodes[last]
+    i = int(u)
+    a = nodes[i]
+    return a + (u - i) * (nodes[i + 1] - a)
+
+
+def node_heights(nodes: list[float], x0: float, spacing: float, x: float, offsets: Sequence[float],
+                 base: float = 0.0) -> list[float]:
+    """:func:`node_height` at ``x + offset`` for each of ``offsets``, minus ``base`` (one call for a few points:
+    the env's look-ahead observation, the surface ahead of the tip relative to the tip)."""
+    last = len(nodes) - 1
+    out = []
+    for dx in offsets:
+        u = (x + dx - x0) / spacing
+        if u <= 0.0:
+            out.append(nodes[0] - base)
+        elif u >= last:
+            out.append(nodes[last] - base)
+        else:
+            i = int(u)
+            a = nodes[i]
+            out.append(a + (u - i) * (nodes[i + 1] - a) - base)
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -147,22 +183,19 @@ class Pile:
 
     def surface_height(self, x: float | np.ndarray) -> float | np.ndarray:
         """Surface height z_s(x) [m], linear between nodes, constant outside the grid."""
-        if np.ndim(x) == 0:
+        if type(x) is float or np.ndim(x) == 0:
             return self.height_at(float(x))
         return np.interp(np.asarray(x, dtype=float), self.x, self.heights)
 
+    @functools.cached_property
+    def nodes(self) -> list[float]:
+        """The heights as a Python list (read-only by convention, like :attr:`heights`): the scalar paths
+        index it, which is several times cheaper than indexing the array."""
+        return self.heights.tolist()
+
     def height_at(self, x: float) -> float:
         """Surface height at one scalar ``x`` [m]: the fast path of :meth:`surface_height` (no NumPy call)."""
-        u = (x - self.x0) / self.spacing
-        z = self.heights
-        if u <= 0.0:
-            return float(z[0])
-        last = z.size - 1
-        if u >= last:
-            return float(z[last])
-        i = int(u)
-        f = u - i
-        return float(z[i] + f * (z[i + 1] - z[i]))
+        return node_height(self.nodes, self.x0, self.spacing, x)
 
     def slope_angle(self, x: float | np.ndarray, window: float = 0.1) -> float | np.ndarray:
         """Local surface slope alpha [rad] at ``x``: the chord slope over ``x +- window``.
@@ -170,9 +203,10 @@ class Pile:
         The chord makes alpha continuous in x even where the polyline has
         kinks (toe, crest, carved edges).
         """
-        if np.ndim(x) == 0:
-            x = float(x)
-            return math.atan((self.height_at(x + window) - self.height_at(x - window)) / (2.0 * window))
+        if type(x) is float or np.ndim(x) == 0:
+            x, z, x0, sp = float(x), self.nodes, self.x0, self.spacing
+            return math.atan((node_height(z, x0, sp, x + window) - node_height(z, x0, sp, x - window))
+                             / (2.0 * window))
         x = np.asarray(x, dtype=float)
         rise = self.surface_height(x + window) - self.surface_height(x - window)
         return np.arctan(rise / (2.0 * window))
@@ -333,46 +367,61 @@ class CarveResult:
 class SurfaceCarver:
     """Incremental carving of a pile, one tip segment at a time (used by the env).
 
-    Keeps a mutable copy of the heights, the fill and the spill. Each call to
-    :meth:`cut_segment` lowers the nodes under the segment to the segment's
-    height and returns the volume removed [m^3].
+    Keeps a mutable copy of the heights (a Python list: the carve touches a few nodes per call, and list
+    items are several times cheaper to read and write than array items), the fill and the spill. Each call
+    to :meth:`cut_segment` lowers the nodes under the segment to the segment's height and returns the volume
+    removed [m^3].
     """
 
-    __slots__ = ("x0", "spacing", "heights", "width", "capacity", "fill", "spilled", "removed", "initial_fill",
-                 "_weights", "_template")
+    __slots__ = ("x0", "spacing", "nodes", "width", "capacity", "fill", "spilled", "removed", "initial_fill",
+                 "_last", "_template")
 
     def __init__(self, pile: Pile, width: float, capacity: float, initial_fill: float = 0.0) -> None:
         self._template = pile
         self.x0 = pile.x0
         self.spacing = pile.spacing
-        self.heights = pile.heights.copy()
+        self.nodes: list[float] = pile.heights.tolist()
+        self._last = len(self.nodes) - 1
         self.width = float(width)
         self.capacity = float(capacity)
         self.initial_fill = float(initial_fill)
         self.fill = float(initial_fill)
         self.spilled = 0.0
         self.removed = 0.0
-        self._weights = np.full(self.heights.size, self.spacing)
-        self._weights[0] = self._weights[-1] = 0.5 * self.spacing
 
-    def cut_segment(self, xa: float, za: float, xb: float, zb: float) -> float:
-        """Carve under the segment (xa, za)-(xb, zb); return the volume removed [m^3]."""
+    @property
+    def heights(self) -> np.ndarray:
+        """The carved heights as a new array [m]."""
+        return np.array(self.nodes)
+
+    def height_at(self, x: float) -> float:
+        """Carved surface height at one scalar ``x`` [m] (as :meth:`Pile.height_at`)."""
+        return node_height(self.nodes, self.x0, self.spacing, x)
+
+    def cut_segment(self, xa: float, za: float, xb: float, zb: float, changes: list | None = None) -> float:
+        """Carve under the segment (xa, za)-(xb, zb); return the volume removed [m^3].
+
+        ``changes``: a list that gets ``(node, old height)`` of every node lowered (for :meth:`restore`).
+        """
         lo, hi = (xa, xb) if xa <= xb else (xb, xa)
-        i0 = max(0, int(math.ceil((lo - self.x0) / self.spacing - 1e-12)))
-        i1 = min(self.heights.size - 1, int(math.floor((hi - self.x0) / self.spacing + 1e-12)))
+        x0, sp, last = self.x0, self.spacing, self._last
+        i0 = max(0, int(math.ceil((lo - x0) / sp - 1e-12)))
+        i1 = min(last, int(math.floor((hi - x0) / sp + 1e-12)))
         if i1 < i0:
             return 0.0
-        heights = self.heights
-        weights = self._weights
+        heights = self.nodes
+        if (za if za <= zb else zb) > max(heights[i0:i1 + 1]) + 1e-9:  # clearly above: nothing to cut (the margin
+            return 0.0  # covers the rounding of the interpolated heights below, so the result is the same)
         removed_area = 0.0
         dx = xb - xa
         for i in range(i0, i1 + 1):
-            xi = self.x0 + i * self.spacing
-            zc = min(za, zb) if dx == 0.0 else za + (zb - za) * (xi - xa) / dx
+            zc = min(za, zb) if dx == 0.0 else za + (zb - za) * ((x0 + i * sp) - xa) / dx
             old = heights[i]
             if zc < old:
                 heights[i] = zc
-                removed_area += weights[i] * (old - zc)
+                removed_area += (0.5 * sp if i == 0 or i == last else sp) * (old - zc)  # trapezoid weight
+                if changes is not None:
+                    changes.append((i, old))
         removed = removed_area * self.width
         if removed > 0.0:
             self.removed += removed
@@ -382,9 +431,20 @@ class SurfaceCarver:
             self.spilled += removed - taken
         return removed
 
+    def state(self) -> tuple[float, float, float]:
+        """``(fill, spilled, removed)``: with the ``changes`` of :meth:`cut_segment`, what :meth:`restore` needs."""
+        return self.fill, self.spilled, self.removed
+
+    def restore(self, changes: list, state: tuple[float, float, float]) -> None:
+        """Undo the cuts that filled ``changes`` since :meth:`state` gave ``state``."""
+        heights = self.nodes
+        for i, old in reversed(changes):
+            heights[i] = old
+        self.fill, self.spilled, self.removed = state
+
     def pile(self) -> Pile:
         """The carved surface as a new :class:`Pile`."""
-        return self._template.with_heights(self.heights)
+        return self._template.with_heights(np.array(self.nodes))
 
     def result(self, removed_history: np.ndarray) -> CarveResult:
         """Summarise into a :class:`CarveResult`."""

@@ -72,7 +72,9 @@ def test_replace_validates_again_and_derived_values_follow():
     assert cfg.exit_fill_volume == pytest.approx(0.25 * cfg.bucket.capacity)
     assert cfg.stone_decay == pytest.approx(math.exp(-cfg.dt / 0.1))
     low, high = cfg.observation_limits
-    assert low == tuple(float(v) for v in cfg.obs_bounds()[0]) and high == tuple(float(v) for v in cfg.obs_bounds()[1])
+    np.testing.assert_array_equal(low, cfg.obs_bounds()[0])
+    np.testing.assert_array_equal(high, cfg.obs_bounds()[1])
+    assert low.dtype == np.float32 and not low.flags.writeable and cfg.observation_limits[0] is low
 
 
 def test_reward_terms_are_named_and_sum_in_order():

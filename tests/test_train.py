@@ -179,7 +179,7 @@ def test_packaged_adapter_uses_only_the_public_vector_api():
     assert "venv._" not in source and "unwrapped._" not in source and "base._" not in source
     from wheelloader.estimator import preset
 
-    env = adapter.make_sb3_vec_env(n_envs=2, seed=3, monitor=False, soil="sand")
+    env = adapter.make_sb3_vec_env(n_envs=2, seed=3, monitor=False, backend="batched", soil="sand")
     assert isinstance(env, adapter.BatchedVecEnv)
     env.reset()
     assert env.get_attr("soil") == [preset("sand")] * 2

@@ -23,7 +23,7 @@ def make_train_env(env_kwargs: dict[str, Any], n_envs: int, seed: int, vec: str 
     if n_envs < 1:
         raise ValueError(f"--n-envs must be >= 1, got {n_envs!r}")
     if vec == "batched":
-        return make_sb3_vec_env(ENV_ID, n_envs, seed, **env_kwargs)
+        return make_sb3_vec_env(ENV_ID, n_envs, seed, backend="batched", **env_kwargs)
     if vec != "dummy":
         raise ValueError(f"--vec must be 'batched' or 'dummy', got {vec!r}")
     env = DummyVecEnv([lambda: gym.make(ENV_ID, **env_kwargs) for _ in range(n_envs)])
