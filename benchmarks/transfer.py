@@ -22,7 +22,11 @@ Variants (calibration on the reference Gaussian-filtered at sigma 0.1 s, the mod
 * ``fee-payload + fixed phi, n``: phi and n fixed at those medians (equal bounds), the rest fitted;
 * ``fee-payload + input prior``: a Gaussian prior on phi, delta and n whose mean is the median of the training
   soils' own parameters (the plant's inputs, ``soil_params`` in each log's metadata) and whose standard
-  deviation is :data:`INPUT_PRIOR_STD`: the physical values, where the fits' medians are not.
+  deviation is :data:`INPUT_PRIOR_STD`: the physical values, where the fits' medians are not;
+* ``fee-payload + residual``: a learned correction beyond the FEE (``wheelloader.estimator.residual``, a ridge
+  on dimensionless inputs) trained on the training cycles' residuals after their own ``fee-payload`` fits; the
+  soil is fitted to the measured forces minus the residual, and the residual added to the prediction (the band
+  shifted with it).
 
 Reported per variant and row (soil or pile): the median F_R RMSE in soil (% of the mean observed |F_R| in soil)
 of unseen paths predicted from ONE cycle, from TWO cycles (two neighbouring paths, the other two predicted), the
@@ -47,11 +51,20 @@ import numpy as np
 
 from wheelloader.estimator import CycleLog
 from wheelloader.estimator.calibration import CalibrationOptions, calibrate, predict
-from wheelloader.estimator.payload import PayloadOptions, fit_payload, kept_fill
+from wheelloader.estimator.payload import PayloadOptions, fit_payload, kept_fill, payload_contact_state
+from wheelloader.estimator.residual import (
+    ResidualModel,
+    corrected_log,
+    features,
+    fit_residual,
+    force_scale,
+    residual_forces,
+)
 from wheelloader.provenance import machine_info
 from wheelloader.references.filtering import filtered
 
-VARIANTS = ("fee", "fee-payload", "fee-payload + prior", "fee-payload + fixed phi, n", "fee-payload + input prior")
+VARIANTS = ("fee", "fee-payload", "fee-payload + prior", "fee-payload + fixed phi, n", "fee-payload + input prior",
+            "fee-payload + residual")
 #: Standard deviation of the input prior (the training soils' own parameters are known exactly; their spread
 #: across soils is what a new soil may differ by): phi and delta 5 deg, n 0.15.
 INPUT_PRIOR_STD = {"phi": math.radians(5.0), "delta": math.radians(5.0), "n": 0.15}
@@ -82,8 +95,11 @@ class Pair:
         self.name = Path(path).name
 
 
-def data_prior(train: list[Pair], payload: PayloadOptions) -> dict:
-    """Median and robust spread of phi, delta, n over the training cycles' own fits (fee-payload)."""
+def data_prior(train: list[Pair], payload: PayloadOptions, residual_samples: list | None = None) -> dict:
+    """Median and robust spread of phi, delta, n over the training cycles' own fits (fee-payload).
+
+    ``residual_samples`` (a list) receives each cycle's ``(inputs, residual / s)`` after its entry.
+    """
     fits = []
     for pair in train:
         try:
@@ -92,6 +108,12 @@ def data_prior(train: list[Pair], payload: PayloadOptions) -> dict:
             print(f"  prior: {pair.name} skipped ({exc})", flush=True)
             continue
         fits.append([getattr(cal.params, name) for name in PRIOR_NAMES])
+        if residual_samples is not None:
+            pred = predict(cal, pair.filt)
+            after = np.arange(len(pair.filt)) >= int(np.flatnonzero(pred.state.depth > 0.0)[0])
+            scale = force_scale(pair.filt)
+            res = np.column_stack([pair.filt.tangential - pred.tangential, pair.filt.normal - pred.normal]) / scale
+            residual_samples.append((features(pred.state, pair.filt)[after], res[after]))
     arr = np.array(fits)
     med = np.median(arr, axis=0)
     spread = 1.4826 * np.median(np.abs(arr - med), axis=0)
@@ -106,7 +128,7 @@ def data_prior(train: list[Pair], payload: PayloadOptions) -> dict:
 def options_for(variant: str, payload: PayloadOptions, prior: dict) -> CalibrationOptions:
     if variant == "fee":
         return CalibrationOptions(fill="model")
-    if variant == "fee-payload":
+    if variant in ("fee-payload", "fee-payload + residual"):
         return CalibrationOptions(force_model="fee-payload", payload=payload)
     med, spread = prior["median"], prior["spread"]
     if variant == "fee-payload + input prior":
@@ -122,10 +144,15 @@ def options_for(variant: str, payload: PayloadOptions, prior: dict) -> Calibrati
     return CalibrationOptions(force_model="fee-payload", payload=payload, bounds=bounds)
 
 
-def errors(pred, pair: Pair) -> dict:
+def errors(pred, pair: Pair, residual: ResidualModel | None = None) -> dict:
     """In-soil F_R RMSE (filtered, unfiltered), the whole record's, and the band's coverage (filtered)."""
     inside = pred.state.depth > 0.0
     pr = np.hypot(pred.tangential, pred.normal)
+    shift = 0.0
+    if residual is not None:
+        r_t, r_n = residual_forces(residual, pred.state, pair.filt)
+        corrected = np.hypot(pred.tangential + r_t, pred.normal + r_n)
+        shift, pr = corrected - pr, corrected
     out = {}
     for key, log in (("filtered", pair.filt), ("unfiltered", pair.raw)):
         obs = np.hypot(log.tangential, log.normal)
@@ -135,7 +162,7 @@ def errors(pred, pair: Pair) -> dict:
             whole = np.arange(len(obs)) >= int(np.flatnonzero(inside)[0])
             out["whole_record"] = 100.0 * math.sqrt(float(np.mean((pr[whole] - obs[whole]) ** 2))) / scale
             if pred.band is not None:
-                out["band_coverage"] = 100.0 * pred.band.coverage(obs, inside)
+                out["band_coverage"] = 100.0 * pred.band.coverage(obs - shift, inside)
     return out
 
 
@@ -148,20 +175,27 @@ def kept_fill_error(variant: str, pred, pair: Pair, payload: PayloadOptions) -> 
     return 100.0 * abs(model - float(pair.raw.fill_volume[-1])) / float(pair.raw.fill_volume[-1])
 
 
-def evaluate(variant: str, options: CalibrationOptions, test: dict[str, list[Pair]], payload: PayloadOptions) -> dict:
+def evaluate(variant: str, options: CalibrationOptions, test: dict[str, list[Pair]], payload: PayloadOptions,
+             residual: ResidualModel | None = None) -> dict:
     records = []
     seconds = []
 
+    def fitted(pair: Pair):
+        if residual is None:
+            return pair.filt
+        return corrected_log(residual, payload_contact_state(pair.filt, payload), pair.filt)
+
     def cal_of(pairs: list[Pair]):
         t0 = time.perf_counter()
-        cal = calibrate([p.filt for p in pairs] if len(pairs) > 1 else pairs[0].filt, options=options)
+        cal = calibrate([fitted(p) for p in pairs] if len(pairs) > 1 else fitted(pairs[0]), options=options)
         if len(pairs) == 1:
             seconds.append(time.perf_counter() - t0)
         return cal
 
     def predicted(cal, pair: Pair, row: str, mode: str, trained: str) -> None:
         pred = predict(cal, pair.filt, band=BAND)
-        records.append({"row": row, "mode": mode, "train": trained, "test": pair.name, **errors(pred, pair),
+        records.append({"row": row, "mode": mode, "train": trained, "test": pair.name,
+                        **errors(pred, pair, residual),
                         "kept_fill_error": kept_fill_error(variant, pred, pair, payload)})
 
     rows = {"gravel": "gravel", "sand": "sand", "modified_sand": "modified_sand (unseen soil)",
@@ -264,12 +298,15 @@ def main() -> None:
     print(f"train {len(train)} cycles, test {sum(len(v) for v in test.values())}", flush=True)
     payload = fit_payload([p.raw for p in train])
     print(f"payload {payload}", flush=True)
-    prior = data_prior(train, payload)
+    samples: list = []
+    prior = data_prior(train, payload, samples)
     print(f"prior {prior}", flush=True)
+    residual = fit_residual(samples)
     result = {"benchmark": "transfer", "sigma_s": SIGMA, "band": BAND, "payload": payload.to_dict(), "prior": prior,
-              "variants": {}, "machine": machine_info()}
+              "residual": residual.to_dict(), "variants": {}, "machine": machine_info()}
     for variant in VARIANTS:
-        result["variants"][variant] = evaluate(variant, options_for(variant, payload, prior), test, payload)
+        result["variants"][variant] = evaluate(variant, options_for(variant, payload, prior), test, payload,
+                                               residual if variant.endswith("residual") else None)
         print(f"{variant} done", flush=True)
     result["summary"] = summarise(result)
     (args.out / "transfer.json").write_text(json.dumps(result, indent=1) + "\n")
