@@ -25,6 +25,7 @@ from wheelloader.estimator.errors import PlanningError
 from wheelloader.estimator.quantise import better, quantise_pile, quantise_soil
 
 from .cycle import cautious_options, cycle_duration, default_start, optimizer_for
+from .kept import KEPT_OBJECTIVE_SCALE, KeptTerms, evaluate, fixed_kept_fill
 from .mpc import ACCEPTED_STATUSES, MPCController
 from .trajectory import Plan, PlannerOptions, StartState
 from .verify import PlanCheck, verify_plan
@@ -73,6 +74,8 @@ STALL_CHECKS = 3
 STALL_TOLERANCE = 0.01
 #: An iterate is kept only once it loads this fraction of the bucket (by the NumPy check).
 ITERATE_MIN_FILL = 0.5
+#: How far below its target (a fraction of the capacity) the kept fill of a plan may be under the kept objective.
+KEPT_TOLERANCE = 0.01
 #: A plan that loads less than this fraction of the bucket (by the NumPy check) is not used: the tip may
 #: stay out of the soil, and a loader too weak to dig would otherwise "plan" a cycle in the air.
 MIN_FILL = 0.1
@@ -144,12 +147,18 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     lam = opt.options.energy_weight if energy_weight is None else energy_weight
     best: dict[str, Any] = {}
     scores: list[float] = []
+    kept_objective = opt.options.objective == "kept_per_energy"
+    min_kept = _kept_target(pile, opt, control_rate, exit_min_fill) if kept_objective else 0.0
 
     def consider(plan, check, iterate: bool = False) -> None:
         # the NumPy model's objective (fill against energy, as the NLP's) of a plan that passes the check; an
         # iterate on the way counts only once it loads ITERATE_MIN_FILL of the bucket (not the air it starts in)
         score = -check.fill / opt.bucket.capacity + lam * check.energy / 1000.0
         useful = check.fill >= (ITERATE_MIN_FILL if iterate else MIN_FILL) * opt.bucket.capacity
+        if kept_objective:  # the kept objective (planner.kept) by the NumPy check, its kept fill on target
+            terms = _kept_terms(plan, check, params, opt)
+            score = terms.per_kept * opt.bucket.capacity / KEPT_OBJECTIVE_SCALE
+            useful = useful and terms.kept >= min_kept - KEPT_TOLERANCE * opt.bucket.capacity
         if check.ok and useful and ("score" not in best or better(score, best["score"])):
             best.update(score=score, plan=plan, check=check)
 
@@ -163,7 +172,8 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     try:
         guess = initial_guess(pile) if callable(initial_guess) else initial_guess
         plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=guess,
-                         exit_min_fill=exit_min_fill, checkpoint=checkpoint, checkpoint_every=CHECK_EVERY)
+                         exit_min_fill=exit_min_fill, checkpoint=checkpoint, checkpoint_every=CHECK_EVERY,
+                         min_kept=min_kept)
         spent += plan.iterations
         check = checked(plan, opt)
         consider(plan, check)
@@ -177,7 +187,8 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
             opt = optimizer_for(opt.bucket, opt.loader, cautious_options(options or PlannerOptions(), level))
             scores.clear()
             plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=plan,
-                             exit_min_fill=exit_min_fill, checkpoint=checkpoint, checkpoint_every=CHECK_EVERY)
+                             exit_min_fill=exit_min_fill, checkpoint=checkpoint, checkpoint_every=CHECK_EVERY,
+                         min_kept=min_kept)
             spent += plan.iterations
             check = checked(plan, opt)
             consider(plan, check)
@@ -207,6 +218,27 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
                                    control_rate=control_rate, replan_every=replan_every, initial_plan=plan,
                                    options=opt.options, exit_min_fill=exit_min_fill)
     path = plan.path(control_rate, name="planned")
+    kept = ""
+    if kept_objective:
+        terms = _kept_terms(plan, check, params, opt)
+        kept = (f"; kept {terms.kept / opt.bucket.capacity:.0%} (target {min_kept / opt.bucket.capacity:.0%}), "
+                f"{terms.per_kept / 1e3:.1f} kJ/m^3 kept with the lift to {opt.options.kept_dump_height:.2f} m")
     return PlanOutcome(path, True, f"{head}{note}{retried}; predicted fill "
-                       f"{check.fill / opt.bucket.capacity:.0%}, {check.energy / 1e3:.1f} kJ", seconds, controller,
-                       plan=plan, check=check, first_failures=first_failures)
+                       f"{check.fill / opt.bucket.capacity:.0%}, {check.energy / 1e3:.1f} kJ{kept}", seconds,
+                       controller, plan=plan, check=check, first_failures=first_failures)
+
+
+def _kept_target(pile: Pile, opt, rate: float, exit_min_fill: float) -> float:
+    """The kept objective's least kept fill [m^3]: the options' ``kept_target`` or the fixed Bezier path's kept
+    fill on ``pile`` (:func:`~wheelloader.planner.kept.fixed_kept_fill`)."""
+    options = opt.options
+    if options.kept_target is not None:
+        return options.kept_target * opt.bucket.capacity
+    return fixed_kept_fill(pile, opt.bucket, options.kept_payload, rate, exit_min_fill)
+
+
+def _kept_terms(plan: Plan, check: PlanCheck, params: SoilParams, opt) -> KeptTerms:
+    """The kept objective's terms of ``plan`` by the NumPy check (its carved fill and energy, exact lift)."""
+    options = opt.options
+    return evaluate(check.fill, check.energy, float(plan.z[-1]), params.gamma, opt.bucket.capacity,
+                    options.kept_payload, options.kept_dump_height)

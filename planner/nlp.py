@@ -20,7 +20,8 @@ acceleration ramps).
   (with a smooth max).
 * Objective: ``- V_N / capacity + lambda * E / 1 kJ + mu * sum |du|^2``
   (fill against energy; ``mu`` a small smoothing weight), optionally with a
-  lower bound on the final fill ("least energy for a fill target").
+  lower bound on the final fill ("least energy for a fill target"); or the opt-in energy per m^3 of kept
+  soil (:mod:`.kept`: ``(E + E_lift) / V_kept``, scaled to O(1)) with a lower bound on ``V_kept``.
 * Constraints: dynamics; velocity and acceleration limits of the loader;
   blade-angle and workspace limits; ``F_T <= margin * max_push_force`` and
   ``F_N <= margin * max_lift_force``; the validity domain where the tip is in
@@ -55,6 +56,7 @@ from wheelloader.estimator.validity import alpha_lower_limit
 
 from . import nlp_cache
 from .casadi_model import casadi_forces, smooth_max, smooth_min, smooth_pos
+from .kept import KEPT_OBJECTIVE_SCALE, kept_terms, smooth_lift
 from .options import PlannerOptions
 
 __all__ = ["VALIDITY_RELAX", "build", "origin", "structural_options"]
@@ -77,7 +79,7 @@ def _smooth_work(v):
 #: of the expressions: as parameters, CasADi differentiates ``F_T / (margin * F_max)`` in another floating-point
 #: order, and the plans would change in their last bits.)
 _NOT_STRUCTURAL = ("max_iter", "max_wall_time", "ipopt_warm_start", "tolerance", "energy_weight", "fill_limit",
-                   "blade_angle_limits", "lift_headroom")
+                   "blade_angle_limits", "lift_headroom", "kept_target")
 #: The derivatives IPOPT needs, by their nlpsol option name and the name of the solver's own function.
 _DERIVATIVES = (("grad_f", "nlp_grad_f"), ("jac_g", "nlp_jac_g"), ("hess_lag", "nlp_hess_l"))
 
@@ -272,16 +274,30 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     if options.end_blade_angle is not None:  # opt-in: end curled, carrying the load
         g_ineq.append(X[2, n] - options.end_blade_angle)
     fill_end = X[3, n]
-    g = ca.vertcat(*g_eq, *g_ineq, fill_end)
+    extra: dict[str, ca.Function] = {}
+    if options.objective == "kept_per_energy":
+        # opt-in (planner.kept): energy per m^3 of kept soil, the load lifted on to the dump height; the kept
+        # fill (the payload state of the carved volume) is constrained from below by the solve's bounds
+        kept, lift, total, per_kept = kept_terms(X[3, n], energy, X[1, n], p_soil[0], bucket.capacity,
+                                                 options.kept_payload, options.kept_dump_height,
+                                                 pos=lambda v: smooth_lift(v, sqrt=ca.sqrt))
+        main = per_kept * bucket.capacity / KEPT_OBJECTIVE_SCALE
+        g_kept = [kept]
+        extra["kept"] = ca.Function("kept", [w, p], [kept, lift, total, per_kept])
+    else:
+        main = -X[3, n] / bucket.capacity + p_lam * energy / 1000.0
+        g_kept = []
+    g = ca.vertcat(*g_eq, *g_ineq, fill_end, *g_kept)
     n_eq, n_ineq = len(g_eq), len(g_ineq)
     tracking = ca.sumsqr(X[0:2, 1:] - p_ref[:, 1:]) / n
-    objective = (-X[3, n] / bucket.capacity + p_lam * energy / 1000.0
-                 + options.smoothing_weight * smooth / n + p_wref * tracking)
+    objective = main + options.smoothing_weight * smooth / n + p_wref * tracking
     problem = ca.Function("nlp", [w, p], [objective, g], ["x", "p"], ["f", "g"])
     outputs = ca.Function("outputs", [w, p], [ca.vertcat(*ft_all), ca.vertcat(*fn_all), energy])
-    layout = {"ng": n_eq + n_ineq + 1, "ineq": slice(n_eq, n_eq + n_ineq), "fill_end": n_eq + n_ineq}
+    layout = {"ng": n_eq + n_ineq + 1 + len(g_kept), "ineq": slice(n_eq, n_eq + n_ineq), "fill_end": n_eq + n_ineq}
+    if g_kept:
+        layout["kept_end"] = n_eq + n_ineq + 1
     constraints = ca.Function("constraints", [w, p], [g])
-    return problem, {"forces": forces, "outputs": outputs, "constraints": constraints}, layout
+    return problem, {"forces": forces, "outputs": outputs, "constraints": constraints, **extra}, layout
 
 
 class IterationMonitor(ca.Callback):

@@ -156,7 +156,9 @@ def _write(path: Path, key: str, result: tuple) -> None:
     solver, functions, layout = result
     header = json.dumps({"key": key, "layout": {"ng": int(layout["ng"]), "ineq": [layout["ineq"].start,
                                                                                  layout["ineq"].stop],
-                                                 "fill_end": int(layout["fill_end"])},
+                                                 "fill_end": int(layout["fill_end"]),
+                                                 **({"kept_end": int(layout["kept_end"])}
+                                                    if "kept_end" in layout else {})},
                          "functions": sorted(functions)})
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp_name = tempfile.mkstemp(prefix=".nlp-", suffix=".tmp", dir=path.parent)
@@ -200,6 +202,8 @@ def _read(path: Path, key: str) -> tuple:
         raise ValueError("unexpected content")
     lay = meta["layout"]
     layout = {"ng": int(lay["ng"]), "ineq": slice(*lay["ineq"]), "fill_end": int(lay["fill_end"])}
+    if "kept_end" in lay:
+        layout["kept_end"] = int(lay["kept_end"])
     if solver.n_out() != 2 or solver.size1_out(1) != layout["ng"]:
         raise ValueError("layout does not match the NLP")
     return solver, functions, layout

@@ -7,12 +7,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wheelloader.estimator import DEFAULT_OPTIONS, ModelOptions, PlanningError
+from wheelloader.estimator import DEFAULT_OPTIONS, ModelOptions, PayloadOptions, PlanningError
 from wheelloader.estimator.checks import check_choice, check_finite, check_int, check_range
+from wheelloader.estimator.force_models import DEFAULT_PAYLOAD
 
 from .surface import SurfaceGrid
 
-__all__ = ["PlannerOptions", "StartState"]
+__all__ = ["OBJECTIVES", "PlannerOptions", "StartState"]
+
+#: The planner's objectives (:attr:`PlannerOptions.objective`).
+OBJECTIVES: tuple[str, ...] = ("fill_energy", "kept_per_energy")
 
 
 @dataclass(frozen=True)
@@ -97,6 +101,19 @@ class PlannerOptions:
         soil, so there the curl-out is not tracked.
     tolerance : float
         IPOPT tolerance (default 1e-4; the objective is O(1)).
+    objective : {"fill_energy", "kept_per_energy"}
+        What the plan optimises: the carved fill against energy (default, ``-V/capacity + lambda E``), or the
+        opt-in energy per m^3 of *kept* soil with the load lifted on to ``dump_height``
+        (:mod:`wheelloader.planner.kept`): the payload model's kept fill of the carved volume, constrained to at
+        least ``kept_target``.
+    payload : PayloadOptions, optional
+        The payload state of ``"kept_per_energy"`` (default :data:`~wheelloader.estimator.DEFAULT_PAYLOAD`).
+    dump_height : float, optional
+        The common height the load is lifted to [m] (default: the fixed Bezier path's end height,
+        :func:`~wheelloader.planner.kept.dump_height`).
+    kept_target : float, optional
+        Least kept fill as a fraction of the nominal capacity (default None: the fixed Bezier path's kept fill on
+        the same pile, :func:`~wheelloader.planner.kept.fixed_kept_fill`, as :func:`plan_next_cycle` sets it).
     surface : SurfaceGrid
         Layout of the smooth surface.
     """
@@ -125,6 +142,22 @@ class PlannerOptions:
     heel_clearance: float | None = None
     end_blade_angle: float | None = None
     curl_out_intervals: int = 0
+    objective: str = "fill_energy"
+    payload: PayloadOptions | None = None
+    dump_height: float | None = None
+    kept_target: float | None = None
+
+    @property
+    def kept_payload(self) -> PayloadOptions:
+        """The payload state the kept objective uses (``payload`` or the default)."""
+        return DEFAULT_PAYLOAD if self.payload is None else self.payload
+
+    @property
+    def kept_dump_height(self) -> float:
+        """The dump height of the kept objective [m] (``dump_height`` or the fixed path's end height)."""
+        from .kept import dump_height
+
+        return dump_height() if self.dump_height is None else float(self.dump_height)
 
     @property
     def curl_out(self) -> int:
@@ -140,6 +173,13 @@ class PlannerOptions:
 
     def __post_init__(self) -> None:
         err = PlanningError
+        check_choice("PlannerOptions.objective", self.objective, OBJECTIVES, error=err)
+        if self.payload is not None and not isinstance(self.payload, PayloadOptions):
+            raise PlanningError(f"PlannerOptions.payload must be a PayloadOptions, got {type(self.payload).__name__}")
+        if self.dump_height is not None:
+            check_finite("PlannerOptions.dump_height", self.dump_height, error=err)
+        if self.kept_target is not None:
+            check_range("PlannerOptions.kept_target", self.kept_target, 0.0, 10.0, error=err)
         check_choice("PlannerOptions.failure_angle", self.failure_angle, ("min_n_gamma", "min_weight_force"),
                      error=err)
         if self.cut_angle is not None:

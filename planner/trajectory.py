@@ -78,7 +78,7 @@ class TrajectoryOptimizer:
               energy_weight: float | None = None, min_fill: float = 0.0, initial_guess: Plan | BucketPath | None = None,
               warm: bool = False, reference: BucketPath | None = None, reference_weight: float = 0.0,
               exit_min_fill: float = 0.0, checkpoint: Callable[[Plan], bool] | None = None,
-              checkpoint_every: int = 10) -> Plan:
+              checkpoint_every: int = 10, min_kept: float = 0.0) -> Plan:
         """Plan a path from ``start`` on ``pile`` lasting ``duration`` seconds.
 
         Parameters
@@ -114,6 +114,9 @@ class TrajectoryOptimizer:
             IPOPT iterations; returning True stops the solve there (IPOPT's ``User_Requested_Stop``). The
             caller keeps what it wants of the iterates (e.g. the best one that passes the NumPy check):
             a stop depends on the iterates only, so the result is as deterministic as without it.
+        min_kept : float
+            With ``objective="kept_per_energy"``: lower bound on the payload model's kept fill [m^3]
+            (default 0: none; :func:`~wheelloader.planner.plan_next_cycle` sets the options' ``kept_target``).
 
         Returns
         -------
@@ -141,7 +144,10 @@ class TrajectoryOptimizer:
         else:
             reference_weight = 0.0
         lbx, ubx = self._bounds(pile, start)
-        lbg, ubg = self._constraint_bounds(soil, min_fill)
+        check_range("min_kept", min_kept, 0.0, None, error=PlanningError)
+        if min_kept > 0.0 and "kept_end" not in self._layout:
+            raise PlanningError("min_kept needs PlannerOptions(objective='kept_per_energy')")
+        lbg, ubg = self._constraint_bounds(soil, min_fill, min_kept)
         args: dict[str, Any] = {"lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
         face = face_position(pile, start)
         if warm and self._last is not None and initial_guess is None:
@@ -247,13 +253,17 @@ class TrajectoryOptimizer:
         ubx[:4] = first
         return lbx, ubx
 
-    def _constraint_bounds(self, soil: SoilParams, min_fill: float) -> tuple[np.ndarray, np.ndarray]:
+    def _constraint_bounds(self, soil: SoilParams, min_fill: float, min_kept: float = 0.0
+                           ) -> tuple[np.ndarray, np.ndarray]:
         lay = self._layout
         lbg = np.zeros(lay["ng"])
         ubg = np.zeros(lay["ng"])
         ubg[lay["ineq"]] = np.inf
         lbg[lay["fill_end"]] = min_fill
         ubg[lay["fill_end"]] = np.inf
+        if "kept_end" in lay:
+            lbg[lay["kept_end"]] = min_kept
+            ubg[lay["kept_end"]] = np.inf
         return lbg, ubg
 
     def _guess_vector(self, guess: Plan | BucketPath, pile: Pile, start: StartState, h: float) -> np.ndarray:
@@ -284,11 +294,14 @@ class TrajectoryOptimizer:
         ft, fn, energy = self._functions["outputs"](w, p)
         t = np.arange(n + 1) * h
         status = str(stats.get("return_status", "unknown"))
+        raw: dict[str, Any] = {"start": start, "h": h, "primal_infeasibility": _final_infeasibility(stats)}
+        if "kept" in self._functions:  # the kept objective's terms as the NLP sees them (planner.kept)
+            kept, lift, total, per_kept = (float(v) for v in self._functions["kept"](w, p))
+            raw["kept_terms"] = {"kept": kept, "lift_energy": lift, "energy": total, "per_kept": per_kept}
         return Plan(t, states[:, 0].copy(), states[:, 1].copy(), states[:, 2].copy(), states[:, 3].copy(),
                     controls[:, 0].copy(), controls[:, 1].copy(), controls[:, 2].copy(),
                     np.array(ft).ravel(), np.array(fn).ravel(), float(energy), bool(stats.get("success", False)),
-                    status, int(stats.get("iter_count", -1)), elapsed, objective,
-                    raw={"start": start, "h": h, "primal_infeasibility": _final_infeasibility(stats)})
+                    status, int(stats.get("iter_count", -1)), elapsed, objective, raw=raw)
 
 
 class _Watch:
