@@ -454,7 +454,8 @@ LOOP_PLANNER_MIDPOINTS = True
 def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_angle: float | None = None,
                     fill_limit: float | None = None, heel_clearance: float | None = None,
                     end_blade_angle: float | None = None, curl_out_intervals: int = 0,
-                    midpoints: bool | None = None) -> Callable[[SoilParams, Pile], PlanOutcome]:
+                    midpoints: bool | None = None, objective: str = "fill_energy",
+                    lookahead: bool = False) -> Callable[[SoilParams, Pile], PlanOutcome]:
     """The planner used between cycles.
 
     A full-cycle CasADi plan within :data:`BETWEEN_CYCLES_MAX_ITER` IPOPT
@@ -468,16 +469,26 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
     ``end_blade_angle``: the opt-in smallest blade angle at the end [rad], ``curl_out_intervals`` the last
     intervals in which the bucket then curls out of the pile; ``midpoints``: forces and validity also at the
     intervals' midpoints (default :data:`LOOP_PLANNER_MIDPOINTS` for the plan, off with ``mpc``, whose re-plans
-    have a 20 ms budget) (:class:`~wheelloader.planner.PlannerOptions`).
+    have a 20 ms budget) (:class:`~wheelloader.planner.PlannerOptions`); ``objective``: the planner's objective
+    (``"kept_per_energy"``: the opt-in energy per m^3 of kept soil, :mod:`wheelloader.planner.kept`);
+    ``lookahead``: choose each plan with the cycle after it in view
+    (:func:`~wheelloader.planner.lookahead.plan_with_lookahead`, each of its plans within the same budgets).
     """
     extra = {} if fill_limit is None else {"fill_limit": fill_limit}
     if midpoints is None:
         midpoints = LOOP_PLANNER_MIDPOINTS and not mpc
     options = PlannerOptions(max_iter=BETWEEN_CYCLES_MAX_ITER, failure_angle=failure_angle, cut_angle=cut_angle,
                              heel_clearance=heel_clearance, end_blade_angle=end_blade_angle,
-                             curl_out_intervals=curl_out_intervals, midpoints=midpoints, **extra)
+                             curl_out_intervals=curl_out_intervals, midpoints=midpoints, objective=objective,
+                             **extra)
     # build the plan's NLP before the loop's timings start; those of the two wider-margin re-plans are built
     # when a plan first fails its check (once per process: planner.optimizer_for)
     optimizer_for(options=options)
+    if lookahead:
+        from wheelloader.planner.lookahead import plan_with_lookahead
+
+        return functools.partial(plan_with_lookahead, mpc=mpc, options=options,
+                                 replan_within_iterations=BETWEEN_CYCLES_REPLAN_ITER,
+                                 exit_min_fill=LOOP_EXIT_MIN_FILL)
     return functools.partial(plan_next_cycle, mpc=mpc, options=options,
                              replan_within_iterations=BETWEEN_CYCLES_REPLAN_ITER, exit_min_fill=LOOP_EXIT_MIN_FILL)

@@ -1,0 +1,152 @@
+"""Two-cycle look-ahead between cycles (#33 item 2): plan the next cycle with the one after it in view.
+
+Each candidate plan of the next cycle (the greedy plan and variants of its settings, :data:`CANDIDATES`) is
+followed by the greedy plan of the cycle after it, made on the pile the candidate leaves (the pile carved along
+the candidate's path up to where the env would end its cycle). The loop's fallback stands in for a next plan
+that fails its check, as in the loop. The candidate whose two cycles together cost the least energy per m^3
+of kept soil, loads lifted on to the dump height (:mod:`.kept`, the NumPy model with the calibrated
+parameters), is dug; a later candidate wins only when it is cheaper by more than
+:data:`~wheelloader.estimator.quantise.TIE_RELATIVE` (on a near-tie the earlier stays, so the greedy plan
+wins ties). Budgets are IPOPT iteration counts (each plan's, as :func:`plan_next_cycle`), so the choice is the
+same on any machine. It uses only the planner's public functions (:func:`plan_next_cycle`,
+:func:`model_bezier_on_face`, :func:`path_energy`).
+
+Aoshima et al. (2025, Automation 6(3):31) plan over the next loadings the same way (a rollout of candidate
+plans).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from wheelloader.estimator import Bucket, BucketPath, Pile, SoilParams, as_soil
+from wheelloader.estimator.quantise import better, quantise_pile, quantise_soil
+
+from .fallback import LOOP_EXIT_MIN_FILL, _kept, model_bezier_on_face
+from .kept import KeptTerms, evaluate
+from .next_cycle import PlanOutcome, plan_next_cycle
+from .options import PlannerOptions
+from .verify import path_energy
+
+__all__ = ["CANDIDATES", "LookaheadChoice", "plan_with_lookahead", "two_cycle_cost"]
+
+#: The candidates of the next cycle: a name and the planner settings it changes (the first is the greedy plan).
+CANDIDATES: tuple[tuple[str, Mapping[str, Any]], ...] = (
+    ("greedy", {}),
+    ("fill limit 0.80", {"fill_limit": 0.80}),
+    ("energy weight 0.04/kJ", {"energy_weight": 0.04}),
+)
+
+
+@dataclass
+class LookaheadChoice:
+    """What the look-ahead weighed: per candidate its name, two-cycle cost [J/m^3 kept] (inf: not usable) and
+    the terms of both cycles; the chosen index and the IPOPT iterations spent."""
+
+    names: list[str]
+    costs: list[float]
+    cycles: list[tuple[KeptTerms | None, KeptTerms | None]]
+    chosen: int
+    iterations: int
+    details: dict[str, Any] = field(default_factory=dict)
+
+
+def _dug_part(path: BucketPath, pile: Pile, bucket: Bucket, exit_min_fill: float) -> tuple[BucketPath, Pile]:
+    """The part of ``path`` the env digs (up to where it ends the cycle) and the pile it leaves."""
+    _, end = _kept(pile, path.x, path.z, bucket, exit_min_fill)
+    part = BucketPath(path.t[:end + 1], path.x[:end + 1], path.z[:end + 1], path.blade_angle[:end + 1], path.name)
+    return part, pile.carve(part.x, part.z, bucket.width, bucket.capacity).pile
+
+
+def _path_terms(path: BucketPath, soil: SoilParams, pile: Pile, bucket: Bucket, options: PlannerOptions
+                ) -> KeptTerms:
+    """Kept fill, energy with the lift and energy per kept m^3 of a dug path by the NumPy model."""
+    sim = path_energy(path, soil, pile, bucket, model_options=options.model_options)
+    return evaluate(sim["fill"], sim["energy"], float(path.z[-1]), soil.gamma, bucket.capacity,
+                    options.kept_payload, options.kept_dump_height)
+
+
+def two_cycle_cost(first: KeptTerms | None, second: KeptTerms | None) -> float:
+    """Energy per m^3 of kept soil over two cycles [J/m^3]: ``(E1 + E2) / (V1 + V2)`` (inf without a first)."""
+    if first is None:
+        return float("inf")
+    energy = first.energy + (second.energy if second is not None else 0.0)
+    kept = first.kept + (second.kept if second is not None else 0.0)
+    return energy / kept if kept > 0.0 else float("inf")
+
+
+def plan_with_lookahead(params: SoilParams | str | dict, pile: Pile, *, options: PlannerOptions | None = None,
+                        candidates: Sequence[tuple[str, Mapping[str, Any]]] = CANDIDATES,
+                        planner: Callable[..., PlanOutcome] = plan_next_cycle,
+                        exit_min_fill: float = LOOP_EXIT_MIN_FILL, control_rate: float = 60.0,
+                        **planner_kwargs: Any) -> PlanOutcome:
+    """The next cycle's plan chosen with the cycle after it in view (module docstring).
+
+    Parameters
+    ----------
+    params, pile
+        As :func:`plan_next_cycle` (calibrated soil; the pile at the start of the cycle).
+    options : PlannerOptions, optional
+        The greedy planner's settings; each candidate replaces some of them.
+    candidates : sequence of (name, mapping)
+        Names and setting changes (:data:`CANDIDATES`); the first should be the greedy plan (it wins ties).
+    planner : callable
+        ``planner(params, pile, options=, exit_min_fill=, control_rate=, **planner_kwargs) -> PlanOutcome``
+        (default :func:`plan_next_cycle`).
+    exit_min_fill, control_rate
+        The env's end-of-cycle rule and the control rate (as the loop's).
+    **planner_kwargs
+        Passed on to ``planner`` (e.g. ``mpc``, ``replan_within_iterations``).
+
+    Returns
+    -------
+    PlanOutcome
+        The chosen candidate's outcome; ``message`` names it and the two-cycle costs, and the outcome carries
+        a :class:`LookaheadChoice` as ``lookahead`` (an attribute).
+    """
+    tic = time.perf_counter()
+    options = options or PlannerOptions()
+    soil, pile = quantise_soil(as_soil(params)), quantise_pile(pile)
+    bucket = Bucket()
+    names, costs, cycles, outcomes = [], [], [], []
+    iterations = 0
+    best, best_cost = None, float("inf")
+    for k, (name, change) in enumerate(candidates):
+        variant = replace(options, **dict(change))
+        first = planner(soil, pile, options=variant, exit_min_fill=exit_min_fill, control_rate=control_rate,
+                        **planner_kwargs)
+        iterations += _iterations(first)
+        terms1 = terms2 = None
+        if first.success and first.path is not None:
+            dug, next_pile = _dug_part(first.path, pile, bucket, exit_min_fill)
+            terms1 = _path_terms(dug, soil, pile, bucket, variant)
+            second = planner(soil, next_pile, options=options, exit_min_fill=exit_min_fill,
+                             control_rate=control_rate, **{**planner_kwargs, "mpc": False})
+            iterations += _iterations(second)
+            path2 = second.path if second.success and second.path is not None else model_bezier_on_face(
+                soil, next_pile, control_rate, bucket, exit_min_fill=exit_min_fill,
+                model_options=options.model_options)
+            dug2, _ = _dug_part(path2, next_pile, bucket, exit_min_fill)
+            terms2 = _path_terms(dug2, soil, next_pile, bucket, options)
+        cost = two_cycle_cost(terms1, terms2)
+        names.append(name)
+        costs.append(cost)
+        cycles.append((terms1, terms2))
+        outcomes.append(first)
+        if best is None or better(cost, best_cost):
+            best, best_cost = k, cost
+    chosen = outcomes[best]
+    chosen.lookahead = LookaheadChoice(names, costs, cycles, best, iterations)
+    listed = ", ".join(f"{n} {c / 1e3:.1f}" for n, c in zip(names, costs, strict=True))
+    chosen.message = (f"look-ahead chose {names[best]} ({listed} kJ/m^3 kept over two cycles; {iterations} IPOPT "
+                      f"it.): {chosen.message}")
+    chosen.seconds = time.perf_counter() - tic
+    return chosen
+
+
+def _iterations(outcome: PlanOutcome) -> int:
+    """IPOPT iterations of an outcome's plan (0 without one)."""
+    return int(outcome.plan.iterations) if outcome.plan is not None else 0

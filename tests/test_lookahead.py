@@ -1,0 +1,77 @@
+"""Two-cycle look-ahead (planner.lookahead, #33 item 2) with stub planners: choice, ties, failures."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from wheelloader.estimator import Pile
+from wheelloader.planner import PlannerOptions, bezier_on_face
+from wheelloader.planner.kept import KeptTerms
+from wheelloader.planner.lookahead import plan_with_lookahead, two_cycle_cost
+from wheelloader.planner.next_cycle import PlanOutcome
+
+CANDS = (("greedy", {}), ("fill limit 0.80", {"fill_limit": 0.80}), ("energy weight 0.04/kJ", {"energy_weight": 0.04}))
+
+
+def _stub(fail: set[float] = frozenset(), shift: dict[float, float] | None = None):
+    """A planner that digs the fixed path on the pile (moved down by ``shift[fill_limit]``), or fails for the
+    fill limits in ``fail``; it records the options of every call."""
+    calls = []
+
+    def planner(params, pile, *, options, **kwargs):
+        calls.append(options)
+        if options.fill_limit in fail:
+            return PlanOutcome(None, False, "stub failed", 0.0)
+        path = bezier_on_face(pile).shifted(dz=-(shift or {}).get(options.fill_limit, 0.0))
+        return PlanOutcome(path, True, f"stub {options.fill_limit}", 0.0)
+
+    planner.calls = calls
+    return planner
+
+
+def test_two_cycle_cost_known_answer():
+    a = KeptTerms(kept=0.1, lift_energy=0.0, energy=4000.0, per_kept=40000.0)
+    b = KeptTerms(kept=0.05, lift_energy=0.0, energy=3500.0, per_kept=70000.0)
+    assert two_cycle_cost(a, b) == pytest.approx(7500.0 / 0.15)
+    assert two_cycle_cost(a, None) == pytest.approx(40000.0)
+    assert math.isinf(two_cycle_cost(None, b))
+
+
+def test_identical_candidates_tie_to_greedy_and_the_next_cycle_is_greedy():
+    stub = _stub()
+    out = plan_with_lookahead("gravel", Pile.trapezoid(), candidates=CANDS, planner=stub)
+    choice = out.lookahead
+    assert choice.chosen == 0 and out.message.startswith("look-ahead chose greedy")
+    # all three cost the same: the same path on the same pile, then the same greedy next cycle
+    assert choice.costs[0] == choice.costs[1] == choice.costs[2] and math.isfinite(choice.costs[0])
+    # every candidate's next cycle is planned with the greedy settings, on the carved pile
+    assert [c.fill_limit for c in stub.calls] == [0.95, 0.95, 0.80, 0.95, 0.95, 0.95]
+    assert [c.energy_weight for c in stub.calls][4:] == [0.04, 0.02]
+    first, second = choice.cycles[0]
+    assert first.kept > 0.0 and second.kept > 0.0
+
+
+def test_failed_candidates_are_not_chosen():
+    out = plan_with_lookahead("gravel", Pile.trapezoid(), candidates=CANDS, planner=_stub(fail={0.95}))
+    # the greedy settings fail (first cycle, and every second cycle): only the 0.80 candidate has a first cycle
+    assert out.lookahead.chosen == 1 and math.isinf(out.lookahead.costs[0]) and math.isinf(out.lookahead.costs[2])
+    assert out.success
+
+
+def test_deterministic():
+    a = plan_with_lookahead("gravel", Pile.trapezoid(), candidates=CANDS, planner=_stub(shift={0.80: 0.03}))
+    b = plan_with_lookahead("gravel", Pile.trapezoid(), candidates=CANDS, planner=_stub(shift={0.80: 0.03}))
+    assert a.lookahead.costs == b.lookahead.costs and a.lookahead.chosen == b.lookahead.chosen
+    assert a.lookahead.costs[1] != a.lookahead.costs[0]
+    assert PlannerOptions().fill_limit == 0.95
+
+
+def test_the_loop_selects_it():
+    from wheelloader.adaptation import BETWEEN_CYCLES_MAX_ITER, default_planner
+    from wheelloader.planner.lookahead import plan_with_lookahead as lookahead
+
+    planner = default_planner(lookahead=True)
+    assert planner.func is lookahead and planner.keywords["options"].max_iter == BETWEEN_CYCLES_MAX_ITER
+    assert default_planner(objective="kept_per_energy").keywords["options"].objective == "kept_per_energy"
