@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import statistics
 import time
 from pathlib import Path
@@ -128,6 +129,29 @@ def loop_figures(loop: dict[str, Any]) -> dict[str, float]:
     return out
 
 
+CHOICE = re.compile(r"look-ahead chose (?P<name>.+?) \((?P<costs>.+?) kJ/m\^3 kept over two cycles")
+
+
+def lookahead_stats(loop: dict[str, Any]) -> dict[str, float]:
+    """How often the look-ahead chose another candidate than greedy, and its predicted two-cycle gain [%]
+    (greedy's predicted cost over the chosen one's, by the model the strategy planned with)."""
+    chosen, gains = 0, []
+    for c in loop["cycles"]:
+        m = CHOICE.search(c["plan_message"])
+        if m is None:
+            continue
+        costs = dict(part.rsplit(" ", 1) for part in m.group("costs").split(", "))
+        greedy, best = float(costs.get("greedy", "inf")), float(costs[m.group("name")])
+        chosen += m.group("name") != "greedy"
+        if math.isfinite(greedy) and math.isfinite(best):
+            gains.append(100.0 * (1.0 - best / greedy))
+    return {"non_greedy_choices": chosen, "cycles_weighed": len(gains),
+            "predicted_gain_percent_median": statistics.median(gains) if gains else math.nan,
+            "predicted_gain_percent_max": max(gains) if gains else math.nan,
+            "next_cycle_error_percent_median": statistics.median(
+                c["prediction_rmse_percent"] for c in loop["cycles"][2:]) if len(loop["cycles"]) > 2 else math.nan}
+
+
 def table(loops: list[dict[str, Any]]) -> str:
     """The markdown table: per strategy, each loop's figures and the median over loops."""
     lines = ["| strategy | soil | seed | kJ/m^3 kept | kept fill | fixed on the same piles: kJ/m^3 kept | "
@@ -196,6 +220,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default="results/kept_lookahead", help="output directory")
     parser.add_argument("--soils", nargs="+", default=list(SOILS))
     parser.add_argument("--seeds", type=int, default=2)
+    parser.add_argument("--only-seed", type=int, help="run only this seed (parallel processes on one --out)")
     parser.add_argument("--cycles", type=int, default=10)
     parser.add_argument("--strategies", nargs="+", choices=STRATEGIES, default=list(STRATEGIES))
     parser.add_argument("--quick", action="store_true", help="1 soil, 1 seed, 2 cycles (smoke run)")
@@ -204,6 +229,8 @@ def main(argv: list[str] | None = None) -> int:
     soils, seeds, cycles = args.soils, range(args.seeds), args.cycles
     if args.quick:
         soils, seeds, cycles = soils[:1], range(1), 2
+    if args.only_seed is not None:
+        seeds = range(args.only_seed, args.only_seed + 1)
     out = Path(args.out)
     (out / "loops").mkdir(parents=True, exist_ok=True)
     started, before = time.perf_counter(), machine_info()
@@ -228,7 +255,8 @@ def main(argv: list[str] | None = None) -> int:
                "load_before": load_label(before), "load_after": load_label(after),
                "seconds": time.perf_counter() - started,
                "cycles": cycles, "soils": list(soils), "seeds": list(seeds),
-               "loops": [{k: lp[k] for k in ("soil", "seed", "strategy")} | loop_figures(lp) for lp in loops]}
+               "loops": [{k: lp[k] for k in ("soil", "seed", "strategy")} | loop_figures(lp)
+                         | (lookahead_stats(lp) if lp["strategy"] == "lookahead" else {}) for lp in loops]}
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=str))
     text = table(loops) + "\n\n" + against_greedy(loops) + "\n"
     (out / "table.md").write_text(text)
