@@ -48,6 +48,9 @@ class MPMSettings:
     threads : int
         Taichi CPU threads (effective at the process's first solver) and lanes of the CPU kernels (the
         result depends on this setting, not on the threads Taichi actually runs; see :mod:`.solver`).
+        Default 2: both cores of the 2-core machine the plant is measured on (filtered F_R within 0.76 % of
+        the old one-thread kernels, as one thread is; ``docs/results/mpm_speed.md``). The shipped
+        reference set was made with ``threads=1``.
     backend : str
         ``"cpu"`` (default), ``"gpu"`` (one of Taichi's GPU backends, an error where none works) or
         ``"auto"`` (a GPU where Taichi finds one, else the CPU); effective at the process's first solver.
@@ -73,7 +76,7 @@ class MPMSettings:
     cfl: float = 0.3
     settle_time: float = 0.3
     settle_damping: float = 20.0
-    threads: int = 1
+    threads: int = 2
     backend: str = "cpu"
     legacy: bool = False
     settle_cache: bool = True
@@ -122,8 +125,8 @@ class MPMPlant:
     resolution : float
         Grid cell size [m]. Default :data:`DEFAULT_RESOLUTION` = 0.02 m, chosen by measurement
         (``benchmarks/mpm_verification.py``, gravel, path 1): the filtered F_R (sigma 0.1 s) of dx 2 cm
-        and 1.5 cm differ by 4.5 % RMS, of 3 and 2 cm by 11.8 %; a default cycle costs about 3 minutes
-        at 2 cm (17k particles) and 10 minutes at 1.5 cm on one thread.
+        and 1.5 cm differ by 4.5 % RMS, of 3 and 2 cm by 11.8 %; a default cycle at 2 cm (17k particles,
+        33k steps) costs about 60 s of CPU (``benchmarks/mpm_speed.py``; the old kernels: 174 s).
     bucket : Bucket
         Bucket geometry (default :class:`Bucket`).
     cache_dir : str or Path, optional

@@ -203,11 +203,15 @@ class MPMSolver:
         ``"cpu"`` (default), ``"gpu"`` or ``"auto"`` (a GPU where Taichi finds one, else the CPU); used at
         the process's first Taichi initialisation only (:func:`._backend.taichi_module`). On a GPU the
         scatter is atomic and the result is not bit-reproducible.
+    scatter : str
+        ``"auto"`` (default: ``"lanes"`` on the CPU, ``"atomic"`` on a GPU), ``"lanes"`` or ``"atomic"``
+        (the GPU kernels, also runnable on the CPU, e.g. to test them where no GPU is).
     """
 
     def __init__(self, soil: ContinuumSoil, domain: Domain, dx: float, particles: np.ndarray, *,
                  tool: ToolShape | None = None, contact_band: float = 1.0, cfl: float = 0.3,
-                 sticky_floor: bool = True, threads: int = 1, legacy: bool = False, backend: str = "cpu") -> None:
+                 sticky_floor: bool = True, threads: int = 1, legacy: bool = False, backend: str = "cpu",
+                 scatter: str = "auto") -> None:
         if not isinstance(soil, ContinuumSoil):
             raise ValueError(f"soil must be a ContinuumSoil, got {type(soil).__name__}")
         if not (isinstance(dx, (int, float)) and math.isfinite(dx) and dx > 0.0):
@@ -245,8 +249,11 @@ class MPMSolver:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
         ti = taichi_module(threads, backend)
         self._ti = ti
-        on_gpu = initialised_backend() != "cpu"
-        self.kernels = "legacy" if legacy else ("atomic" if on_gpu else "lanes")
+        if scatter not in ("auto", "lanes", "atomic"):
+            raise ValueError(f"scatter must be 'auto', 'lanes' or 'atomic', got {scatter!r}")
+        if scatter == "auto":
+            scatter = "lanes" if initialised_backend() == "cpu" else "atomic"
+        self.kernels = "legacy" if legacy else scatter
         self.lanes = threads if self.kernels == "lanes" else 1
         self._f = _acquire_fields(ti, self.n, self.nx, self.nz, self.lanes, self.kernels)
         self._finalizer = weakref.finalize(self, _release, self._f)
