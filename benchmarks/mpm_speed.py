@@ -2,7 +2,8 @@
 
 Each variant digs the cycle in its own process (Taichi fixes its thread count per process), measured from
 outside: wall time, CPU time of the process (user + system, all its threads, from ``wait4``) and the
-load average before and after. Variants::
+load average before and after; inside, the CPU time up to the first sample (start-up, Taichi's compile or
+offline-cache load, settling) and after it (the dig). Variants::
 
     old             MPMSolver(legacy=True): the kernels before the rewrite, one thread (today's plant)
     new-1t          the new kernels, one thread (the plant's default), settling computed
@@ -66,6 +67,12 @@ def worker(spec: dict[str, Any]) -> dict[str, Any]:
         from wheelloader.references.mpm import MPMPlant
         from wheelloader.references.mpm.generate import cases, path_by_key
 
+        marks: list[float] = []
+
+        def first_sample(t: float, positions: np.ndarray) -> None:
+            if not marks:
+                marks.append(time.process_time())
+
         settings = {"threads": options["threads"], "legacy": options["legacy"],
                     "settle_cache": options["settle_cache"], "cache_dir": spec.get("cache_dir")}
         if spec["case"] == "tiny":  # the tiny scene of tests/test_mpm.py (a smoke run)
@@ -76,16 +83,18 @@ def worker(spec: dict[str, Any]) -> dict[str, Any]:
                              scene=SceneSettings(bed_depth=0.1, wall_margin=0.2), **settings)
             path = bezier_path((-0.03, 0.05), (0.30, 0.03), (0.38, 0.30), duration=1.2, rate=30.0,
                                angle_start=math.radians(-5.0), angle_end=math.radians(40.0), curl_from=0.5)
-            log = plant.dig(path, Pile.trapezoid(height=0.25, top_length=0.3, ground_before=0.2), "sand", seed=0)
+            log = plant.dig(path, Pile.trapezoid(height=0.25, top_length=0.3, ground_before=0.2), "sand", seed=0,
+                            observer=first_sample)
         else:
             case = next(c for c in cases() if c.name == spec["case"])
             plant = MPMPlant(**settings)
-            log = plant.dig(path_by_key(case.paths[0]), case.pile(), case.soil, seed=0)
+            log = plant.dig(path_by_key(case.paths[0]), case.pile(), case.soil, seed=0, observer=first_sample)
         meta = log.metadata
         return {"t": log.path.t.tolist(), "tangential": log.tangential.tolist(), "normal": log.normal.tolist(),
                 "fill_end": float(log.fill_volume[-1]), "steps": meta["steps"], "particles": meta["particles"],
                 "settle_cache": meta["settle_cache"], "kernels": meta["kernels"], "inner_wall_s": meta["wall_s"],
-                "settle_wall_s": meta["settle_wall_s"], "taichi_threads": meta["taichi_threads"]}
+                "settle_wall_s": meta["settle_wall_s"], "taichi_threads": meta["taichi_threads"],
+                "cpu_before_first_sample_s": marks[0], "cpu_after_first_sample_s": time.process_time() - marks[0]}
     from wheelloader.references.mpm.verification import (
         SOIL_A,
         at_rest_force,
@@ -166,6 +175,9 @@ def compare(runs: dict[str, dict[str, Any]], case: str) -> dict[str, Any]:
         row = {"wall_s": r["wall_s"], "cpu_s": r["cpu_s"], "threads": r["threads"], "steps": r["steps"],
                "settle_cache": r["settle_cache"], "settle_wall_s": r["settle_wall_s"],
                "loadavg_start": r["loadavg_start"], "loadavg_end": r["loadavg_end"], "fill_end": r["fill_end"]}
+        for key in ("cpu_before_first_sample_s", "cpu_after_first_sample_s"):
+            if key in r:  # start-up, Taichi compile and settling / the dig itself (CPU of the worker)
+                row[key] = r[key]
         if "old" in fr:
             row["filtered_fr_vs_old_percent"] = relative_rmse(fr[name], fr["old"])
             row["speedup_cpu_vs_old"] = runs["old"]["cpu_s"] / r["cpu_s"]
