@@ -95,8 +95,8 @@ def worker(spec: dict[str, Any]) -> dict[str, Any]:
                 "settle_cache": meta["settle_cache"], "kernels": meta["kernels"], "inner_wall_s": meta["wall_s"],
                 "settle_wall_s": meta["settle_wall_s"], "taichi_threads": meta["taichi_threads"],
                 "cpu_before_first_sample_s": marks[0], "cpu_after_first_sample_s": time.process_time() - marks[0]}
+    from wheelloader.references.mpm import ContinuumSoil
     from wheelloader.references.mpm.verification import (
-        SOIL_A,
         at_rest_force,
         mckyes_blade,
         rankine_passive,
@@ -104,18 +104,20 @@ def worker(spec: dict[str, Any]) -> dict[str, Any]:
         run_wall,
     )
 
+    # the frictional soil of tests/test_mpm_verification.py (phi 30 deg, delta 20 deg, 1600 kg/m^3)
+    soil = ContinuumSoil(1600.0, math.radians(30.0), wall_friction_angle=math.radians(20.0))
     if spec["kind"] == "blade":
-        res = run_blade(BLADE_DEPTH, SOIL_A, BLADE_DEPTH / 10, threads=options["threads"], legacy=options["legacy"])
+        res = run_blade(BLADE_DEPTH, soil, BLADE_DEPTH / 10, threads=options["threads"], legacy=options["legacy"])
         travel = res.extra["travel"]
         window = (travel >= 0.5 * BLADE_DEPTH) & (travel <= BLADE_DEPTH)
         return {"horizontal": float(-np.mean(res.force[window, 0])), "vertical": float(np.mean(res.force[window, 1])),
-                "mckyes_flat": mckyes_blade(BLADE_DEPTH, SOIL_A)["horizontal"], "steps": res.steps,
+                "mckyes_flat": mckyes_blade(BLADE_DEPTH, soil)["horizontal"], "steps": res.steps,
                 "particles": res.particles}
-    res = run_wall(WALL_HEIGHT, SOIL_A, WALL_DX, push=WALL_PUSH, threads=options["threads"], legacy=options["legacy"])
+    res = run_wall(WALL_HEIGHT, soil, WALL_DX, push=WALL_PUSH, threads=options["threads"], legacy=options["legacy"])
     return {"at_rest": float(-np.mean(res.force[(res.times > 0.45) & (res.times < 0.6), 0])),
             "passive": float(-np.mean(res.force[res.extra["displacement"] >= 0.04, 0])),
-            "at_rest_closed_form": at_rest_force(WALL_HEIGHT, SOIL_A),
-            "passive_closed_form": rankine_passive(WALL_HEIGHT, SOIL_A), "steps": res.steps,
+            "at_rest_closed_form": at_rest_force(WALL_HEIGHT, soil),
+            "passive_closed_form": rankine_passive(WALL_HEIGHT, soil), "steps": res.steps,
             "particles": res.particles}
 
 
