@@ -203,6 +203,8 @@ def report(out: Path) -> dict[str, Any]:
         kind_case, variant = f.stem.split("__")
         runs.setdefault(kind_case, {})[variant] = json.loads(f.read_text())
     results: dict[str, Any] = {"cycles": {}, "verification": {}}
+    order = {name: k for k, name in enumerate(VARIANTS)}
+    runs = {key: dict(sorted(v.items(), key=lambda item: order[item[0]])) for key, v in runs.items()}
     for key, by_variant in runs.items():
         if key.startswith("cycle-"):
             results["cycles"][key[len("cycle-"):]] = compare(by_variant, key[len("cycle-"):])
@@ -217,8 +219,12 @@ def report(out: Path) -> dict[str, Any]:
                                              if "closed_form" not in k and k != "mckyes_flat"}
                 rows[name] = row
             results["verification"][key] = rows
-    summary = {"benchmark": "mpm_speed", "sigma_s": SIGMA_S, "machine": machine_info(), "results": results,
-               "command": "python benchmarks/mpm_speed.py " + " ".join(sys.argv[1:])}
+    command = "python benchmarks/mpm_speed.py " + " ".join(sys.argv[1:])
+    previous = out / "mpm_speed.json"
+    if "--report" in sys.argv and previous.exists():  # a re-assembly keeps the command that ran the variants
+        command = json.loads(previous.read_text()).get("command", command)
+    summary = {"benchmark": "mpm_speed", "sigma_s": SIGMA_S, "machine_at_report": machine_info(),
+               "results": results, "command": command}
     (out / "mpm_speed.json").write_text(json.dumps(summary, indent=1))
     _figure(out, runs, results)
     return summary
