@@ -226,8 +226,36 @@ def report(out: Path) -> dict[str, Any]:
     summary = {"benchmark": "mpm_speed", "sigma_s": SIGMA_S, "machine_at_report": machine_info(),
                "results": results, "command": command}
     (out / "mpm_speed.json").write_text(json.dumps(summary, indent=1))
+    (out / "mpm_speed.md").write_text(table(results))
     _figure(out, runs, results)
     return summary
+
+
+def table(results: dict[str, Any]) -> str:
+    """The Markdown tables of a report (the result page includes them; ``benchmarks/readme_tables.py``)."""
+    lines = ["| cycle | variant | threads | wall [s] | CPU [s] | CPU to first sample / after [s] | settling | "
+             "filtered F_R vs old | vs data/mpm | load at start |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for case, rows in results["cycles"].items():
+        for name, r in rows.items():
+            if not isinstance(r, dict):
+                continue
+            split = (f"{r['cpu_before_first_sample_s']:.1f} / {r['cpu_after_first_sample_s']:.1f}"
+                     if "cpu_before_first_sample_s" in r else "–")
+            committed = r.get("filtered_fr_vs_committed_percent")
+            lines.append(f"| {case} | {name} | {r['threads']} | {r['wall_s']:.0f} | {r['cpu_s']:.1f} | {split} | "
+                         f"{r['settle_cache']} | {r.get('filtered_fr_vs_old_percent', math.nan):.2f} % | "
+                         f"{'–' if committed is None else f'{committed:.2f} %'} | {r['loadavg_start'][0]:.1f} |")
+        if "cache_hit_bit_identical" in rows:
+            lines.append(f"\nSettle-cache hit bit-identical to the miss ({case}): {rows['cache_hit_bit_identical']}.")
+    for scene, rows in results["verification"].items():
+        lines += ["", f"| {scene} | threads | wall [s] | CPU [s] | values [N/m] | vs old |",
+                  "|---|---|---|---|---|---|"]
+        for name, r in rows.items():
+            values = ", ".join(f"{k} {v:.1f}" for k, v in r.items()
+                               if k not in ("wall_s", "cpu_s", "threads", "percent_vs_old") and isinstance(v, float))
+            diff = ", ".join(f"{k} {v:+.2f} %" for k, v in r.get("percent_vs_old", {}).items())
+            lines.append(f"| {name} | {r['threads']} | {r['wall_s']:.0f} | {r['cpu_s']:.1f} | {values} | {diff} |")
+    return "\n".join(lines) + "\n"
 
 
 def _figure(out: Path, runs: dict[str, dict[str, dict[str, Any]]], results: dict[str, Any]) -> None:
