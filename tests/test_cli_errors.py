@@ -144,7 +144,7 @@ BAD_VALUES = ["-1", "0", "nan", "inf", "-inf", "1e309", "99999999999999999999999
 COMMANDS: dict[str, tuple[list[str], list[str]]] = {
     # subcommand: (a valid argument list, the options and positionals ("@k") to corrupt)
     "demo": (["demo", "-o", "{o}/demo", "--cycles", "2"],
-             ["--cycles", "--seed", "--window", "--plant", "--resolution", "-o", "--no-planner", "--mpc"]),
+             ["--cycles", "--seed", "--seeds", "--window", "--plant", "--resolution", "-o", "--no-planner", "--mpc"]),
     "calibrate": (["calibrate", "{d}/log.csv", "-o", "{o}/p.json"],
                   ["@1", "--forgetting", "--method", "--initial", "--sigma", "-o", "--plot", "--compare"]),
     "predict": (["predict", "{d}/params.json", "{d}/path.csv", "-o", "{o}/f.csv"],

@@ -36,11 +36,9 @@ def _error(capsys) -> str:
 
 @pytest.fixture()
 def reference_copy(tmp_path):
-    """A copy of the shipped DEM reference set's manifest and one cycle (enough for the refusal)."""
+    """A copy of the shipped DEM reference set (3 MB), so that the old code's overwrite hits the copy."""
     copy = tmp_path / "reference"
-    copy.mkdir()
-    for name in ("manifest.json", "gravel_path1.csv", "gravel_path1.json"):
-        shutil.copy2(REFERENCE / name, copy / name)
+    shutil.copytree(REFERENCE, copy)
     return copy
 
 
