@@ -90,13 +90,27 @@ def check_pile(pile, source: str = "pile") -> list[str]:
     return warned
 
 
+def check_path(path, source: str = "path") -> list[str]:
+    """Warnings for a bucket path's time scale (duration, sample rate); :class:`ParameterError` naming the
+    likely cause when implausible."""
+    refused: list[str] = []
+    warned: list[str] = []
+    _time(path.t, refused, warned)
+    if refused:
+        raise ParameterError(f"{source}: implausible for a wheel loader: " + "; ".join(refused))
+    return warned
+
+
+def _time(t: np.ndarray, refused: list[str], warned: list[str]) -> None:
+    _judge("duration", float(t[-1] - t[0]), refused, warned)
+    _judge("rate", float(1.0 / np.median(np.diff(t))), refused, warned)
+
+
 def _log(log) -> tuple[list[str], list[str]]:
     refused: list[str] = []
     warned: list[str] = []
     _pile(log.pile.x, log.pile.heights, refused, warned)
-    t = log.path.t
-    _judge("duration", float(t[-1] - t[0]), refused, warned)
-    _judge("rate", float(1.0 / np.median(np.diff(t))), refused, warned)
+    _time(log.path.t, refused, warned)
     depth = log.pile.surface_height(log.path.x) - log.path.z
     soil = depth > 0.0
     if np.any(soil):

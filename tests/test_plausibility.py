@@ -59,6 +59,15 @@ def test_the_command_line_refuses_a_log_in_ms_with_one_line(log, tmp_path, capsy
     assert not (tmp_path / "p.json").exists()
 
 
+def test_a_path_in_ms_is_refused_for_prediction(log, tmp_path, capsys):
+    from wheelloader.estimator import save_path_csv
+
+    save_path_csv(_path(log, t=log.path.t * 1000.0), tmp_path / "path.csv")
+    assert main(["predict", "gravel", str(tmp_path / "path.csv"), "-o", str(tmp_path / "f.csv")]) == 2
+    assert "t looks like ms" in capsys.readouterr().err
+    assert not (tmp_path / "f.csv").exists()
+
+
 def test_a_mild_oddity_gives_a_warning_and_an_untrustworthy_fit(log, tmp_path):
     # a cycle fifteen times slower than a loader digs: over a minute long, sampled at 4 Hz (both warning bands)
     odd = CycleLog.load(_saved(log, tmp_path, path=_path(log, t=log.path.t * 15.0)))

@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import time
 from pathlib import Path
@@ -114,7 +115,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
     if args.forgetting is not None and not several:
         raise CalibrationError("--forgetting needs several logs")
     inputs = [*args.logs, *(sidecar_of(log) for log in args.logs), args.initial]
-    check_input_files([("log", p) for p in inputs])
+    check_input_files([*(("log", p) for p in args.logs), *(("sidecar", sidecar_of(p)) for p in args.logs),
+                       ("--initial", args.initial)])
     _refuse_repeated_logs(args.logs)
     run = OutputRun(force=args.force, inputs=inputs)
     run.file("-o/--output", args.output)
@@ -174,7 +176,8 @@ def run_predict(args: argparse.Namespace) -> int:
 
     path_file = Path(args.path)
     inputs = [args.params, path_file, sidecar_of(path_file), args.pile]
-    check_input_files([("input", p) for p in inputs])
+    check_input_files([("params", args.params), ("path", path_file), ("sidecar", sidecar_of(path_file)),
+                       ("--pile", args.pile)])
     run = OutputRun(force=args.force, inputs=inputs)
     run.file("-o/--output", args.output)
     run.file("--plot", args.plot)
@@ -191,6 +194,10 @@ def run_predict(args: argparse.Namespace) -> int:
         pile_used = pile if pile is not None else target.pile
     else:
         target = load_path_csv(path_file)
+        from wheelloader.estimator.plausibility import check_path
+
+        for warning in check_path(target, str(path_file)):
+            logging.getLogger("wheelloader.cli").warning("warning: %s: %s", path_file, warning)
         pile = load_pile(None) if pile is None else pile
         pile_used = pile
     band = args.band if args.band > 0.0 and saved.band_model is not None else None
