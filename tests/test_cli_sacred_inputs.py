@@ -132,6 +132,7 @@ def test_a_second_run_on_the_same_output_is_refused_naming_the_first_and_a_dead_
     assert out.is_file() and not lock.exists()
 
 
+@pytest.mark.slow  # the lock itself is tested above in a second; this runs two real plans
 def test_two_concurrent_runs_of_a_real_command(inputs, tmp_path):
     """Two ``plan`` runs into the same output at once: the second is refused naming the first, which
     completes."""

@@ -89,6 +89,17 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     from wheelloader.estimator.errors import WheelloaderError  # after parsing: --help imports no estimator
 
+    from .staging import command_scope
+
+    try:
+        with command_scope(program=argv is None):
+            return _run(args, WheelloaderError)
+    except KeyboardInterrupt:  # between the command's own handling and the end of the scope
+        print("wheelloader: interrupted", file=sys.stderr)
+        return 130
+
+
+def _run(args: argparse.Namespace, WheelloaderError: type[Exception]) -> int:  # noqa: N803 - an error class
     try:
         return int(args.func(args) or 0)
     except WheelloaderError as exc:

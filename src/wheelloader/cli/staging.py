@@ -71,18 +71,48 @@ def _identity(path: Path) -> tuple[int, int] | None:
     return (st.st_dev, st.st_ino)
 
 
+#: Set by :func:`command_scope` while a command runs: after its outputs are in place, Ctrl-C stays held.
+_SCOPE = {"active": False}
+
+
+def _hold(signum: int, frame: Any) -> None:
+    """A SIGINT handler that does nothing: the work it would interrupt must complete."""
+
+
 @contextlib.contextmanager
-def held_interrupts() -> Iterator[None]:
-    """Hold Ctrl-C (SIGINT) during the block; a signal that arrived is ignored (the block completes)."""
+def held_interrupts(keep: bool = False) -> Iterator[None]:
+    """Hold Ctrl-C (SIGINT) during the block; a signal that arrived is ignored (the block completes). With
+    ``keep`` the hold stays after the block (until :func:`command_scope` ends)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     previous = signal.getsignal(signal.SIGINT)
-    signal.signal(signal.SIGINT, lambda signum, frame: None)
+    signal.signal(signal.SIGINT, _hold)
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous if previous is not None else signal.SIG_DFL)
+        if not keep:
+            signal.signal(signal.SIGINT, previous if previous is not None else signal.SIG_DFL)
+
+
+@contextlib.contextmanager
+def command_scope(program: bool) -> Iterator[None]:
+    """One command of ``main()``: once its outputs are moved into place the command is complete, so Ctrl-C
+    is held until it returns (it would report an interrupt with the outputs written). When ``program`` (the
+    console script) Ctrl-C is then ignored through the interpreter's exit, whose clean-up restores the OS
+    default (which would end the process by the signal, after it finished); in-process the handler before
+    the command comes back."""
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.getsignal(signal.SIGINT) if main_thread else None
+    _SCOPE["active"] = main_thread
+    try:
+        yield
+    finally:
+        _SCOPE["active"] = False
+        if main_thread and program:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+        elif previous is not None:
+            signal.signal(signal.SIGINT, previous)
 
 
 def check_input_files(paths: Iterable[tuple[str, str | Path | None]]) -> None:
@@ -288,7 +318,7 @@ class OutputRun:
 
     def commit(self) -> None:
         """Move every staged output into place, then remove the staging directories and the locks."""
-        with held_interrupts():
+        with held_interrupts(keep=_SCOPE["active"]):
             try:
                 for path, _, is_dir in self.outputs:
                     staged = self.staged(path)
