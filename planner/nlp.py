@@ -56,6 +56,7 @@ from wheelloader.estimator.validity import alpha_lower_limit
 
 from . import nlp_cache
 from .casadi_model import casadi_forces, smooth_max, smooth_min, smooth_pos
+from .interrupt import guarded
 from .kept import KEPT_OBJECTIVE_SCALE, kept_terms, smooth_lift
 from .options import PlannerOptions
 
@@ -112,12 +113,13 @@ def build(bucket: Bucket, loader: Loader, options: PlannerOptions):
     if entry is None:
         # the disk cache holds the NLP's expressions (plain CasADi Functions); the IPOPT solver with its
         # iteration callback (a Python object, not serialisable) is made on top of them in each process
-        problem, functions, layout = nlp_cache.load_or_build(bucket, loader, structural, _build_nlp)
+        # CasADi may swallow a Ctrl-C while it builds or loads (as inside IPOPT): guarded re-raises it
+        problem, functions, layout = guarded(nlp_cache.load_or_build, bucket, loader, structural, _build_nlp)
         entry = _CACHE[(bucket, loader, structural)] = {"problem": problem, "functions": functions,
                                                          "layout": layout, "derivatives": None, "solvers": {}}
     settings = _solver_settings(options)
     if settings not in entry["solvers"]:
-        solver, monitor = _make_solver(entry["problem"], settings, entry["derivatives"])
+        solver, monitor = guarded(_make_solver, entry["problem"], settings, entry["derivatives"])
         if entry["derivatives"] is None:
             entry["derivatives"] = {name: solver.get_function(own) for name, own in _DERIVATIVES
                                     if solver.has_function(own)}

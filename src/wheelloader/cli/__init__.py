@@ -84,13 +84,12 @@ def main(argv: list[str] | None = None) -> int:
             parser.print_help()
             return 2
         _configure_logging(args.verbose, args.quiet)
+        from wheelloader.estimator.errors import WheelloaderError  # after parsing: --help imports no estimator
+
+        from .staging import command_scope
     except KeyboardInterrupt:
         print("wheelloader: interrupted", file=sys.stderr)
         return 130
-    from wheelloader.estimator.errors import WheelloaderError  # after parsing: --help imports no estimator
-
-    from .staging import command_scope
-
     try:
         with command_scope(program=argv is None):
             return _run(args, WheelloaderError)
