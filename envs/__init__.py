@@ -14,7 +14,8 @@
 
 Keyword arguments of :class:`BucketLoadingEnv` pass through ``gym.make``.
 
-Modules: ``bucket_loading`` (the env), ``vector`` (the NumPy-batched env),
+Modules: ``bucket_loading`` (the env), ``vector`` (the NumPy-batched env; ``vector_api``
+its Gymnasium vector API, ``batched_records`` its cycle records),
 ``bookkeeping`` (work, reward terms, cycle end and reset options, one copy
 for every backend), ``config`` (``EnvConfig``, the settings, and the shared
 random draws), ``rllib_env_config`` (construction from RLlib's ``env_config``
