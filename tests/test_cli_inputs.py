@@ -186,3 +186,20 @@ def test_unphysical_parameters_warn_or_fail_with_strict(tmp_path, good, capsys):
     assert not (tmp_path / "g.csv").exists()
     assert main(["calibrate", str(log), "-o", str(tmp_path / "p.json"), "--initial", str(params), "--strict"]) == 2
     assert main(["plan", str(params), "-o", str(tmp_path / "plan.csv"), "--strict"]) == 2
+
+
+def test_a_compressed_saved_cycle_is_recognised_as_a_cycle_log(tmp_path):
+    """A saved loop cycle (``.csv.xz`` + ``.json.xz``) is a cycle log to the CLI, as its plain form is."""
+    import shutil
+
+    from wheelloader.cli.inputs import is_cycle_log
+
+    source = Path(__file__).resolve().parents[1] / "data" / "results" / "adaptation_mpm" / "cycles" / "gravel"
+    for name in ("cycle1.csv.xz", "cycle1.json.xz"):
+        shutil.copy(source / "seed0" / "ours" / name, tmp_path / name)
+    assert is_cycle_log(tmp_path / "cycle1.csv.xz")
+    (tmp_path / "cycle1.json.xz").unlink()
+    assert not is_cycle_log(tmp_path / "cycle1.csv.xz")
+    (tmp_path / "broken.csv.xz").write_bytes(b"not xz")
+    (tmp_path / "broken.json.xz").write_bytes(b"not xz")
+    assert not is_cycle_log(tmp_path / "broken.csv.xz")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import lzma
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -65,16 +66,17 @@ def load_soil(spec: str) -> SoilParams:
 
 
 def is_cycle_log(path: Path) -> bool:
-    """Whether ``path`` is a cycle-log CSV (a JSON sidecar beside it and F_T, F_N columns)."""
-    if not path.with_suffix(".json").exists() or not path.is_file():
+    """Whether ``path`` is a cycle-log CSV, plain or ``.csv.xz`` (its JSON sidecar beside it and F_T, F_N columns)."""
+    if not path.name or not path.is_file() or not sidecar_of(path).exists():
         return False
+    opener = lzma.open if path.name.endswith(".xz") else open
     try:
-        with open(path, encoding="utf-8-sig") as fh:
+        with opener(path, "rt", encoding="utf-8-sig") as fh:
             for line in fh:
                 if line.strip() and not line.lstrip().startswith("#"):
                     header = [h.strip() for h in line.split(",")]
                     return "F_T" in header and "F_N" in header
-    except UnicodeDecodeError:
+    except (UnicodeDecodeError, lzma.LZMAError):
         return False  # reading it as a path CSV then reports the problem
     return False
 
