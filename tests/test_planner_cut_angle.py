@@ -97,7 +97,9 @@ def test_a_plan_with_heel_clearance_keeps_the_heel_out():
     from wheelloader.planner import plan_next_cycle
     from wheelloader.planner.verify import HEEL_TOLERANCE
 
-    pile = Pile.trapezoid()
+    # a 20 deg face: here the free planner digs with its heel ~0.2 m in the soil (on the default 30 deg pile it
+    # has kept the heel at the surface since the planner's soil and pile are quantised, so no contrast there)
+    pile = Pile.trapezoid(angle=math.radians(20.0))
     options = PlannerOptions(heel_clearance=0.0, failure_angle="min_weight_force", max_iter=BETWEEN_CYCLES_MAX_ITER)
     outcome = plan_next_cycle("gravel", pile, options=options, replan_within_iterations=BETWEEN_CYCLES_MAX_ITER,
                               exit_min_fill=LOOP_EXIT_MIN_FILL)
@@ -153,7 +155,9 @@ def test_a_plan_with_heel_clearance_and_curl_out_ends_curled_with_the_heel_out()
     from wheelloader.planner import plan_next_cycle
     from wheelloader.planner.verify import HEEL_TOLERANCE
 
-    pile = Pile.trapezoid()
+    # a 20 deg face: here the free planner digs with its heel ~0.2 m in the soil (on the default 30 deg pile it
+    # has kept the heel at the surface since the planner's soil and pile are quantised, so no contrast there)
+    pile = Pile.trapezoid(angle=math.radians(20.0))
     options = PlannerOptions(heel_clearance=0.0, end_blade_angle=math.radians(45.0), curl_out_intervals=8,
                              failure_angle="min_weight_force", max_iter=BETWEEN_CYCLES_MAX_ITER)
     outcome = plan_next_cycle("gravel", pile, options=options, replan_within_iterations=BETWEEN_CYCLES_MAX_ITER,
