@@ -27,7 +27,7 @@ from wheelloader.estimator.quantise import better, quantise_pile, quantise_soil
 from .cycle import cautious_options, cycle_duration, default_start, optimizer_for
 from .kept import KEPT_OBJECTIVE_SCALE, KeptTerms, evaluate, fixed_kept_fill
 from .mpc import ACCEPTED_STATUSES, MPCController
-from .trajectory import Plan, PlannerOptions, StartState
+from .trajectory import Plan, PlannerOptions, StartState, TrajectoryOptimizer
 from .verify import PlanCheck, verify_plan
 
 
@@ -137,72 +137,20 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     opt = optimizer_for(bucket, loader, options)
     start = start or default_start(pile)
     duration = cycle_duration(pile, start)
-    retried = ""
-    first_failures: list[str] = []
-    spent = 0
-
-    def over_budget() -> bool:
+    def over_budget(spent: int) -> bool:
         return ((replan_within_iterations is not None and spent > replan_within_iterations)
                 or (replan_within is not None and time.perf_counter() - tic > replan_within))
 
-    def checked(plan, opt):
-        # under the kept objective a hop out of the soil counts as the env's end of the cycle from
-        # KEPT_EXIT_SHARE of exit_min_fill loaded (see KEPT_EXIT_SHARE)
-        share = KEPT_EXIT_SHARE if opt.options.objective == "kept_per_energy" else 1.0
-        return verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate,
-                           exit_min_fill=share * exit_min_fill)
-
-    lam = opt.options.energy_weight if energy_weight is None else energy_weight
-    best: dict[str, Any] = {}
-    scores: list[float] = []
     kept_objective = opt.options.objective == "kept_per_energy"
     min_kept = _kept_target(pile, opt, control_rate, exit_min_fill) if kept_objective else 0.0
-
-    def consider(plan, check, iterate: bool = False) -> None:
-        # the NumPy model's objective (fill against energy, as the NLP's) of a plan that passes the check; an
-        # iterate on the way counts only once it loads ITERATE_MIN_FILL of the bucket (not the air it starts in)
-        score = -check.fill / opt.bucket.capacity + lam * check.energy / 1000.0
-        useful = check.fill >= (ITERATE_MIN_FILL if iterate else MIN_FILL) * opt.bucket.capacity
-        if kept_objective:  # the kept objective (planner.kept) by the NumPy check, its kept fill on target
-            terms = _kept_terms(plan, check, params, opt)
-            score = terms.per_kept * opt.bucket.capacity / KEPT_OBJECTIVE_SCALE
-            useful = useful and terms.kept >= min_kept - KEPT_TOLERANCE * opt.bucket.capacity
-        if check.ok and useful and ("score" not in best or better(score, best["score"])):
-            best.update(score=score, plan=plan, check=check)
-
-    def checkpoint(plan) -> bool:
-        # every CHECK_EVERY iterations: keep the best iterate that passes the check; stop once it has gained
-        # less than STALL_TOLERANCE over the last STALL_CHECKS checkpoints
-        consider(plan, checked(plan, opt), iterate=True)
-        scores.append(best.get("score", math.inf))
-        return len(scores) > STALL_CHECKS and scores[-1 - STALL_CHECKS] - scores[-1] < STALL_TOLERANCE
-
     try:
-        guess = initial_guess(pile) if callable(initial_guess) else initial_guess
-        plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=guess,
-                         exit_min_fill=exit_min_fill, checkpoint=checkpoint, checkpoint_every=CHECK_EVERY,
-                         min_kept=min_kept)
-        spent += plan.iterations
-        check = checked(plan, opt)
-        consider(plan, check)
-        for level in (1, 2):
-            if best or over_budget():
-                break
-            # no iterate passed the check (the smooth CasADi surface can differ from a carved pile near its
-            # kinks, and the path between the plan's nodes can graze a crest): re-plan with wider margins,
-            # from the plan that failed
-            first_failures = first_failures or list(check.failures)
-            opt = optimizer_for(opt.bucket, opt.loader, cautious_options(options or PlannerOptions(), level))
-            scores.clear()
-            plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=plan,
-                             exit_min_fill=exit_min_fill, checkpoint=checkpoint, checkpoint_every=CHECK_EVERY,
-                         min_kept=min_kept)
-            spent += plan.iterations
-            check = checked(plan, opt)
-            consider(plan, check)
-            retried = f" (re-planned {level}x with wider margins after: {'; '.join(first_failures)})"
+        found = _search(opt, options, params, pile, start, duration, energy_weight=energy_weight,
+                        initial_guess=initial_guess, exit_min_fill=exit_min_fill, control_rate=control_rate,
+                        kept_objective=kept_objective, min_kept=min_kept, over_budget=over_budget)
     except PlanningError as exc:
         return PlanOutcome(None, False, f"planning failed: {exc}", time.perf_counter() - tic)
+    opt, plan, check, best = found.opt, found.plan, found.check, found.best
+    spent, retried, first_failures = found.spent, found.retried, found.first_failures
     if best:
         plan, check = best["plan"], best["check"]
     seconds = time.perf_counter() - tic
@@ -226,14 +174,95 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
                                    control_rate=control_rate, replan_every=replan_every, initial_plan=plan,
                                    options=opt.options, exit_min_fill=exit_min_fill)
     path = plan.path(control_rate, name="planned")
-    kept = ""
-    if kept_objective:
-        terms = _kept_terms(plan, check, params, opt)
-        kept = (f"; kept {terms.kept / opt.bucket.capacity:.0%} (target {min_kept / opt.bucket.capacity:.0%}), "
-                f"{terms.per_kept / 1e3:.1f} kJ/m^3 kept with the lift to {opt.options.kept_dump_height:.2f} m")
+    kept = _kept_note(plan, check, params, opt, min_kept) if kept_objective else ""
     return PlanOutcome(path, True, f"{head}{note}{retried}; predicted fill "
                        f"{check.fill / opt.bucket.capacity:.0%}, {check.energy / 1e3:.1f} kJ{kept}", seconds,
                        controller, plan=plan, check=check, first_failures=first_failures)
+
+
+@dataclass
+class _Search:
+    """What :func:`_search` found: the last optimiser and plan, its check, the best passing plan, the work."""
+
+    opt: TrajectoryOptimizer
+    plan: Plan
+    check: PlanCheck
+    best: dict[str, Any]
+    spent: int
+    retried: str
+    first_failures: list[str]
+
+
+def _search(opt: TrajectoryOptimizer, options: PlannerOptions | None, params: SoilParams, pile: Pile,
+            start: StartState, duration: float, *, energy_weight: float | None, initial_guess: Any,
+            exit_min_fill: float, control_rate: float, kept_objective: bool, min_kept: float,
+            over_budget: Callable[[int], bool]) -> _Search:
+    """Solve, keep the best iterate that passes the NumPy check, re-plan with wider margins when none does."""
+    retried = ""
+    first_failures: list[str] = []
+    spent = 0
+
+    def checked(plan, opt):
+        # under the kept objective a hop out of the soil counts as the env's end of the cycle from
+        # KEPT_EXIT_SHARE of exit_min_fill loaded (see KEPT_EXIT_SHARE)
+        share = KEPT_EXIT_SHARE if opt.options.objective == "kept_per_energy" else 1.0
+        return verify_plan(plan, params, pile, opt.bucket, opt.loader, opt.options, rate=control_rate,
+                           exit_min_fill=share * exit_min_fill)
+
+    lam = opt.options.energy_weight if energy_weight is None else energy_weight
+    best: dict[str, Any] = {}
+    scores: list[float] = []
+
+    def consider(plan, check, iterate: bool = False) -> None:
+        # the NumPy model's objective (fill against energy, as the NLP's) of a plan that passes the check; an
+        # iterate on the way counts only once it loads ITERATE_MIN_FILL of the bucket (not the air it starts in)
+        score = -check.fill / opt.bucket.capacity + lam * check.energy / 1000.0
+        useful = check.fill >= (ITERATE_MIN_FILL if iterate else MIN_FILL) * opt.bucket.capacity
+        if kept_objective:  # the kept objective (planner.kept) by the NumPy check, its kept fill on target
+            terms = _kept_terms(plan, check, params, opt)
+            score = terms.per_kept * opt.bucket.capacity / KEPT_OBJECTIVE_SCALE
+            useful = useful and terms.kept >= min_kept - KEPT_TOLERANCE * opt.bucket.capacity
+        if check.ok and useful and ("score" not in best or better(score, best["score"])):
+            best.update(score=score, plan=plan, check=check)
+
+    def checkpoint(plan) -> bool:
+        # every CHECK_EVERY iterations: keep the best iterate that passes the check; stop once it has gained
+        # less than STALL_TOLERANCE over the last STALL_CHECKS checkpoints
+        consider(plan, checked(plan, opt), iterate=True)
+        scores.append(best.get("score", math.inf))
+        return len(scores) > STALL_CHECKS and scores[-1 - STALL_CHECKS] - scores[-1] < STALL_TOLERANCE
+
+    guess = initial_guess(pile) if callable(initial_guess) else initial_guess
+    plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=guess,
+                     exit_min_fill=exit_min_fill, checkpoint=checkpoint, checkpoint_every=CHECK_EVERY,
+                     min_kept=min_kept)
+    spent += plan.iterations
+    check = checked(plan, opt)
+    consider(plan, check)
+    for level in (1, 2):
+        if best or over_budget(spent):
+            break
+        # no iterate passed the check (the smooth CasADi surface can differ from a carved pile near its
+        # kinks, and the path between the plan's nodes can graze a crest): re-plan with wider margins,
+        # from the plan that failed
+        first_failures = first_failures or list(check.failures)
+        opt = optimizer_for(opt.bucket, opt.loader, cautious_options(options or PlannerOptions(), level))
+        scores.clear()
+        plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=plan,
+                         exit_min_fill=exit_min_fill, checkpoint=checkpoint, checkpoint_every=CHECK_EVERY,
+                     min_kept=min_kept)
+        spent += plan.iterations
+        check = checked(plan, opt)
+        consider(plan, check)
+        retried = f" (re-planned {level}x with wider margins after: {'; '.join(first_failures)})"
+    return _Search(opt, plan, check, best, spent, retried, first_failures)
+
+
+def _kept_note(plan: Plan, check: PlanCheck, params: SoilParams, opt: TrajectoryOptimizer, min_kept: float) -> str:
+    """The kept objective's part of the outcome's message: kept fill against its target, energy per m^3 kept."""
+    terms = _kept_terms(plan, check, params, opt)
+    return (f"; kept {terms.kept / opt.bucket.capacity:.0%} (target {min_kept / opt.bucket.capacity:.0%}), "
+            f"{terms.per_kept / 1e3:.1f} kJ/m^3 kept with the lift to {opt.options.kept_dump_height:.2f} m")
 
 
 def _kept_target(pile: Pile, opt, rate: float, exit_min_fill: float) -> float:

@@ -123,43 +123,18 @@ class TrajectoryOptimizer:
         Plan
             Always returned; check ``plan.success`` (and :func:`~wheelloader.planner.verify_plan`).
         """
-        soil = as_soil(soil)
-        if not isinstance(start, StartState):
-            raise PlanningError(f"start must be a StartState, got {type(start).__name__}")
-        check_range("duration", duration, 0.2, 60.0, error=PlanningError)
-        lam = self.options.energy_weight if energy_weight is None else energy_weight
-        check_range("energy_weight", lam, 0.0, None, error=PlanningError)
-        cap = self.bucket.capacity
-        check_range("min_fill", min_fill, 0.0, cap, error=PlanningError)  # at most the bucket's capacity
-        if start.fill > cap * (1 + 1e-9):
-            raise PlanningError(f"start fill {start.fill} m^3 exceeds the bucket capacity {cap} m^3")
+        soil, lam, cap = self._checked(soil, start, duration, energy_weight, min_fill)
         n = self.intervals
         h = float(duration) / n
         check_range("reference_weight", reference_weight, 0.0, None, error=PlanningError)
-        ref = np.zeros((n + 1, 2))
-        if reference is not None and reference_weight > 0.0:
-            ts = np.arange(n + 1) * h
-            rt = reference.t - reference.t[0]
-            ref = np.column_stack([np.interp(ts, rt, reference.x), np.interp(ts, rt, reference.z)])
-        else:
-            reference_weight = 0.0
+        ref, reference_weight = self._reference_track(reference, reference_weight, h)
         lbx, ubx = self._bounds(pile, start)
         check_range("min_kept", min_kept, 0.0, None, error=PlanningError)
         if min_kept > 0.0 and "kept_end" not in self._layout:
             raise PlanningError("min_kept needs PlannerOptions(objective='kept_per_energy')")
         lbg, ubg = self._constraint_bounds(soil, min_fill, min_kept)
         args: dict[str, Any] = {"lbx": lbx, "ubx": ubx, "lbg": lbg, "ubg": ubg}
-        face = face_position(pile, start)
-        if warm and self._last is not None and initial_guess is None:
-            args["x0"] = np.clip(self._last["x"], lbx, ubx)
-            args["lam_x0"] = self._last["lam_x"]
-            args["lam_g0"] = self._last["lam_g"]
-        else:
-            if initial_guess is None:
-                initial_guess, face = surface_dig(pile, start, duration, self.bucket, soil.phi, self.options.rho_margin)
-            elif isinstance(initial_guess, Plan) and "face" in initial_guess.raw:
-                face = initial_guess.raw["face"]
-            args["x0"] = np.clip(self._guess_vector(initial_guess, pile, start, h), lbx, ubx)
+        face = self._start_point(args, soil, pile, start, duration, h, warm, initial_guess)
         check_range("exit_min_fill", exit_min_fill, 0.0, 1.0, error=PlanningError)
         free = [1.0, exit_min_fill * cap] if exit_min_fill > 0.0 else [0.0, 0.0]
         tail = np.concatenate([ref.ravel(), [reference_weight], [face], free])
@@ -195,6 +170,51 @@ class TrajectoryOptimizer:
         plan = self._plan_from(w, p, h, start, stats, elapsed, float(sol["f"]))
         plan.raw["face"] = face
         return plan
+
+    def _checked(self, soil: SoilParams | str | dict, start: StartState, duration: float,
+                 energy_weight: float | None, min_fill: float) -> tuple[SoilParams, float, float]:
+        """Check :meth:`solve`'s arguments; the soil, the energy weight lambda [1/kJ] and the capacity [m^3]."""
+        soil = as_soil(soil)
+        if not isinstance(start, StartState):
+            raise PlanningError(f"start must be a StartState, got {type(start).__name__}")
+        check_range("duration", duration, 0.2, 60.0, error=PlanningError)
+        lam = self.options.energy_weight if energy_weight is None else energy_weight
+        check_range("energy_weight", lam, 0.0, None, error=PlanningError)
+        cap = self.bucket.capacity
+        check_range("min_fill", min_fill, 0.0, cap, error=PlanningError)  # at most the bucket's capacity
+        if start.fill > cap * (1 + 1e-9):
+            raise PlanningError(f"start fill {start.fill} m^3 exceeds the bucket capacity {cap} m^3")
+        return soil, lam, cap
+
+    def _reference_track(self, reference: BucketPath | None, reference_weight: float,
+                         h: float) -> tuple[np.ndarray, float]:
+        """The reference path's tip positions at the n + 1 nodes and its weight (zeros and 0 without one)."""
+        n = self.intervals
+        ref = np.zeros((n + 1, 2))
+        if reference is not None and reference_weight > 0.0:
+            ts = np.arange(n + 1) * h
+            rt = reference.t - reference.t[0]
+            ref = np.column_stack([np.interp(ts, rt, reference.x), np.interp(ts, rt, reference.z)])
+        else:
+            reference_weight = 0.0
+        return ref, reference_weight
+
+    def _start_point(self, args: dict[str, Any], soil: SoilParams, pile: Pile, start: StartState, duration: float,
+                     h: float, warm: bool, initial_guess: Plan | BucketPath | None) -> float:
+        """Put IPOPT's start point (and warm multipliers) into ``args``; return the face past which the tip digs."""
+        lbx, ubx = args["lbx"], args["ubx"]
+        face = face_position(pile, start)
+        if warm and self._last is not None and initial_guess is None:
+            args["x0"] = np.clip(self._last["x"], lbx, ubx)
+            args["lam_x0"] = self._last["lam_x"]
+            args["lam_g0"] = self._last["lam_g"]
+        else:
+            if initial_guess is None:
+                initial_guess, face = surface_dig(pile, start, duration, self.bucket, soil.phi, self.options.rho_margin)
+            elif isinstance(initial_guess, Plan) and "face" in initial_guess.raw:
+                face = initial_guess.raw["face"]
+            args["x0"] = np.clip(self._guess_vector(initial_guess, pile, start, h), lbx, ubx)
+        return face
 
     def reset_warm_start(self) -> None:
         """Forget the previous solution."""

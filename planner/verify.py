@@ -135,18 +135,7 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
     bucket = bucket or Bucket()
     loader = loader or Loader()
     options = options or PlannerOptions()
-    initial_fill = 0.0
-    if isinstance(plan, Plan):
-        path = plan.path(rate)
-        accel = _interval_acceleration(plan)
-        start = plan.raw.get("start")
-        initial_fill = min(start.fill, bucket.capacity) if start is not None else 0.0
-    elif isinstance(plan, BucketPath):
-        path = plan
-        vx, vz, _ = path.velocity()
-        accel = float(np.max(np.abs(np.diff(np.column_stack([vx, vz]), axis=0)) / np.diff(path.t)[:, None]))
-    else:
-        raise PlanningError(f"plan must be a Plan or a BucketPath, got {type(plan).__name__}")
+    path, accel, initial_fill = _sampled(plan, rate, bucket)
     sim = path_energy(path, soil, pile, bucket, initial_fill, options.model_options)
     forces, state = sim["forces"], sim["state"]
     dt = np.diff(path.t)
@@ -157,18 +146,8 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
     early_exit = premature_exit(path, pile, state.depth, state.fill_volume / bucket.capacity,
                                 exit_clearance - tracking_margin, exit_min_fill)
     slack = 1.0 + tolerance
-    off_blade = 0
-    if options.cut_angle is not None:  # the opt-in cutting cone (PlannerOptions.cut_angle)
-        th = path.blade_angle[1:]
-        along = vx * np.cos(th) + vz * np.sin(th)
-        deep = (state.depth[1:] > options.cut_depth) & (np.hypot(vx, vz) > 1e-3)
-        off_blade = int(np.count_nonzero(deep & (along < math.cos(options.cut_angle + 0.05) * np.hypot(vx, vz))))
-    heel_buried = 0
-    if options.heel_clearance is not None:  # the opt-in heel clearance (PlannerOptions.heel_clearance)
-        heel_x = path.x - bucket.floor_length * np.cos(path.blade_angle)
-        heel_z = path.z - bucket.floor_length * np.sin(path.blade_angle)
-        heel_buried = int(np.count_nonzero(heel_z - pile.surface_height(heel_x)
-                                           < options.heel_clearance - HEEL_TOLERANCE))
+    off_blade = _off_blade_steps(path, state.depth, vx, vz, options)
+    heel_buried = _heel_buried_steps(path, pile, bucket, options)
     checks = {
         "tangential force above the loader's push limit": float(forces.tangential.max()) > loader.max_push_force,
         "normal force above the loader's lift limit": float(forces.normal.max()) > loader.max_lift_force,
@@ -199,6 +178,43 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
                  "off_blade_steps": off_blade, "heel_buried_steps": heel_buried},
     )
 
+
+
+def _sampled(plan: Plan | BucketPath, rate: float, bucket: Bucket) -> tuple[BucketPath, float, float]:
+    """The path to re-simulate, its largest acceleration [m/s^2] and the fill at its start [m^3]."""
+    initial_fill = 0.0
+    if isinstance(plan, Plan):
+        path = plan.path(rate)
+        accel = _interval_acceleration(plan)
+        start = plan.raw.get("start")
+        initial_fill = min(start.fill, bucket.capacity) if start is not None else 0.0
+    elif isinstance(plan, BucketPath):
+        path = plan
+        vx, vz, _ = path.velocity()
+        accel = float(np.max(np.abs(np.diff(np.column_stack([vx, vz]), axis=0)) / np.diff(path.t)[:, None]))
+    else:
+        raise PlanningError(f"plan must be a Plan or a BucketPath, got {type(plan).__name__}")
+    return path, accel, initial_fill
+
+
+def _off_blade_steps(path: BucketPath, depth: np.ndarray, vx: np.ndarray, vz: np.ndarray,
+                     options: PlannerOptions) -> int:
+    """Steps in soil moving outside the opt-in cutting cone (``PlannerOptions.cut_angle``); 0 without it."""
+    if options.cut_angle is None:
+        return 0
+    th = path.blade_angle[1:]
+    along = vx * np.cos(th) + vz * np.sin(th)
+    deep = (depth[1:] > options.cut_depth) & (np.hypot(vx, vz) > 1e-3)
+    return int(np.count_nonzero(deep & (along < math.cos(options.cut_angle + 0.05) * np.hypot(vx, vz))))
+
+
+def _heel_buried_steps(path: BucketPath, pile: Pile, bucket: Bucket, options: PlannerOptions) -> int:
+    """Samples with the heel below the opt-in heel clearance (``PlannerOptions.heel_clearance``); 0 without it."""
+    if options.heel_clearance is None:
+        return 0
+    heel_x = path.x - bucket.floor_length * np.cos(path.blade_angle)
+    heel_z = path.z - bucket.floor_length * np.sin(path.blade_angle)
+    return int(np.count_nonzero(heel_z - pile.surface_height(heel_x) < options.heel_clearance - HEEL_TOLERANCE))
 
 def premature_exit(path: BucketPath, pile: Pile, depth: np.ndarray, fill_fraction: np.ndarray,
                    exit_clearance: float = 0.02, exit_min_fill: float = 0.0) -> float | None:
