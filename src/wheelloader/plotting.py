@@ -279,36 +279,41 @@ def plot_plan(path: BucketPath, forces: dict[str, np.ndarray], pile: Pile, loade
     ax.set_title("predicted forces along the plan")
 
     if pareto:
-        ax = axes[2]
-        good = [p for p in pareto if p.ok]
-        bad = [p for p in pareto if not p.ok]
-        optimal = [p for p in good if p.solver_ok]
-        unproven = [p for p in good if not p.solver_ok]
-        if optimal:
-            ax.plot([p.energy / 1e3 for p in optimal], [p.fill for p in optimal], "o", color="tab:blue",
-                    label="plans (IPOPT ok, check ok)")
-        if unproven:
-            ax.plot([p.energy / 1e3 for p in unproven], [p.fill for p in unproven], "o", mfc="none",
-                    mec="tab:orange", label="check ok, IPOPT not converged")
-        front = sorted((p for p in good if p.pareto_optimal), key=lambda p: p.energy)
-        if front:
-            ax.plot([p.energy / 1e3 for p in front], [p.fill for p in front], "-", color="tab:blue", lw=1,
-                    label="Pareto front")
-        _label_weights(ax, pareto)
-        if bad:
-            ax.plot([p.energy / 1e3 for p in bad], [p.fill for p in bad], "x", color="tab:red", ms=8,
-                    label="failed the NumPy check")
-        if plan_point is not None:
-            label = "this plan" if chosen_weight is None else f"this plan (λ = {chosen_weight:g}/kJ)"
-            ax.plot(plan_point[1] / 1e3, plan_point[0], "s", mfc="none", mec="k", ms=11, label=label)
-        if baseline_point is not None:
-            ax.plot(baseline_point[1] / 1e3, baseline_point[0], "D", color="tab:gray", label="Bezier baseline")
-        ax.set_xlabel("energy [kJ] (NumPy re-simulation)")
-        ax.set_ylabel("fill [m³]")
-        ax.margins(x=0.12, y=0.15)  # the weight labels stay inside the axes
-        ax.legend(loc="lower right", fontsize=8)
-        ax.set_title("Pareto sweep: fill against energy, labelled by λ [1/kJ]", fontsize=10)
+        _pareto_panel(axes[2], pareto, chosen_weight, baseline_point, plan_point)
     return finish_figure(fig, out, title, dpi=110)
+
+
+def _pareto_panel(ax: Any, pareto: Sequence[ParetoPoint], chosen_weight: float | None,
+                  baseline_point: tuple[float, float] | None, plan_point: tuple[float, float] | None) -> None:
+    """The Pareto panel of :func:`plot_plan`: fill against energy of the sweep, the plan and the baseline."""
+    good = [p for p in pareto if p.ok]
+    bad = [p for p in pareto if not p.ok]
+    optimal = [p for p in good if p.solver_ok]
+    unproven = [p for p in good if not p.solver_ok]
+    if optimal:
+        ax.plot([p.energy / 1e3 for p in optimal], [p.fill for p in optimal], "o", color="tab:blue",
+                label="plans (IPOPT ok, check ok)")
+    if unproven:
+        ax.plot([p.energy / 1e3 for p in unproven], [p.fill for p in unproven], "o", mfc="none",
+                mec="tab:orange", label="check ok, IPOPT not converged")
+    front = sorted((p for p in good if p.pareto_optimal), key=lambda p: p.energy)
+    if front:
+        ax.plot([p.energy / 1e3 for p in front], [p.fill for p in front], "-", color="tab:blue", lw=1,
+                label="Pareto front")
+    _label_weights(ax, pareto)
+    if bad:
+        ax.plot([p.energy / 1e3 for p in bad], [p.fill for p in bad], "x", color="tab:red", ms=8,
+                label="failed the NumPy check")
+    if plan_point is not None:
+        label = "this plan" if chosen_weight is None else f"this plan (λ = {chosen_weight:g}/kJ)"
+        ax.plot(plan_point[1] / 1e3, plan_point[0], "s", mfc="none", mec="k", ms=11, label=label)
+    if baseline_point is not None:
+        ax.plot(baseline_point[1] / 1e3, baseline_point[0], "D", color="tab:gray", label="Bezier baseline")
+    ax.set_xlabel("energy [kJ] (NumPy re-simulation)")
+    ax.set_ylabel("fill [m³]")
+    ax.margins(x=0.12, y=0.15)  # the weight labels stay inside the axes
+    ax.legend(loc="lower right", fontsize=8)
+    ax.set_title("Pareto sweep: fill against energy, labelled by λ [1/kJ]", fontsize=10)
 
 
 def _label_weights(ax: Any, points: Sequence[ParetoPoint], near: float = 0.04) -> None:

@@ -101,9 +101,84 @@ def _per_m3(energy: float, fill: float) -> float | None:
     return energy / fill if fill > 0 else None
 
 
+def _output_paths(given: str) -> tuple[Path, Path]:
+    """The CSV path ``-o/--output`` names and the JSON summary's beside it (a clear error for a bad name)."""
+    from wheelloader.estimator import ParameterError
+
+    output = Path(given)
+    if output.name in ("", ".", ".."):
+        raise ParameterError(f"-o/--output {given!r} is not a file name")
+    if output.name.lower().endswith(SUMMARY_SUFFIX) or output.suffix.lower() == ".json":
+        raise ParameterError(f"output {output} should be a .csv file (the JSON summary is written beside it)")
+    return output, output.with_name(output.stem + SUMMARY_SUFFIX)
+
+
+def _summary(args: argparse.Namespace, *, soil, lam: float, duration: float, start, ok: bool, outcome,
+             solver_ok: bool, cap: float, baseline, base_check, points: list, timing: dict[str, float],
+             nlp_origin: str, output: Path) -> dict[str, Any]:
+    """The JSON summary of ``wheelloader plan``."""
+    from wheelloader.estimator import default_path
+
+    plan, check, retried = outcome.plan, outcome.check, outcome.first_failures or None
+    return {
+        "params": str(args.params), "soil": soil.to_dict(), "pile": args.pile or "trapezoid",
+        "energy_weight_per_kJ": lam, "duration_s": duration, "max_time_s": args.max_time,
+        "start": {"x": start.x, "z": start.z, "blade_angle": start.blade_angle},
+        "ok": ok,
+        "ok_definition": "the NumPy re-simulation passed every check; solver_ok false: feasible, not proven "
+                         "optimal",
+        "replanned_with_wider_margins_after": retried,
+        "message": outcome.message,
+        "plan": {"status": plan.status, "solver_ok": solver_ok, "iterations": plan.iterations,
+                 "solve_time_s": plan.solve_time, "objective": plan.objective,
+                 "predicted_energy_J_casadi": plan.energy, "predicted_fill_m3_casadi": plan.final_fill,
+                 "fill_m3": check.fill, "fill_fraction": check.fill / cap, "energy_J": check.energy,
+                 "energy_per_m3_J": _per_m3(check.energy, check.fill), "check": check.to_dict()},
+        "baseline": {"name": baseline.name, "x_shift_m": float(baseline.x[0] - default_path(rate=args.rate).x[0]),
+                     "fill_m3": base_check.fill, "fill_fraction": base_check.fill / cap,
+                     "energy_J": base_check.energy, "energy_per_m3_J": _per_m3(base_check.energy, base_check.fill),
+                     "check": base_check.to_dict()},
+        "pareto": [pt.to_dict() for pt in points],
+        "timing_s": timing,
+        "nlp": nlp_origin,
+        "files": {"csv": str(output), "plot": args.plot},
+        "energy_definition": "NumPy re-simulation at the CSV rate: sum of max(0, F_T ds_t + F_N ds_n) + "
+                             "max(0, W_load dz) per step (the env's bookkeeping)",
+    }
+
+
+def _print_verdict(ok: bool, outcome, solver_ok: bool, max_time: float | None) -> None:
+    """Print whether the plan passed the NumPy check and how IPOPT ended."""
+    plan, check = outcome.plan, outcome.check
+    if ok:
+        print("check: passed (forces, speeds, accelerations, validity domain, capacity, forward motion, end pose)")
+    elif check.ok:
+        print(f"check: FAILED: {outcome.message}")
+    else:
+        print("check: FAILED: " + "; ".join(check.failures))
+    if not solver_ok:
+        print(f"IPOPT did not succeed: {plan.status}"
+              + ("; the plan is feasible by the NumPy check but not proven optimal" if check.ok else ""))
+    if plan.status == "Maximum_WallTime_Exceeded":
+        print(f"the --max-time cap of {max_time:g} s fired: this result depends on the machine's speed")
+
+
+def _print_pareto(points: list, seconds: float) -> None:
+    """Print the Pareto sweep's table."""
+    print(f"Pareto sweep over {len(points)} weights in {seconds:.1f} s:")
+    print("  lambda/kJ   fill m^3  fill %   energy kJ   kJ/m^3  IPOPT status                  check")
+    for pt in points:
+        per = f"{pt.energy_per_m3 / 1e3:8.1f}" if math.isfinite(pt.energy_per_m3) else "     n/a"
+        mark = "ok" if pt.check_ok else "FAILED: " + "; ".join(pt.failures)
+        star = " *" if pt.pareto_optimal else ""
+        print(f"  {pt.energy_weight:9g}  {pt.fill:9.4f}  {pt.fill_fraction:5.0%}  {pt.energy / 1e3:10.2f}  "
+              f"{per}  {pt.status:<28}  {mark}{star}")
+    print("  (* = Pareto-optimal among the points that passed the check)")
+
+
 def run_plan(args: argparse.Namespace) -> int:
     """Handler of ``wheelloader plan``."""
-    from wheelloader.estimator import ParameterError, PlanningError, default_path
+    from wheelloader.estimator import PlanningError
     from wheelloader.estimator.cyclelog import write_columns
     from wheelloader.planner import (
         PlannerOptions,
@@ -121,12 +196,7 @@ def run_plan(args: argparse.Namespace) -> int:
 
     _validate(args)
     weights = _parse_weights(args.weights) if args.pareto else ()
-    output = Path(args.output)
-    if output.name in ("", ".", ".."):
-        raise ParameterError(f"-o/--output {args.output!r} is not a file name")
-    if output.name.lower().endswith(SUMMARY_SUFFIX) or output.suffix.lower() == ".json":
-        raise ParameterError(f"output {output} should be a .csv file (the JSON summary is written beside it)")
-    summary_path = output.with_name(output.stem + SUMMARY_SUFFIX)
+    output, summary_path = _output_paths(args.output)
     check_input_files([("params", args.params), ("--pile", args.pile)])
     run = OutputRun(force=args.force, inputs=[args.params, args.pile])
     for flag, value in (("-o/--output", output), ("summary", summary_path), ("--plot", args.plot)):
@@ -170,31 +240,9 @@ def run_plan(args: argparse.Namespace) -> int:
             timing["pareto_s"] = time.perf_counter() - tic
 
         state, forces = sim["state"], sim["forces"]
-        summary: dict[str, Any] = {
-            "params": str(args.params), "soil": soil.to_dict(), "pile": args.pile or "trapezoid",
-            "energy_weight_per_kJ": lam, "duration_s": duration, "max_time_s": args.max_time,
-            "start": {"x": start.x, "z": start.z, "blade_angle": start.blade_angle},
-            "ok": ok,
-            "ok_definition": "the NumPy re-simulation passed every check; solver_ok false: feasible, not proven "
-                             "optimal",
-            "replanned_with_wider_margins_after": retried,
-            "message": outcome.message,
-            "plan": {"status": plan.status, "solver_ok": solver_ok, "iterations": plan.iterations,
-                     "solve_time_s": plan.solve_time, "objective": plan.objective,
-                     "predicted_energy_J_casadi": plan.energy, "predicted_fill_m3_casadi": plan.final_fill,
-                     "fill_m3": check.fill, "fill_fraction": check.fill / cap, "energy_J": check.energy,
-                     "energy_per_m3_J": _per_m3(check.energy, check.fill), "check": check.to_dict()},
-            "baseline": {"name": baseline.name, "x_shift_m": float(baseline.x[0] - default_path(rate=args.rate).x[0]),
-                         "fill_m3": base_check.fill, "fill_fraction": base_check.fill / cap,
-                         "energy_J": base_check.energy, "energy_per_m3_J": _per_m3(base_check.energy, base_check.fill),
-                         "check": base_check.to_dict()},
-            "pareto": [pt.to_dict() for pt in points],
-            "timing_s": timing,
-            "nlp": nlp_origin,
-            "files": {"csv": str(output), "plot": args.plot},
-            "energy_definition": "NumPy re-simulation at the CSV rate: sum of max(0, F_T ds_t + F_N ds_n) + "
-                                 "max(0, W_load dz) per step (the env's bookkeeping)",
-        }
+        summary = _summary(args, soil=soil, lam=lam, duration=duration, start=start, ok=ok, outcome=outcome,
+                           solver_ok=solver_ok, cap=cap, baseline=baseline, base_check=base_check, points=points,
+                           timing=timing, nlp_origin=nlp_origin, output=output)
         # the first four columns are save_path_csv's, so load_path_csv reads the file as a path
         write_columns(run.staged(output), {"t": path.t, "x": path.x, "z": path.z, "blade_angle": path.blade_angle,
                                            "depth": state.depth, "fill": state.fill_volume, "F_T": forces.tangential,
@@ -219,27 +267,9 @@ def run_plan(args: argparse.Namespace) -> int:
           f"{'' if base_check.ok else '; fails: ' + '; '.join(base_check.failures)}")
     if retried is not None:
         print("first plan failed the NumPy check (" + "; ".join(retried) + "); re-planned with wider margins")
-    if ok:
-        print("check: passed (forces, speeds, accelerations, validity domain, capacity, forward motion, end pose)")
-    elif check.ok:
-        print(f"check: FAILED: {outcome.message}")
-    else:
-        print("check: FAILED: " + "; ".join(check.failures))
-    if not solver_ok:
-        print(f"IPOPT did not succeed: {plan.status}"
-              + ("; the plan is feasible by the NumPy check but not proven optimal" if check.ok else ""))
-    if plan.status == "Maximum_WallTime_Exceeded":
-        print(f"the --max-time cap of {args.max_time:g} s fired: this result depends on the machine's speed")
+    _print_verdict(ok, outcome, solver_ok, args.max_time)
     if points:
-        print(f"Pareto sweep over {len(points)} weights in {timing['pareto_s']:.1f} s:")
-        print("  lambda/kJ   fill m^3  fill %   energy kJ   kJ/m^3  IPOPT status                  check")
-        for pt in points:
-            per = f"{pt.energy_per_m3 / 1e3:8.1f}" if math.isfinite(pt.energy_per_m3) else "     n/a"
-            mark = "ok" if pt.check_ok else "FAILED: " + "; ".join(pt.failures)
-            star = " *" if pt.pareto_optimal else ""
-            print(f"  {pt.energy_weight:9g}  {pt.fill:9.4f}  {pt.fill_fraction:5.0%}  {pt.energy / 1e3:10.2f}  "
-                  f"{per}  {pt.status:<28}  {mark}{star}")
-        print("  (* = Pareto-optimal among the points that passed the check)")
+        _print_pareto(points, timing["pareto_s"])
     print(f"path written to {output}; summary written to {summary_path}")
     if args.plot:
         print(f"figure written to {args.plot}")
