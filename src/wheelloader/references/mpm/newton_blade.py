@@ -33,6 +33,7 @@ import math
 import time
 from dataclasses import asdict, dataclass
 from types import ModuleType
+from typing import Any
 
 import numpy as np
 
@@ -131,6 +132,109 @@ def drucker_prager_friction(friction_angle: float) -> float:
     return math.sin(friction_angle)
 
 
+def _steps_per_sample(depth: float, soil: ContinuumSoil, dx: float, samples_per_s: float,
+                      settings: NewtonBladeSettings) -> int:
+    """Check :func:`run_newton_blade`'s arguments; the time steps per output sample."""
+    if not depth > 0.0:
+        raise ValueError(f"depth must be > 0 m, got {depth!r}")
+    if not 0.0 < dx <= depth:
+        raise ValueError(f"dx must be in (0, depth], got {dx!r}")
+    if soil.cohesion != 0.0 or soil.adhesion != 0.0:
+        raise ValueError("the Newton blade cross-check covers cohesionless soils only (cohesion = adhesion = 0); "
+                         f"got cohesion {soil.cohesion!r} Pa, adhesion {soil.adhesion!r} Pa")
+    steps_per_sample = int(round(1.0 / (samples_per_s * settings.dt)))
+    if steps_per_sample < 1 or not math.isclose(steps_per_sample * settings.dt * samples_per_s, 1.0, rel_tol=1e-9):
+        raise ValueError(f"1 / samples_per_s ({1.0 / samples_per_s!r} s) must be a whole number of time steps "
+                         f"dt = {settings.dt!r} s")
+    return steps_per_sample
+
+
+def _bed_particles(extents: tuple[float, float, float], spacing: float, seed: int) -> np.ndarray:
+    """Particle positions (N, 3) [m] filling the box ``extents`` on a grid of ``spacing``, jittered by a
+    quarter spacing (seeded)."""
+    rng = np.random.default_rng(seed)
+    axes = [np.arange(0.5 * spacing, extent - 0.25 * spacing, spacing) for extent in extents]
+    pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    pts += rng.uniform(-0.25, 0.25, size=pts.shape) * spacing
+    return pts
+
+
+def _add_walls(wp: Any, builder: Any, smooth: Any, x_end: float, width: float, tall: float, dx: float) -> None:
+    """The frictionless side walls (the slab faces y = 0 and y = width) and end walls (x = -0.1, x_end)."""
+    for y in (-0.5 * dx, width + 0.5 * dx):
+        builder.add_shape_box(-1, xform=wp.transform(wp.vec3(0.5 * x_end - 0.05, y, 0.5 * tall),
+                                                     wp.quat_identity()),
+                              hx=0.5 * x_end + 0.05 + 2.0 * dx, hy=0.5 * dx, hz=0.5 * tall, cfg=smooth)
+    for x in (-0.1 - 0.5 * dx, x_end + 0.5 * dx):  # the Taichi case's domain ends
+        builder.add_shape_box(-1, xform=wp.transform(wp.vec3(x, 0.5 * width, 0.5 * tall), wp.quat_identity()),
+                              hx=0.5 * dx, hy=0.5 * width + dx, hz=0.5 * tall, cfg=smooth)
+
+
+def _set_material(mpm: Any, soil: ContinuumSoil, settings: NewtonBladeSettings) -> None:
+    """Newton's MPM material for ``soil``: Drucker-Prager friction, no cohesion, no dilatancy."""
+    mpm.young_modulus.fill_(soil.youngs_modulus if settings.youngs_modulus is None else settings.youngs_modulus)
+    mpm.poisson_ratio.fill_(soil.poisson_ratio)
+    mpm.friction.fill_(drucker_prager_friction(soil.friction_angle))
+    mpm.yield_pressure.fill_(1.0e12)
+    mpm.tensile_yield_ratio.fill_(0.0)
+    mpm.yield_stress.fill_(0.0)
+    mpm.dilatancy.fill_(0.0)
+
+
+class _BladeStep:
+    """One Newton step with the kinematic blade at its prescribed pose: its centre ``pose[0]`` behind
+    ``position(t)`` in x, at ``pose[1:]`` in y and z. A call returns the impulses of the step on the blade and
+    on the static colliders (floor, walls). The solver is reset with the blade at its start pose."""
+
+    def __init__(self, solver: Any, state: Any, blade: int, position: Any, pose: tuple[float, float, float],
+                 dt: float) -> None:
+        self.solver, self.state, self.blade, self.position, self.dt = solver, state, blade, position, dt
+        self.blade_half, self.y, self.z = pose
+        self.place_blade(0.0, dt)
+        solver.reset(state)
+        self.body_of_collider = solver.collider_body_index.numpy()
+
+    def place_blade(self, t: float, dt: float) -> None:
+        """Put the blade at its pose and velocity of time ``t``."""
+        state, blade, position = self.state, self.blade, self.position
+        x = float(position(t)) - self.blade_half
+        v = (float(position(t + dt)) - float(position(t))) / dt
+        q = state.body_q.numpy()
+        q[blade] = (x, self.y, self.z, 0.0, 0.0, 0.0, 1.0)
+        state.body_q.assign(q)
+        qd = state.body_qd.numpy()
+        qd[blade] = (v, 0.0, 0.0, 0.0, 0.0, 0.0)
+        state.body_qd.assign(qd)
+
+    def collider_impulses(self) -> tuple[np.ndarray, np.ndarray]:
+        """The impulses of the last step on the blade and on the static colliders (floor, walls)."""
+        impulses, _, colliders = self.solver.collect_collider_impulses(self.state)
+        ids = colliders.numpy()
+        body = np.where(ids >= 0, self.body_of_collider[np.maximum(ids, 0)], -2)
+        values = impulses.numpy().astype(float)
+        return values[body == self.blade].sum(axis=0), values[body == -1].sum(axis=0)
+
+    def __call__(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        self.place_blade(t, self.dt)
+        self.solver.step(self.state, self.state, None, None, self.dt)
+        self.solver.project_outside(self.state, self.state, self.dt)
+        return self.collider_impulses()
+
+
+def _settle(step: _BladeStep, settings: NewtonBladeSettings, weight: float) -> tuple[int, float]:
+    """Let the bed settle (``settings.settle`` [s], the blade at rest): the steps taken and the static
+    colliders' mean vertical reaction over the last quarter of them divided by the bed's ``weight`` [N]."""
+    settle_steps = int(round(settings.settle / settings.dt))
+    t = -settle_steps * settings.dt
+    floor = []
+    for _ in range(settle_steps):
+        floor.append(step(min(t, 0.0))[1][2])
+        t += settings.dt
+    # the impulse accounting checked on the bed's weight: the static colliders carry it at rest
+    tail = floor[-max(1, settle_steps // 4):]
+    return settle_steps, float(-np.mean(tail) / settings.dt / weight) if floor else float("nan")
+
+
 def run_newton_blade(depth: float, soil: ContinuumSoil, dx: float, *, speed: float = 0.2,
                      travel: float | None = None, seed: int = 0, samples_per_s: float = 60.0,
                      settings: NewtonBladeSettings | None = None) -> CaseResult:
@@ -142,18 +246,8 @@ def run_newton_blade(depth: float, soil: ContinuumSoil, dx: float, *, speed: flo
     negative; z: soil lifting it is positive) averaged over each of the ``samples_per_s`` intervals,
     ``extra['travel']`` per sample [m] and the heaped soil per sample.
     """
-    if not depth > 0.0:
-        raise ValueError(f"depth must be > 0 m, got {depth!r}")
-    if not 0.0 < dx <= depth:
-        raise ValueError(f"dx must be in (0, depth], got {dx!r}")
-    if soil.cohesion != 0.0 or soil.adhesion != 0.0:
-        raise ValueError("the Newton blade cross-check covers cohesionless soils only (cohesion = adhesion = 0); "
-                         f"got cohesion {soil.cohesion!r} Pa, adhesion {soil.adhesion!r} Pa")
     settings = NewtonBladeSettings() if settings is None else settings
-    steps_per_sample = int(round(1.0 / (samples_per_s * settings.dt)))
-    if steps_per_sample < 1 or not math.isclose(steps_per_sample * settings.dt * samples_per_s, 1.0, rel_tol=1e-9):
-        raise ValueError(f"1 / samples_per_s ({1.0 / samples_per_s!r} s) must be a whole number of time steps "
-                         f"dt = {settings.dt!r} s")
+    steps_per_sample = _steps_per_sample(depth, soil, dx, samples_per_s, settings)
     wp, newton, solver_cls = _newton()
 
     travel, duration, position = blade_motion(depth, speed, travel)
@@ -162,10 +256,7 @@ def run_newton_blade(depth: float, soil: ContinuumSoil, dx: float, *, speed: flo
     x_end = travel + 4.0 * depth + 0.1
     width = settings.cells_across * dx
     spacing = dx / settings.particles_per_cell
-    rng = np.random.default_rng(seed)
-    axes = [np.arange(0.5 * spacing, extent - 0.25 * spacing, spacing) for extent in (x_end, width, surface)]
-    pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    pts += rng.uniform(-0.25, 0.25, size=pts.shape) * spacing
+    pts = _bed_particles((x_end, width, surface), spacing, seed)
     particle_mass = soil.density * spacing**3
     blade_height = depth + 0.3
     blade_half = 0.5 * dx
@@ -178,27 +269,12 @@ def run_newton_blade(depth: float, soil: ContinuumSoil, dx: float, *, speed: flo
                               mass=[particle_mass] * len(pts), radius=[0.5 * spacing] * len(pts))
         smooth = newton.ModelBuilder.ShapeConfig(mu=0.0, density=0.0)
         builder.add_ground_plane(cfg=newton.ModelBuilder.ShapeConfig(mu=settings.floor_friction, density=0.0))
-        tall = surface + blade_height
-        # frictionless side walls (the slab faces y = 0 and y = width) and end walls (x = -0.1, x_end)
-        for y in (-0.5 * dx, width + 0.5 * dx):
-            builder.add_shape_box(-1, xform=wp.transform(wp.vec3(0.5 * x_end - 0.05, y, 0.5 * tall),
-                                                         wp.quat_identity()),
-                                  hx=0.5 * x_end + 0.05 + 2.0 * dx, hy=0.5 * dx, hz=0.5 * tall, cfg=smooth)
-        for x in (-0.1 - 0.5 * dx, x_end + 0.5 * dx):  # the Taichi case's domain ends
-            builder.add_shape_box(-1, xform=wp.transform(wp.vec3(x, 0.5 * width, 0.5 * tall), wp.quat_identity()),
-                                  hx=0.5 * dx, hy=0.5 * width + dx, hz=0.5 * tall, cfg=smooth)
+        _add_walls(wp, builder, smooth, x_end, width, surface + blade_height, dx)
         blade = builder.add_body(is_kinematic=True, label="blade")
         builder.add_shape_box(blade, hx=blade_half, hy=0.5 * width + dx, hz=0.5 * blade_height,
                               cfg=newton.ModelBuilder.ShapeConfig(mu=math.tan(soil.wall_friction_angle), density=0.0))
         model = builder.finalize()
-        mpm = model.mpm
-        mpm.young_modulus.fill_(soil.youngs_modulus if settings.youngs_modulus is None else settings.youngs_modulus)
-        mpm.poisson_ratio.fill_(soil.poisson_ratio)
-        mpm.friction.fill_(drucker_prager_friction(soil.friction_angle))
-        mpm.yield_pressure.fill_(1.0e12)
-        mpm.tensile_yield_ratio.fill_(0.0)
-        mpm.yield_stress.fill_(0.0)
-        mpm.dilatancy.fill_(0.0)
+        _set_material(model.mpm, soil, settings)
 
         config = solver_cls.Config()
         config.voxel_size = dx
@@ -207,45 +283,8 @@ def run_newton_blade(depth: float, soil: ContinuumSoil, dx: float, *, speed: flo
         solver = solver_cls(model, config)
         state = model.state()
         blade_z = below + 0.5 * blade_height  # the blade's lower edge at the cut depth
-
-        def place_blade(t: float, dt: float) -> None:
-            x = float(position(t)) - blade_half
-            v = (float(position(t + dt)) - float(position(t))) / dt
-            q = state.body_q.numpy()
-            q[blade] = (x, 0.5 * width, blade_z, 0.0, 0.0, 0.0, 1.0)
-            state.body_q.assign(q)
-            qd = state.body_qd.numpy()
-            qd[blade] = (v, 0.0, 0.0, 0.0, 0.0, 0.0)
-            state.body_qd.assign(qd)
-
-        place_blade(0.0, settings.dt)
-        solver.reset(state)
-        body_of_collider = solver.collider_body_index.numpy()
-
-        def collider_impulses() -> tuple[np.ndarray, np.ndarray]:
-            """The impulses of the last step on the blade and on the static colliders (floor, walls)."""
-            impulses, _, colliders = solver.collect_collider_impulses(state)
-            ids = colliders.numpy()
-            body = np.where(ids >= 0, body_of_collider[np.maximum(ids, 0)], -2)
-            values = impulses.numpy().astype(float)
-            return values[body == blade].sum(axis=0), values[body == -1].sum(axis=0)
-
-        def step(t: float) -> tuple[np.ndarray, np.ndarray]:
-            place_blade(t, settings.dt)
-            solver.step(state, state, None, None, settings.dt)
-            solver.project_outside(state, state, settings.dt)
-            return collider_impulses()
-
-        settle_steps = int(round(settings.settle / settings.dt))
-        t = -settle_steps * settings.dt
-        floor = []
-        for _ in range(settle_steps):
-            floor.append(step(min(t, 0.0))[1][2])
-            t += settings.dt
-        # the impulse accounting checked on the bed's weight: the static colliders carry it at rest
-        weight = len(pts) * particle_mass * GRAVITY
-        tail = floor[-max(1, settle_steps // 4):]
-        floor_over_weight = float(-np.mean(tail) / settings.dt / weight) if floor else float("nan")
+        step = _BladeStep(solver, state, blade, position, (blade_half, 0.5 * width, blade_z), settings.dt)
+        settle_steps, floor_over_weight = _settle(step, settings, len(pts) * particle_mass * GRAVITY)
         samples = int(round(duration * samples_per_s))
         force = np.zeros((samples, 2))
         heap_bins = np.arange(0.0, x_end + dx, dx)

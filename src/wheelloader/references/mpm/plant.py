@@ -200,29 +200,9 @@ class MPMPlant:
             cache_status = self._settle(solver, scene, material, traj, t0)
             start_positions = solver.positions()
             settle_s = time.perf_counter() - wall0
-            t = path.t
-            mids = 0.5 * (t[1:] + t[:-1])
-            n = len(t)
-            impulse = np.zeros((n, 2))
-            window = np.zeros(n)
-            fill = np.zeros(n)
             poses = traj.poses()
-            fill[0] = np.count_nonzero(self.shape.inside(tuple(poses[0]), start_positions)) * solver.particle_volume
-            if observer is not None:
-                observer(float(t[0]), start_positions)
-            for k in range(n):
-                if k > 0:
-                    impulse[k] += solver.advance(t[k], traj)
-                    window[k] += t[k] - mids[k - 1]
-                    positions = solver.positions()
-                    fill[k] = np.count_nonzero(self.shape.inside(tuple(poses[k]), positions)) * solver.particle_volume
-                    if observer is not None:
-                        observer(float(t[k]), positions)
-                if k < n - 1:
-                    impulse[k] += solver.advance(mids[k], traj)
-                    window[k] += mids[k] - t[k]
+            force, fill = self._follow(solver, traj, path.t, poses, start_positions, observer)
             end_positions = solver.positions()
-            force = impulse / window[:, None]
             tangential, normal = blade_frame(force[:, 0], force[:, 1], path.blade_angle)
             pile_after, balance = _carved_pile(pile, scene, start_positions, end_positions,
                                                self.shape.inside(tuple(poses[-1]), end_positions),
@@ -268,6 +248,32 @@ class MPMPlant:
         return CycleLog(path, tangential * width, normal * width, pile, self.bucket, fill * width, None, pile_after,
                         metadata)
 
+
+    def _follow(self, solver: MPMSolver, traj: Trajectory, t: np.ndarray, poses: np.ndarray,
+                start_positions: np.ndarray, observer: Callable[[float, np.ndarray], None] | None
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """Advance ``solver`` along the path's samples ``t``: the mean force over each sample's interval
+        (centred on the sample) per metre of width [N/m] and the fill at each sample [m^3/m]."""
+        mids = 0.5 * (t[1:] + t[:-1])
+        n = len(t)
+        impulse = np.zeros((n, 2))
+        window = np.zeros(n)
+        fill = np.zeros(n)
+        fill[0] = np.count_nonzero(self.shape.inside(tuple(poses[0]), start_positions)) * solver.particle_volume
+        if observer is not None:
+            observer(float(t[0]), start_positions)
+        for k in range(n):
+            if k > 0:
+                impulse[k] += solver.advance(t[k], traj)
+                window[k] += t[k] - mids[k - 1]
+                positions = solver.positions()
+                fill[k] = np.count_nonzero(self.shape.inside(tuple(poses[k]), positions)) * solver.particle_volume
+                if observer is not None:
+                    observer(float(t[k]), positions)
+            if k < n - 1:
+                impulse[k] += solver.advance(mids[k], traj)
+                window[k] += mids[k] - t[k]
+        return impulse / window[:, None], fill
 
     def _settle(self, solver: MPMSolver, scene: Any, material: ContinuumSoil, traj: Trajectory, t0: float) -> str:
         """Settle the soil under gravity until ``t0`` (or restore the cached result); ``"hit"``, ``"miss"`` or
