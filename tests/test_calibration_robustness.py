@@ -165,7 +165,7 @@ def test_huge_filter_sigma_is_refused_at_once():
 # ------------------------------------------------------------------ long logs (issue #13, item 4)
 def test_grid_in_chunks_equals_grid_at_once(monkeypatch):
     from wheelloader.estimator import PAPER_BOUNDS
-    from wheelloader.estimator.calibration import varpro
+    from wheelloader.estimator.calibration import varpro_grid
     from wheelloader.estimator.calibration.fitmodel import FitData
     from wheelloader.estimator.soil_vector import vector_bounds
 
@@ -173,9 +173,9 @@ def test_grid_in_chunks_equals_grid_at_once(monkeypatch):
     data = FitData.from_state(cycle.contact_state(), cycle.tangential, cycle.normal, cycle.bucket)
     lo, hi = vector_bounds(PAPER_BOUNDS, cycle.bucket.edge_thickness)
     axes = (np.linspace(0.0, 0.78, 5), np.linspace(0.0, 0.78, 4), np.linspace(0.11, 1.53, 3))
-    whole = varpro.projected_grid(data, lo, hi, *axes)
-    monkeypatch.setattr(varpro, "GRID_CHUNK_ELEMENTS", 3 * len(data))  # three (phi, delta) pairs per chunk
-    chunked = varpro.projected_grid(data, lo, hi, *axes)
+    whole = varpro_grid.projected_grid(data, lo, hi, *axes)
+    monkeypatch.setattr(varpro_grid, "GRID_CHUNK_ELEMENTS", 3 * len(data))  # three (phi, delta) pairs per chunk
+    chunked = varpro_grid.projected_grid(data, lo, hi, *axes)
     np.testing.assert_allclose(chunked[0], whole[0], rtol=1e-9)
     np.testing.assert_allclose(chunked[1], whole[1], rtol=1e-7, atol=1e-6)
 

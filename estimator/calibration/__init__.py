@@ -9,7 +9,9 @@ in :mod:`wheelloader.estimator`; this subpackage fits it:
   :class:`SolverResult`, the one result type of the internal solvers;
 * :mod:`.verdict`: whether the data could determine the soil (:attr:`Calibration.trustworthy`);
 * :mod:`.fitmodel`: the force model arranged for fitting (linear basis, analytic Jacobian);
+* :mod:`.fit_factors`: the bearing factors at beta* and their derivatives, for fitting;
 * :mod:`.varpro`: the ``"varpro"`` method (variable projection, global grid, analytic refinement);
+* :mod:`.varpro_grid`: its global grid search (the projected cost and the refinement's starts);
 * :mod:`.boxqp`: the exact batched box-constrained least-squares solver it uses;
 * :mod:`.paper_methods`: the paper's ``"single-stage"`` and ``"multi-stage"`` baselines;
 * :mod:`.uncertainty`: covariance and identifiability;
