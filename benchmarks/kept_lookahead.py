@@ -120,6 +120,10 @@ def loop_figures(loop: dict[str, Any]) -> dict[str, float]:
            "kept_fill": statistics.fmean(kept) / cap,
            "cycles_to_move": next((i + 1 for i, v in enumerate(np.cumsum(kept)) if v >= MOVE_VOLUME), math.inf),
            "between_cycles_s_median": statistics.median(c["between_cycles_s"] for c in rows)}
+    spent = [int(m.group(1) or m.group(2)) for c in rows
+             if (m := PLAN_ITERATIONS.search(c["plan_message"])) is not None]
+    if spent:  # the IPOPT iterations of the plan dug (of its solve and re-plans; not the look-ahead's others)
+        out["plan_iterations_median"] = statistics.median(spent)
     if all("fixed_on_pile" in c for c in rows):
         fixed = [c["fixed_on_pile"] for c in rows]
         out["fixed_kJ_per_kept_m3"] = sum(f["energy_J"] for f in fixed) / sum(f["kept_m3"] for f in fixed) / 1e3
@@ -129,23 +133,27 @@ def loop_figures(loop: dict[str, Any]) -> dict[str, float]:
     return out
 
 
-CHOICE = re.compile(r"look-ahead chose (?P<name>.+?) \((?P<costs>.+?) kJ/m\^3 kept over two cycles")
+PLAN_ITERATIONS = re.compile(r"IPOPT (?:\S+ in (\d+) it\.|iterate \d+ of (\d+))")
+CHOICE = re.compile(r"look-ahead chose (?P<name>.+?) \((?P<costs>.+?) kJ/m\^3 kept over two cycles; "
+                    r"(?P<iterations>\d+) IPOPT it")
 
 
 def lookahead_stats(loop: dict[str, Any]) -> dict[str, float]:
     """How often the look-ahead chose another candidate than greedy, and its predicted two-cycle gain [%]
     (greedy's predicted cost over the chosen one's, by the model the strategy planned with)."""
-    chosen, gains = 0, []
+    chosen, gains, iterations = 0, [], []
     for c in loop["cycles"]:
         m = CHOICE.search(c["plan_message"])
         if m is None:
             continue
+        iterations.append(int(m.group("iterations")))
         costs = dict(part.rsplit(" ", 1) for part in m.group("costs").split(", "))
         greedy, best = float(costs.get("greedy", "inf")), float(costs[m.group("name")])
         chosen += m.group("name") != "greedy"
         if math.isfinite(greedy) and math.isfinite(best):
             gains.append(100.0 * (1.0 - best / greedy))
     return {"non_greedy_choices": chosen, "cycles_weighed": len(gains),
+            "ipopt_iterations_median": statistics.median(iterations) if iterations else math.nan,
             "predicted_gain_percent_median": statistics.median(gains) if gains else math.nan,
             "predicted_gain_percent_max": max(gains) if gains else math.nan,
             "next_cycle_error_percent_median": statistics.median(

@@ -83,9 +83,10 @@ def test_lookahead_stats_from_the_messages():
     rows[0]["plan_message"] = ("look-ahead chose greedy (greedy 40.0, fill limit 0.80 41.0, energy weight 0.04/kJ "
                                "45.0 kJ/m^3 kept over two cycles; 200 IPOPT it.): IPOPT ...")
     rows[1]["plan_message"] = ("look-ahead chose fill limit 0.80 (greedy 50.0, fill limit 0.80 45.0, energy weight "
-                               "0.04/kJ inf kJ/m^3 kept over two cycles; 200 IPOPT it.): IPOPT ...")
+                               "0.04/kJ inf kJ/m^3 kept over two cycles; 300 IPOPT it.): IPOPT ...")
     stats = bench.lookahead_stats({"cycles": rows})
     assert stats["non_greedy_choices"] == 1 and stats["cycles_weighed"] == 2
+    assert stats["ipopt_iterations_median"] == 250
     assert stats["predicted_gain_percent_median"] == pytest.approx(5.0)
     assert stats["predicted_gain_percent_max"] == pytest.approx(10.0)
     assert stats["next_cycle_error_percent_median"] == pytest.approx(20.0)
