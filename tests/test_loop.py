@@ -213,7 +213,40 @@ def test_plant_loop_unit_passes_the_planner_settings_on(monkeypatch):
     assert seen["failure_angle"] == "min_weight_force"
 
 
-def test_first_cycle_benchmark_smoke(tmp_path):
+def _need_taichi():
+    try:
+        import taichi  # noqa: F401
+    except ImportError:
+        if os.environ.get("WHEELLOADER_REQUIRE_MPM") == "1":
+            pytest.fail("WHEELLOADER_REQUIRE_MPM=1 but taichi is not installed")
+        pytest.skip('taichi not installed: pip install "wheelloader[mpm]"')
+
+
+def test_first_cycle_benchmark_fixed_path_smoke(tmp_path, monkeypatch):
+    """Smoke run of ``benchmarks/plant_first_cycle.py --quick`` (its whole run is slow, below): only its fixed
+    Bezier path, dug at 8 cm in this process; a second run reads the saved cycle instead of digging again. The
+    planned variants' constraints are checked in ``tests/test_planner_cut_angle.py``."""
+    import importlib.util
+    import json
+    from pathlib import Path
+
+    _need_taichi()
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "plant_first_cycle.py"
+    spec = importlib.util.spec_from_file_location("wheelloader_benchmark_plant_first_cycle", script)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    monkeypatch.setattr(bench, "QUICK", ("fixed Bezier path",))
+    for attempt in range(2):
+        assert bench.main(["--quick", "--ray", "off", "--out", str(tmp_path)]) == 0
+        rows = json.loads((tmp_path / "plant_first_cycle.json").read_text())["rows"]
+        assert [r["variant"] for r in rows] == ["fixed Bezier path"]
+        assert rows[0]["fill_m3"] > 0.0 and rows[0]["energy_J"] > 0.0
+        assert rows[0]["resumed"] == (attempt == 1)
+    assert "| fixed Bezier path |" in (tmp_path / "plant_first_cycle.md").read_text()
+
+
+@pytest.mark.slow
+def test_first_cycle_benchmark_quick(tmp_path):
     """``benchmarks/plant_first_cycle.py --quick``: the fixed path and one planner variant dug at 8 cm; a second
     run reads the saved cycles instead of digging again."""
     import json
@@ -221,12 +254,7 @@ def test_first_cycle_benchmark_smoke(tmp_path):
     import sys
     from pathlib import Path
 
-    try:
-        import taichi  # noqa: F401
-    except ImportError:
-        if os.environ.get("WHEELLOADER_REQUIRE_MPM") == "1":
-            pytest.fail("WHEELLOADER_REQUIRE_MPM=1 but taichi is not installed")
-        pytest.skip('taichi not installed: pip install "wheelloader[mpm]"')
+    _need_taichi()
     script = Path(__file__).resolve().parents[1] / "benchmarks" / "plant_first_cycle.py"
     for attempt in range(2):
         done = subprocess.run([sys.executable, str(script), "--quick", "--ray", "off", "--out", str(tmp_path)],
