@@ -92,7 +92,9 @@ def held_interrupts(keep: bool = False) -> Iterator[None]:
         yield
     finally:
         if not keep:
-            signal.signal(signal.SIGINT, previous if previous is not None else signal.SIG_DFL)
+            # a handler installed outside Python reads as None: Python's own (KeyboardInterrupt) comes back,
+            # never the OS default, which would end the process by the signal instead of exit 130
+            signal.signal(signal.SIGINT, previous if previous is not None else signal.default_int_handler)
 
 
 @contextlib.contextmanager
