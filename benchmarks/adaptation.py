@@ -45,6 +45,7 @@ from typing import Any  # noqa: E402
 import numpy as np  # noqa: E402
 
 from wheelloader.arguments import add_planner_physics_arguments, planner_physics  # noqa: E402
+from wheelloader.estimator.synthetic import perturbed_preset  # noqa: E402
 from wheelloader.provenance import commit_label, machine_info  # noqa: E402
 from wheelloader.ray_mode import add_ray_arguments  # noqa: E402
 
@@ -80,18 +81,6 @@ def _ours_options(args: argparse.Namespace) -> dict[str, Any]:
     if args.fill != "log":
         out["fill"] = args.fill
     return out
-
-
-def _plant_soil(name: str, seed: int):
-    """A hidden soil near the preset (log-normal 10 % perturbation), so no strategy starts from the truth."""
-    from wheelloader.estimator import PAPER_BOUNDS, SoilParams, preset
-
-    rng = np.random.default_rng(1000 + seed)
-    base = preset(name).to_dict()
-    for key in ("gamma", "cohesion", "adhesion", "phi", "delta", "k_c"):
-        lo, hi = PAPER_BOUNDS[key]
-        base[key] = float(np.clip(base[key] * math.exp(rng.normal(0.0, 0.1)), lo, hi * 0.999))
-    return SoilParams(**base)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -162,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     for soil_name in soils:
         for pile_name, pile_kwargs in piles.items():
             for seed in seeds:
-                hidden = _plant_soil(soil_name, seed)
+                hidden = perturbed_preset(soil_name, seed)
                 for name in _strategy_names(args):
                     keys.append({"soil": soil_name, "pile": pile_name, "seed": seed})
                     units.append(Unit(strategy_loop, {"soil": hidden, "pile": pile_kwargs, "truth": TRUTH,

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from wheelloader.estimator.synthetic import perturbed_preset
 from wheelloader.provenance import commit_label, load_label, machine_info
 
 SOILS = ("gravel", "dirt")
@@ -43,18 +44,6 @@ STRATEGIES = ("fixed", "greedy", "kept", "lookahead")
 TRUTH = {"compaction": 0.5, "rate_resistance": 1.0e4, "stone_rate": 0.5, "stone_force": 3000.0, "drift": 0.05}
 #: The volume the "cycles to move" column counts to [m^3 of kept soil].
 MOVE_VOLUME = 0.5
-
-
-def plant_soil(name: str, seed: int):
-    """A hidden soil near the preset (log-normal 10 % perturbation per seed), as ``benchmarks/adaptation.py``."""
-    from wheelloader.estimator import PAPER_BOUNDS, SoilParams, preset
-
-    rng = np.random.default_rng(1000 + seed)
-    base = preset(name).to_dict()
-    for key in ("gamma", "cohesion", "adhesion", "phi", "delta", "k_c"):
-        lo, hi = PAPER_BOUNDS[key]
-        base[key] = float(np.clip(base[key] * math.exp(rng.normal(0.0, 0.1)), lo, hi * 0.999))
-    return SoilParams(**base)
 
 
 def judge(fill_m3: float, energy_j: float, z_end: float, gamma: float) -> dict[str, float]:
@@ -86,7 +75,7 @@ def run_one(soil_name: str, seed: int, strategy: str, cycles: int) -> dict[str, 
     from wheelloader.loop import run_loop
     from wheelloader.references import make_plant
 
-    soil = plant_soil(soil_name, seed)
+    soil = perturbed_preset(soil_name, seed)
     plant = make_plant("fee-env", keep_env=True, truth=dict(TRUTH))
     try:
         records, logs = run_loop(plant, _strategy(strategy), Pile.trapezoid(), soil, cycles=cycles, seed=seed)

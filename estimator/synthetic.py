@@ -186,6 +186,20 @@ def random_soil(rng: np.random.Generator, bounds: dict[str, tuple[float, float]]
     return SoilParams(**values)
 
 
+def perturbed_preset(name: str, seed: int, spread: float = 0.1) -> SoilParams:
+    """A hidden soil near the preset ``name``: gamma, cohesion, adhesion, phi, delta and k_c each scaled by
+    ``exp(N(0, spread))`` (a log-normal perturbation, drawn from ``default_rng(1000 + seed)``) and clipped into
+    the paper's bounds, so that no strategy of a benchmark starts from the truth."""
+    from .soil import preset
+
+    rng = np.random.default_rng(1000 + seed)
+    base = preset(name).to_dict()
+    for key in ("gamma", "cohesion", "adhesion", "phi", "delta", "k_c"):
+        lo, hi = PAPER_BOUNDS[key]
+        base[key] = float(np.clip(base[key] * math.exp(rng.normal(0.0, spread)), lo, hi * 0.999))
+    return SoilParams(**base)
+
+
 def random_bezier_path(rng: np.random.Generator, toe_x: float = 0.0, name: str = "random") -> BucketPath:
     """A random quadratic Bezier digging path for the default trapezoid pile (Fig. 8 style).
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -75,3 +77,17 @@ def test_random_problems_are_valid():
         path = random_bezier_path(rng)
         cyc = synthetic_cycle(soil, path, noise=0.0)
         assert np.count_nonzero(cyc.contact_state().depth > 0) > 50
+
+
+def test_perturbed_preset_is_seeded_near_the_preset_and_inside_the_bounds():
+    from wheelloader.estimator import PAPER_BOUNDS, preset
+    from wheelloader.estimator.synthetic import perturbed_preset
+
+    a, b = perturbed_preset("gravel", 0), perturbed_preset("gravel", 0)
+    assert a == b and a != perturbed_preset("gravel", 1)
+    base = preset("gravel")
+    for key in ("gamma", "phi", "delta", "k_c"):
+        lo, hi = PAPER_BOUNDS[key]
+        assert lo <= getattr(a, key) <= hi
+        assert abs(math.log(getattr(a, key) / getattr(base, key))) < 0.5
+    assert a.n == base.n  # parameters outside the perturbed set stay the preset's
