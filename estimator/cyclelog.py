@@ -49,7 +49,7 @@ import numpy as np
 
 from .checks import check_choice
 from .errors import CycleLogError, ParameterError
-from .jsonable import to_jsonable
+from .jsonable import read_json, to_jsonable
 from .kinematics import DEFAULT_SLOPE_WINDOW, ContactState, contact_state
 from .machine import Bucket
 from .paths import BucketPath
@@ -247,19 +247,7 @@ class CycleLog:
         sidecar = sidecar_path(csv_path)
         if not sidecar.exists():
             raise CycleLogError(f"{csv_path}: JSON sidecar {sidecar.name} not found (it holds the pile and bucket)")
-        try:
-            with _open_text(sidecar, "r", encoding="utf-8-sig") as fh:
-                meta = json.loads(fh.read())
-        except lzma.LZMAError as exc:
-            raise CycleLogError(f"{sidecar}: not an xz file ({exc})") from None
-        except json.JSONDecodeError as exc:
-            raise CycleLogError(f"{sidecar}: not valid JSON ({exc})") from None
-        except UnicodeDecodeError as exc:
-            raise CycleLogError(f"{sidecar}: not a UTF-8 JSON file ({exc.reason} at byte {exc.start})") from None
-        except IsADirectoryError:
-            raise CycleLogError(f"{sidecar}: is a directory, expected the JSON sidecar") from None
-        except RecursionError:
-            raise CycleLogError(f"{sidecar}: not valid JSON (nested too deeply to read)") from None
+        meta = read_json(sidecar, CycleLogError)
         if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
             raise CycleLogError(f'{sidecar}: "format" must be "{FORMAT_NAME}"')
         if meta.get("version") != FORMAT_VERSION:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import lzma
 import math
 from pathlib import Path
 from typing import Any
@@ -36,7 +37,8 @@ def to_jsonable(value: Any) -> Any:
 
 
 def read_json(path: str | Path, error: type[Exception] | None = None) -> Any:
-    """The JSON value in the file ``path``, with one clear error for a file that is not JSON.
+    """The JSON value in the file ``path`` (read through xz when it ends in ``.xz``), with one clear error for a
+    file that is not JSON.
 
     Raises
     ------
@@ -48,7 +50,12 @@ def read_json(path: str | Path, error: type[Exception] | None = None) -> Any:
     error = error or ParameterError
     path = Path(path)
     try:
+        if path.name.endswith(".xz"):  # a compressed sidecar of a saved cycle
+            with lzma.open(path, "rt", encoding="utf-8-sig") as fh:
+                return json.loads(fh.read())
         return json.loads(path.read_text(encoding="utf-8-sig"))
+    except lzma.LZMAError as exc:
+        raise error(f"{path}: not an xz file ({exc})") from None
     except json.JSONDecodeError as exc:
         raise error(f"{path}: not a valid JSON file ({exc})") from None
     except UnicodeDecodeError as exc:
