@@ -27,6 +27,7 @@ from ..errors import CalibrationError
 
 if TYPE_CHECKING:
     from .api import calibrate
+    from .identify import HeldPrior
     from .options import DEFAULT_METHOD, METHOD_ALIASES, METHODS, CalibrationOptions, canonical_method
     from .prediction import Prediction, predict
     from .result import Calibration, FitQuality, SolverResult, StageResult, load_params
@@ -42,6 +43,7 @@ _HOMES = {
     **dict.fromkeys(("Prediction", "predict"), ".prediction"),
     **dict.fromkeys(("Calibration", "FitQuality", "SolverResult", "StageResult", "load_params"), ".result"),
     "Uncertainty": ".uncertainty",
+    "HeldPrior": ".identify",
     "FitWarning": ".verdict",
 }
 
@@ -60,6 +62,6 @@ def __dir__() -> list[str]:
 
 
 __all__ = ["DEFAULT_METHOD", "METHODS", "METHOD_ALIASES", "Calibration", "CalibrationError", "CalibrationOptions",
-           "FitQuality", "FitWarning",
+           "FitQuality", "FitWarning", "HeldPrior",
            "Prediction", "SolverResult", "StageResult", "Uncertainty", "calibrate", "canonical_method",
            "load_params", "predict"]

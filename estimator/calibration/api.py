@@ -194,8 +194,12 @@ def fit_varpro_method(data: FitData, cycle: CycleLog, opts: CalibrationOptions, 
     t0 = time.perf_counter()
     x0 = None if opts.initial is None else soil_vector(opts.initial, b)
     moments = None if opts.prior is None else class_prior(opts.prior)
+    if opts.held is not None:
+        cycles = 1 if data.cycle is None else int(np.max(data.cycle)) + 1
+        settings["held"] = opts.held.to_dict() | {"free": list(opts.held.free(cycles))}
+        moments = opts.held.apply(cycles, lo, hi)[2]
     fit = fit_varpro(data, lo, hi, opts.lam, x0, opts.grid, opts.n_starts, opts.max_nfev,
-                     regularize=opts.map_estimate, prior_moments=moments)
+                     regularize=opts.regularize or moments is not None, prior_moments=moments)
     if fit.prior is not None:
         settings["prior"] = {"mean": fit.prior.mean, "scale": fit.prior.scale, "nu": fit.prior.nu,
                              "autocorrelation_time": fit.tau, "exact_fit": fit.exact, "exact_fit_cost": fit.exact_cost}
@@ -289,6 +293,7 @@ def calibrate(cycles: CycleLog | list[CycleLog] | None = None, *legacy_args: Any
                                                                                                       strict=True))]
     data = parts[0] if len(logs) == 1 else FitData.concat(parts, weights)
     lo, hi = vector_bounds(opts.bounds, logs[0].bucket.edge_thickness)
+    lo, hi = (lo, hi) if opts.held is None else opts.held.apply(len(logs), lo, hi)[:2]  # identify.py
     settings = _model_settings(opts)
     data = _decimated(data, settings)
     _log.info("calibrate: method %s on %d in-soil samples of %d", opts.method, len(data), len(logs[0]))
@@ -307,7 +312,7 @@ def calibrate(cycles: CycleLog | list[CycleLog] | None = None, *legacy_args: Any
         settings["band_noise"] = "cross-cycle"
     sigma_0, relative = residual_noise_model(obs_r, fit_r)
     settings["band_model"] = BandModel(unc.covariance, integrated_autocorrelation_time(obs_r - fit_r), sigma_0,
-                                       relative).to_dict()
+                                       relative, opts.band_scale).to_dict()
     if len(logs) > 1:
         settings["cycles"] = _cycles_report(logs, data, weights, at_t, at_n, jac, resid, fit.x, lo, hi, force_scale)
     warns = assess(success=bool(fit.success), obs_t=data.y_t, obs_n=data.y_n, pred_t=at_t, pred_n=at_n,

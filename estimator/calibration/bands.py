@@ -13,10 +13,12 @@ Two sources of spread, added as variances per sample (Gaussian, independent):
   are fitted as ``var_r = sigma_0^2 + (c F_R,pred)^2`` (a floor plus a part proportional to the
   predicted force; non-negative least squares on the squared residuals), :func:`residual_noise_model`.
 
-The band of level ``p`` is ``mean +- z_p sqrt(var_p + var_r)`` with ``z_p`` the two-sided normal
-quantile. Both parts are estimated on the training cycle(s); a new path the model describes worse than
-its training cycles gets a band that is too narrow, which the coverage tables of
-``benchmarks/paper_experiments.py`` measure.
+The band of level ``p`` is ``mean +- k z_p sqrt(var_p + var_r)`` with ``z_p`` the two-sided normal
+quantile and ``k`` the band's scale (``CalibrationOptions(band_scale=)``, default 1; > 1 where validation
+paths showed that a new path is predicted worse than the training residuals say). Both parts are
+estimated on the training cycle(s); a new path the model describes worse than its training cycles gets
+a band that is too narrow at ``k = 1``, which the coverage tables of ``benchmarks/paper_experiments.py``
+and ``benchmarks/transfer.py`` measure.
 """
 
 from __future__ import annotations
@@ -65,17 +67,23 @@ class BandModel:
         Integrated autocorrelation time of the training residuals [samples] (>= 1).
     sigma_0, relative : float
         Residual noise model ``var = sigma_0^2 + (relative F_R,pred)^2`` [N, -].
+    scale : float
+        Factor on the band's standard deviation (default 1).
     """
 
     covariance: np.ndarray
     tau: float
     sigma_0: float
     relative: float
+    scale: float = 1.0
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable mapping (NaN as None)."""
         cov = [[None if not np.isfinite(v) else float(v) for v in row] for row in self.covariance]
-        return {"covariance": cov, "tau": self.tau, "sigma_0_N": self.sigma_0, "relative": self.relative}
+        out = {"covariance": cov, "tau": self.tau, "sigma_0_N": self.sigma_0, "relative": self.relative}
+        if self.scale != 1.0:
+            out["scale"] = self.scale
+        return out
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> BandModel:
@@ -84,7 +92,8 @@ class BandModel:
             cov = np.array([[np.nan if v is None else float(v) for v in row] for row in data["covariance"]])
             if cov.shape != (7, 7):
                 raise ValueError(f"covariance has shape {cov.shape}, expected (7, 7)")
-            return cls(cov, float(data["tau"]), float(data["sigma_0_N"]), float(data["relative"]))
+            return cls(cov, float(data["tau"]), float(data["sigma_0_N"]), float(data["relative"]),
+                       float(data.get("scale", 1.0)))
         except (KeyError, TypeError, ValueError) as exc:
             raise ParameterError(f"band model: {exc}") from None
 
@@ -162,10 +171,11 @@ def prediction_band(model: BandModel, soil: SoilParams, state: ContactState, buc
         fr = np.maximum(f_r[idx], 1e-9)
         jr = (f_t[idx, None] * jt + f_n[idx, None] * jn) / fr[:, None]
         var_r[idx] = np.einsum("ij,jk,ik->i", jr, cov, jr)
-    param_std = np.sqrt(np.maximum(var_r, 0.0))
+    k = model.scale
+    param_std = k * np.sqrt(np.maximum(var_r, 0.0))
     noise = lambda f: model.sigma_0**2 + (model.relative * f) ** 2  # noqa: E731
-    std_t = np.sqrt(np.maximum(var_t, 0.0) + noise(np.abs(f_t)))
-    std_n = np.sqrt(np.maximum(var_n, 0.0) + noise(np.abs(f_n)))
-    std_r = np.sqrt(np.maximum(var_r, 0.0) + noise(f_r))
+    std_t = k * np.sqrt(np.maximum(var_t, 0.0) + noise(np.abs(f_t)))
+    std_n = k * np.sqrt(np.maximum(var_n, 0.0) + noise(np.abs(f_n)))
+    std_r = k * np.sqrt(np.maximum(var_r, 0.0) + noise(f_r))
     return PredictionBand(float(level), std_t, std_n, std_r, param_std, np.maximum(f_r - z * std_r, 0.0),
                           f_r + z * std_r)

@@ -19,6 +19,7 @@ from ..kinematics import DEFAULT_SLOPE_WINDOW
 from ..payload import PayloadOptions
 from ..soil import SoilParams, as_soil, validate_bounds
 from .fitmodel import MIN_SAMPLES
+from .identify import HeldPrior
 from .priors import class_prior
 
 __all__ = ["DEFAULT_METHOD", "METHODS", "METHOD_ALIASES", "CalibrationOptions", "canonical_method"]
@@ -141,6 +142,14 @@ class CalibrationOptions:
         Residual noise model of the prediction band (:mod:`~.bands`): ``"training"`` (default) fits it to the
         training residuals; ``"cross-cycle"`` (several cycles) to the residuals of each cycle predicted by a
         fit on the others (leave one cycle out; one local refinement per cycle).
+    held : HeldPrior, optional
+        Fit only what the cycles identify (varpro method; :mod:`~.identify`): the parameters free for the
+        number of cycles given are fitted, the others held at the prior's mean (fixed, or a Gaussian prior of
+        its width). Not with ``prior``.
+    band_scale : float
+        Factor (> 0, default 1) on the prediction band's standard deviation (:mod:`~.bands`): a band whose width
+        was calibrated on validation paths (``benchmarks/transfer.py``) is wider than the training residuals
+        say, since a new path is predicted worse than the cycle the soil was fitted to.
 
     Raises
     ------
@@ -169,6 +178,8 @@ class CalibrationOptions:
     band_noise: str = "training"
     force_model: str = DEFAULT_FORCE_MODEL
     payload: PayloadOptions | None = None
+    held: HeldPrior | None = None
+    band_scale: float = 1.0
 
     def __post_init__(self) -> None:
         err = CalibrationError
@@ -203,6 +214,12 @@ class CalibrationOptions:
             class_prior(self.prior)  # raises CalibrationError on an unknown class or bad ranges
             if self.method != "varpro":
                 raise err("a literature prior needs the varpro method")
+        if self.held is not None:
+            if not isinstance(self.held, HeldPrior):
+                raise err(f"held must be a HeldPrior, got {type(self.held).__name__}")
+            if self.method != "varpro" or self.prior is not None:
+                raise err("held needs the varpro method and no prior (it is the prior)")
+        check_range("band_scale", self.band_scale, 0.0, None, low_open=True, error=err)
         set_(self, "initial", _coerce_initial(self.initial))
 
     @property
@@ -218,4 +235,5 @@ class CalibrationOptions:
     @property
     def map_estimate(self) -> bool:
         """Whether the varpro fit ends in a MAP estimate (``regularize`` or a literature ``prior``)."""
-        return self.regularize or self.prior is not None
+        return self.regularize or self.prior is not None or (
+            self.held is not None and any(v > 0.0 for v in (self.held.std or {}).values()))
