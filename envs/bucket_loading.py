@@ -25,6 +25,7 @@ from wheelloader.estimator import (
 )
 from wheelloader.estimator.checks import check_optional_int
 from wheelloader.estimator.kinematics import surface_contact
+from wheelloader.estimator.payload import kept_volume_float
 from wheelloader.estimator.pile import node_heights
 
 from .bookkeeping import (
@@ -65,6 +66,10 @@ def env_config_episode_limit(settings: dict[str, Any]) -> dict[str, Any]:
     return settings
 
 
+#: The acceleration of a step without one (the paper's model, or a stalled step) [m/s^2].
+_AT_REST = (0.0, 0.0)
+
+
 def _pick(condition: Any, a: Any, b: Any) -> Any:
     """``where`` for Python scalars."""
     return a if condition else b
@@ -88,6 +93,19 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
 
     Depth is measured to the pile surface as it was at the start of the cycle;
     fill and the look-ahead surface heights come from the carved surface.
+
+    ``force_model`` selects the plant's model, as ``force_model=`` does in
+    :func:`~wheelloader.estimator.calibrate`, :func:`~wheelloader.estimator.predict`
+    and the planner: ``"fee"`` (default, the paper's FEE: the fill is the carved
+    volume up to the capacity, no force out of the soil) or ``"fee-payload"``
+    (the payload as a state, :mod:`~wheelloader.estimator.payload`: the fill is
+    the kept soil, ``kept_volume`` of the volume removed this cycle, saturating
+    smoothly at the heaped capacity; in soil the FEE's surcharge is the carved
+    fill's, and as the tip leaves the soil the kept soil's weight and inertia
+    (the step's acceleration) take over, so a loaded bucket out of the soil
+    still feels its load). The fill in the observation, ``info`` and the reward
+    is the model's fill; ``info["carved_volume"]`` is the carved volume under
+    either model.
 
     ## Action Space
 
@@ -131,7 +149,8 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
     + reward_force`` (each term is in ``info``; weights in
     :class:`~wheelloader.envs.config.RewardWeights`):
 
-    * ``reward_fill = fill * dV_bucket / capacity`` (fill gained this step);
+    * ``reward_fill = fill * dV_bucket / capacity`` (fill gained this step; the
+      kept soil under ``"fee-payload"``);
     * ``reward_energy = -energy * (dE_soil + dE_payload)``: mechanical work
       done on the soil, ``max(0, F_T ds_t + F_N ds_n)`` with the tip
       displacement resolved along and across the blade, plus lifting work on
@@ -199,6 +218,10 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
       soil's friction angle, or a repose angle [rad]), ``relax_iterations``
       (sweeps of :meth:`Pile.relaxed` per new cycle, default 500: a partial
       slump of steep carved walls), ``cycles_per_episode`` (default 1).
+    * ``force_model``: ``"fee"`` (default) or ``"fee-payload"`` (a name of
+      :data:`~wheelloader.estimator.FORCE_MODELS`); ``payload``:
+      :class:`~wheelloader.estimator.PayloadOptions` or dict for
+      ``"fee-payload"`` (default :data:`~wheelloader.estimator.DEFAULT_PAYLOAD`).
     * ``render_mode``: ``None``, ``"rgb_array"`` or ``"human"``.
     * ``max_episode_steps``: truncate the episode after this many steps
       (default None: ``gym.make`` adds its ``TimeLimit`` wrapper instead).
@@ -303,6 +326,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         self._stone = 0.0
         self._beta: float | None = None
         self._energy_soil = self._energy_payload = 0.0
+        self._fill = 0.0  # the bucket's fill [m^3]: the carved volume ("fee") or the payload's kept soil
         self._cycle_t = 0
         self._samples = []
         depth, rho, alpha, lt = contact_single(pile, self._x, self._z, self._th, cfg.bucket.floor_length,
@@ -322,7 +346,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         m_n = self._measure(f_n, noise[1])
         if self._samples is not None:
             self._samples.append((self._cycle_t * self.cfg.dt, self._x, self._z, self._th, m_t, m_n,
-                                  self._carver.fill, f_t, f_n, flags))
+                                  self._fill, f_t, f_n, flags))
         self._mt, self._mn = m_t, m_n
         return m_t, m_n
 
@@ -345,25 +369,29 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         ld = cfg.loader
         x, z, th = self._x, self._z, self._th
         xn, zn, thn, vx, vz, om = self._move(action)
-        before = fill0, _, _ = carver.fill, carver.spilled, carver.removed  # carver.state()
+        before = carver.fill, carver.spilled, carver.removed  # carver.state()
+        fill0 = self._fill
+        payload = cfg.payload
         changes: list = []
         carver.cut_segment(x, z, xn, zn, changes)
         k = self._k = self._k + 1
         j = k % NOISE_CHUNK
         if j == 0:
             self._draw_noise()
-        depth, rho, alpha, height, w_load, f_t, f_n, beta, flags = self._plant(xn, zn, thn, x, z, j)
+        acc = _AT_REST if payload is None else ((vx - self._vx) / cfg.dt, (vz - self._vz) / cfg.dt)
+        depth, rho, alpha, height, w_load, f_t, f_n, beta, flags = self._plant(xn, zn, thn, x, z, j, acc)
         stalled = f_t > ld.max_push_force or f_n > ld.max_lift_force
-        if stalled:  # the bucket does not move: carving undone, pose held, velocity zeroed
+        if stalled:  # the bucket does not move: carving undone, pose held, velocity zeroed (weight only)
             carver.restore(changes, before)
             xn, zn, thn, vx, vz, om = x, z, th, 0.0, 0.0, 0.0
-            depth, rho, alpha, height, w_load, f_t, f_n, beta, flags = self._plant(x, z, th, x, z, -1)
+            depth, rho, alpha, height, w_load, f_t, f_n, beta, flags = self._plant(x, z, th, x, z, -1, _AT_REST)
             self._stall_count += 1
         else:
             self._stall_count = 0
         if depth > 0.0:
             self._beta = beta
-        fill = carver.fill
+        fill = self._fill = (carver.fill if payload is None
+                             else kept_volume_float(carver.removed, cfg.bucket.capacity, payload))
         e_soil, e_pay = step_work(f_t, f_n, xn - x, zn - z, thn, w_load, cos=math.cos, sin=math.sin)
         self._energy_soil += e_soil
         self._energy_payload += e_pay
@@ -389,7 +417,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         info = {
             "reward_fill": terms.fill, "reward_energy": terms.energy, "reward_validity": terms.validity,
             "reward_stall": terms.stall, "reward_force": terms.force,
-            "fill_volume": fill, "fill_fraction": fill / cap, "spilled": carver.spilled,
+            "fill_volume": fill, "fill_fraction": fill / cap, "carved_volume": carver.fill, "spilled": carver.spilled,
             "force_tangential": f_t, "force_normal": f_n, "measured_tangential": m_t, "measured_normal": m_n,
             "energy_soil": self._energy_soil, "energy_payload": self._energy_payload,
             "depth": depth, "flags": flags, "stalled": stalled, "cycle_done": done,
@@ -433,20 +461,32 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         thn = lo if thn < lo else (hi if thn > hi else thn)
         return xn, zn, thn, (xn - x) / dt, (zn - z) / dt, (thn - th) / dt
 
-    def _plant(self, x: float, z: float, th: float, x_before: float, z_before: float, j: int) -> tuple:
+    def _plant(self, x: float, z: float, th: float, x_before: float, z_before: float, j: int,
+               acceleration: tuple[float, float]) -> tuple:
         """Contact and plant forces at a pose with the current fill: the shared model (depth to the
         start-of-cycle surface), then the truth beyond the model (``j < 0``: no new stone; the step came from
-        ``(x_before, z_before)``).
+        ``(x_before, z_before)``; ``acceleration``: the tip's this step [m/s^2], the carried load's inertia under
+        ``"fee-payload"``).
 
-        Returns ``(depth, rho, alpha, surface height, W_load, F_T, F_N, beta, flags)``.
+        Returns ``(depth, rho, alpha, surface height, W_load, F_T, F_N, beta, flags)``; ``W_load`` [N] is the
+        weight of the bucket's fill (the payload's kept soil under ``"fee-payload"``, whose surcharge in soil
+        is the carved fill's, as the estimator's model has it).
         """
         cfg = self.cfg
         soil, bucket = self._soil, cfg.bucket
         depth, rho, alpha, lt, height = surface_contact(self._start_pile, x, z, th, bucket.floor_length,
                                                         cfg.slope_window)
         w_load = soil.gamma * GRAVITY * self._carver.fill
-        f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, lt, w_load, bucket, DEFAULT_OPTIONS,
-                                                   self._beta)
+        payload = cfg.payload
+        if payload is None:
+            f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, lt, w_load, bucket, DEFAULT_OPTIONS,
+                                                       self._beta)
+        else:  # "fee-payload": the kept soil's weight and inertia take over from the surcharge at exit
+            kept = kept_volume_float(self._carver.removed, bucket.capacity, payload)
+            carried = soil.gamma * GRAVITY * kept
+            f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, lt, w_load, bucket, cfg.model_options,
+                                                       self._beta, acceleration=acceleration, carried_weight=carried)
+            w_load = carried
         if cfg.truth_active:
             dist = math.hypot(x - x_before, z - z_before)
             f_t, f_n = self._truth_forces(f_t, f_n, depth, dist / cfg.dt, dist, j)
@@ -485,7 +525,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         carver = self._carver
         cfg = self.cfg
         vals = [x, z, self._th, self._vx, self._vz, self._om, self._depth, self._rho, self._alpha,
-                carver.fill / cfg.bucket.capacity, m_t * 1e-3, m_n * 1e-3]
+                self._fill / cfg.bucket.capacity, m_t * 1e-3, m_n * 1e-3]
         vals += node_heights(carver.nodes, carver.x0, carver.spacing, x, cfg.lookahead, z)  # surface minus tip z
         obs = np.array(vals, dtype=np.float32)
         low, high = cfg.observation_limits  # float32 bounds: clipping after the cast equals clipping before it
@@ -565,7 +605,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         """What the renderer draws (plain data)."""
         return {
             "pile": self.cfg.pile, "start_pile": self._start_pile, "carved": self._carver.pile(),
-            "x": self._x, "z": self._z, "blade_angle": self._th, "fill": self._carver.fill,
+            "x": self._x, "z": self._z, "blade_angle": self._th, "fill": self._fill,
             "capacity": self.cfg.bucket.capacity, "F_T": self._mt, "F_N": self._mn,
             "floor_length": self.cfg.bucket.floor_length, "time": self._cycle_t * self.cfg.dt,
             "limits": (self.cfg.loader.max_push_force, self.cfg.loader.max_lift_force),

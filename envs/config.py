@@ -18,14 +18,19 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from wheelloader.estimator import (
+    DEFAULT_OPTIONS,
     Bucket,
     Loader,
+    ModelOptions,
     ParameterError,
+    PayloadOptions,
     Pile,
     SoilParams,
     as_soil,
 )
 from wheelloader.estimator.checks import check_finite, check_int, check_range
+from wheelloader.estimator.force_models import DEFAULT_FORCE_MODEL, check_force_model, model_options_for
+from wheelloader.estimator.payload import as_payload
 
 from .soils import SoilRandomization, SoilSpec, drift_soil, parse_soil
 from .truth import TruthOptions, as_truth, stone_decay
@@ -262,6 +267,10 @@ class EnvConfig:
         Sweeps of :meth:`Pile.relaxed` per new cycle (>= 1).
     cycles_per_episode : int
         Digging cycles per episode (>= 1).
+    force_model : str
+        The plant's model, a name of :data:`~wheelloader.estimator.FORCE_MODELS` (the env's docstring).
+    payload : PayloadOptions or dict, optional
+        The payload of ``"fee-payload"`` (default :data:`~wheelloader.estimator.DEFAULT_PAYLOAD`).
     """
 
     soil: SoilArgument = "gravel"
@@ -287,9 +296,12 @@ class EnvConfig:
     relax: bool | float = False
     relax_iterations: int = 500
     cycles_per_episode: int = 1
+    force_model: str = DEFAULT_FORCE_MODEL
+    payload: PayloadOptions | Mapping[str, float] | None = None
 
     def __post_init__(self) -> None:
         set_ = functools.partial(object.__setattr__, self)
+        set_("payload", check_force_model(self.force_model, as_payload(self.payload)))
         pile = parse_pile(self.pile)
         set_("soil", parse_soil(self.soil))
         set_("pile", pile)
@@ -337,6 +349,10 @@ class EnvConfig:
         return cls(**settings)
 
     # ------------------------------------------------------------------ derived values
+    @functools.cached_property
+    def model_options(self) -> ModelOptions:
+        """The plant's force-model options (``"fee-payload"``: the carried load handed over at exit)."""
+        return model_options_for(self.force_model, DEFAULT_OPTIONS)
     @functools.cached_property
     def dt(self) -> float:
         """Control period [s]."""
@@ -410,14 +426,15 @@ class EnvConfig:
         return np.array(low, dtype=np.float32), np.array(high, dtype=np.float32)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-able summary (for cycle-log metadata)."""
-        return {
+        """JSON-able summary (for cycle-log metadata; ``force_model`` and ``payload`` only when not ``"fee"``)."""
+        model = {} if self.payload is None else {"force_model": self.force_model, "payload": self.payload.to_dict()}
+        return {  # the paper's model adds nothing (saved metadata stays as it was)
             "soil": self.soil.to_dict(), "loader": self.loader.to_dict(), "bucket": self.bucket.to_dict(),
             "control_rate": self.control_rate, "sensor_noise": self.sensor_noise, "sensor_range": self.sensor_range,
             "reward": asdict(self.reward_weights), "truth": self.truth.to_dict(),
             "stall_patience": self.stall_patience, "exit_clearance": self.exit_clearance,
             "exit_min_fill": self.exit_min_fill, "keep_pile": self.keep_pile, "relax": self.relax,
-            "relax_iterations": self.relax_iterations, "cycles_per_episode": self.cycles_per_episode,
+            "relax_iterations": self.relax_iterations, "cycles_per_episode": self.cycles_per_episode, **model,
         }
 
 

@@ -46,6 +46,8 @@ from wheelloader.estimator import (
     soil_forces_single,
 )
 from wheelloader.estimator.checks import check_int
+from wheelloader.estimator.force_model import carried_forces
+from wheelloader.estimator.payload import kept_volume
 
 from .batched_records import BatchedCycleRecorder
 from .batched_surface import BatchedSurfaces
@@ -172,7 +174,9 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         self._x, self._z, self._th = z(n), z(n), z(n)
         self._vx, self._vz, self._om = z(n), z(n), z(n)
         self._depth, self._rho, self._alpha = z(n), z(n), z(n)
-        self._fill, self._spilled, self._stone = z(n), z(n), z(n)
+        self._fill, self._spilled, self._stone = z(n), z(n), z(n)  # fill: the carved volume up to the capacity
+        self._removed = z(n)  # volume removed since the cycle started (the payload's input) [m^3]
+        self._kept = z(n)  # the bucket's fill as the env reports it: _fill, or the payload's kept soil [m^3]
         self._mt, self._mn = z(n), z(n)
         self._e_soil, self._e_pay = z(n), z(n)
         self._entered = np.zeros(n, dtype=bool)
@@ -278,6 +282,7 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         self._x[i], self._z[i], self._th[i] = x, z, th
         self._vx[i] = self._vz[i] = self._om[i] = 0.0
         self._fill[i] = self._spilled[i] = self._stone[i] = 0.0
+        self._removed[i] = self._kept[i] = 0.0
         self._e_soil[i] = self._e_pay[i] = 0.0
         self._stall[i] = 0
         self._k[i] = 0
@@ -424,12 +429,20 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         vx, vz, om = (xn - x) / dt, (zn - z) / dt, (thn - th) / dt
         fill0 = self._fill.copy()
         spilled0 = self._spilled.copy()
+        removed0 = self._removed.copy()
+        kept0 = self._kept.copy()
+        payload = cfg.payload
         rows = np.arange(self.num_envs)
         undo = self._carve(rows, x, z, xn, zn)
         fill = self._fill.copy()
         depth, rho, alpha, lt, h_surf = self._surf.contact(rows, xn, zn, thn, cfg.slope_window,
                                                            cfg.bucket.floor_length)
         f_t, f_n, flags, beta = self._forces(rows, depth, rho, alpha, lt, fill)
+        if payload is not None:  # "fee-payload": the kept soil's weight and inertia, in and out of soil
+            kept = kept_volume(self._removed, cfg.bucket.capacity, payload)
+            acc = np.column_stack([(vx - self._vx) / dt, (vz - self._vz) / dt])
+            d_t, d_n = carried_forces(depth, alpha - rho, self._gamma * GRAVITY * kept, acc, cfg.model_options)
+            f_t, f_n = f_t + d_t, f_n + d_n
         self._k += 1
         j = self._k % NOISE_CHUNK
         redraw = j == 0 if pending is None else (j == 0) & ~pending
@@ -446,12 +459,17 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
             fill[s] = fill0[s]
             self._fill[s] = fill0[s]
             self._spilled[s] = spilled0[s]
+            self._removed[s] = removed0[s]
             xn[s], zn[s], thn[s] = x[s], z[s], th[s]
             vx[s] = vz[s] = om[s] = 0.0
             d2, rho2, al2, lt2, h2 = self._surf.contact(s, x[s], z[s], th[s], cfg.slope_window,
                                                         cfg.bucket.floor_length)
             h_surf[s] = h2
             ft2, fn2, fl2, beta[s] = self._forces(s, d2, rho2, al2, lt2, fill0[s])
+            if payload is not None:  # held: weight only
+                d_t, d_n = carried_forces(d2, al2 - rho2, self._gamma[s] * GRAVITY * kept0[s], None,
+                                          cfg.model_options)
+                ft2, fn2 = ft2 + d_t, fn2 + d_n
             if truth_on:
                 ft2, fn2 = self._truth(s, s, ft2, fn2, d2, 0.0, 0.0, None, False)
             depth[s], rho[s], alpha[s], f_t[s], f_n[s], flags[s] = d2, rho2, al2, ft2, fn2, fl2
@@ -459,6 +477,11 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         else:
             self._stall[:] = 0
         self._beta = np.where(depth > 0.0, beta, self._beta)
+        carved = fill
+        if payload is not None:  # the fill is the payload's kept soil (obs, info, reward, cycle end, records)
+            kept = kept_volume(self._removed, cfg.bucket.capacity, payload)
+            fill0, fill = kept0, kept
+        self._kept = fill.copy()
         # energy (the shared bookkeeping)
         e_soil, e_pay = step_work(f_t, f_n, xn - x, zn - z, thn, self._gamma * GRAVITY * fill)
         self._e_soil += e_soil
@@ -482,8 +505,10 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
             self._records.write_step((xn, zn, thn, self._mt, self._mn, fill, f_t, f_n, flags))
         info = dict(zip(REWARD_TERMS, terms, strict=True))
         # fresh arrays only (the env's state arrays change at the next step)
-        info.update(fill_volume=fill, fill_fraction=fill / cap, spilled=self._spilled.copy(), force_tangential=f_t,
-                    force_normal=f_n, measured_tangential=self._mt.copy(), measured_normal=self._mn.copy(),
+        info.update(fill_volume=fill, fill_fraction=fill / cap,
+                    carved_volume=carved.copy() if payload is None else carved, spilled=self._spilled.copy(),
+                    force_tangential=f_t, force_normal=f_n, measured_tangential=self._mt.copy(),
+                    measured_normal=self._mn.copy(),
                     energy_soil=self._e_soil.copy(), energy_payload=self._e_pay.copy(), depth=depth.copy(),
                     flags=np.asarray(flags, dtype=int), stalled=stalled, cycle_done=done,
                     cycle=np.zeros(self.num_envs, dtype=int))
@@ -499,6 +524,7 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         room = np.maximum(0.0, self.cfg.bucket.capacity - fill)
         taken = np.where(removed <= room, removed, room)
         pos = removed > 0.0
+        self._removed = np.where(pos, self._removed + removed, self._removed)
         self._fill = np.where(pos, fill + taken, fill)
         self._spilled = np.where(pos, self._spilled + (removed - taken), self._spilled)
         return idx_u, old_u
@@ -512,7 +538,7 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         obs[:, 0], obs[:, 1], obs[:, 2] = self._x, self._z, self._th
         obs[:, 3], obs[:, 4], obs[:, 5] = self._vx, self._vz, self._om
         obs[:, 6], obs[:, 7], obs[:, 8] = self._depth, self._rho, self._alpha
-        obs[:, 9] = self._fill / cfg.bucket.capacity
+        obs[:, 9] = self._kept / cfg.bucket.capacity
         obs[:, 10], obs[:, 11] = self._mt * 1e-3, self._mn * 1e-3
         if look:
             ahead = self._x[:, None] + np.asarray(look)[None, :]

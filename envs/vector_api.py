@@ -25,8 +25,9 @@ __all__ = ["PER_ENV_ATTRIBUTES", "PER_ENV_METHODS", "RESET_INFO_KEYS", "STEP_INF
 
 #: Keys of the per-step ``info`` of both envs (the batched env adds a ``_key`` mask to each).
 STEP_INFO_KEYS: tuple[str, ...] = REWARD_TERMS + (
-    "fill_volume", "fill_fraction", "spilled", "force_tangential", "force_normal", "measured_tangential",
-    "measured_normal", "energy_soil", "energy_payload", "depth", "flags", "stalled", "cycle_done", "cycle")
+    "fill_volume", "fill_fraction", "carved_volume", "spilled", "force_tangential", "force_normal",
+    "measured_tangential", "measured_normal", "energy_soil", "energy_payload", "depth", "flags", "stalled",
+    "cycle_done", "cycle")
 #: Keys of the reset ``info`` of both envs (``soil``: the soil's parameters as a plain dict).
 RESET_INFO_KEYS: tuple[str, ...] = ("soil", "cycle")
 #: Attributes whose value differs between sub-envs (``get_attr`` / ``call`` give one per sub-env).
@@ -128,7 +129,7 @@ class VectorApi:
         return {
             "pile": self.cfg.pile, "start_pile": self._start_piles[i], "carved": self._surf.pile(i),
             "x": float(self._x[i]), "z": float(self._z[i]), "blade_angle": float(self._th[i]),
-            "fill": float(self._fill[i]), "capacity": self.cfg.bucket.capacity, "F_T": float(self._mt[i]),
+            "fill": float(self._kept[i]), "capacity": self.cfg.bucket.capacity, "F_T": float(self._mt[i]),
             "F_N": float(self._mn[i]), "floor_length": self.cfg.bucket.floor_length,
             "time": float(self._steps[i]) * self.cfg.dt,
             "limits": (self.cfg.loader.max_push_force, self.cfg.loader.max_lift_force),

@@ -55,6 +55,7 @@ model). The forces stay linear in gamma, C, C_a and K.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, replace
 
@@ -86,8 +87,8 @@ from .validity import (
 __all__ = [
     "DEFAULT_OPTIONS", "FLAG_ALPHA_CLAMPED", "FLAG_NAMES", "FLAG_OUT_OF_SOIL", "FLAG_RHO_HIGH", "FLAG_RHO_LOW",
     "FLAG_TENSION", "GRAVITY", "ModelOptions", "SoilForces", "bearing_factors", "bearing_factors_cotangent",
-    "beta_bounds", "carried_load_factors", "clamp_angles", "log_ngamma_slope", "optimal_beta", "optimal_beta_scalar",
-    "slip_factor", "soil_forces", "soil_forces_single",
+    "beta_bounds", "carried_forces", "carried_load_factors", "clamp_angles", "log_ngamma_slope", "optimal_beta",
+    "optimal_beta_scalar", "slip_factor", "soil_forces", "soil_forces_single",
 ]
 
 #: Standard gravity [m/s^2].
@@ -213,6 +214,35 @@ class SoilForces:
         return {name: int(np.count_nonzero(self.flags & bit)) for bit, name in FLAG_NAMES.items()}
 
 
+def carried_forces(depth, blade_angle, carried_weight, acceleration=None,
+                   options: ModelOptions = DEFAULT_OPTIONS) -> tuple[np.ndarray, np.ndarray]:
+    """The opt-in carried-load term's ``(dF_T, dF_N)`` [N] (module docstring), in and out of soil.
+
+    The one vectorised form of the term: :func:`soil_forces` adds it, and so does the batched env to every row
+    (in soil and out of it) under the ``"fee-payload"`` force model.
+
+    Parameters
+    ----------
+    depth : array_like
+        Tip depth [m] (<= 0: out of soil).
+    blade_angle : array_like
+        Blade direction above +x [rad] (``alpha - rho``).
+    carried_weight : array_like
+        Weight of the carried load [N].
+    acceleration : array_like, optional
+        Tip acceleration ``(a_x, a_z)``, shape ``(n, 2)`` [m/s^2]; None: weight only.
+    options : ModelOptions
+        ``carried_in_soil`` False hands the weight over from the surcharge as the tip leaves the soil,
+        ``1 - min(d / contact_depth, 1)``.
+    """
+    c_t, c_n = carried_load_factors(blade_angle, acceleration)
+    w_carried = np.asarray(carried_weight, dtype=float)
+    if not options.carried_in_soil:  # handed over from the surcharge as the tip leaves (ModelOptions)
+        ramp = np.minimum(np.maximum(np.asarray(depth, dtype=float), 0.0) / options.contact_depth, 1.0)
+        w_carried = (1.0 - ramp) * w_carried
+    return w_carried * c_t, w_carried * c_n
+
+
 def soil_forces(soil: SoilParams, state: ContactState, bucket: Bucket,
                 options: ModelOptions = DEFAULT_OPTIONS, beta_guess: np.ndarray | None = None) -> SoilForces:
     """Forces of the modified FEE along a path (vectorised).
@@ -267,15 +297,19 @@ def soil_forces(soil: SoilParams, state: ContactState, bucket: Bucket,
                       + soil.adhesion * w * state.blade_length)  # eq 16
     normal = fee * math.cos(delta)  # eq 17
     if options.carried_load:  # opt-in: the carried load's weight and inertia (module docstring)
-        c_t, c_n = carried_load_factors(state.blade_angle, state.acceleration)
-        w_carried = state.carried_weight(soil.gamma)
-        if not options.carried_in_soil:  # handed over from the surcharge as the tip leaves (ModelOptions)
-            w_carried = (1.0 - ramp) * w_carried
-        tangential = tangential + w_carried * c_t
-        normal = normal + w_carried * c_n
+        d_t, d_n = carried_forces(state.depth, state.blade_angle, state.carried_weight(soil.gamma),
+                                  state.acceleration, options)
+        tangential = tangential + d_t
+        normal = normal + d_n
     flags = np.where(out, FLAG_OUT_OF_SOIL, flags)  # out of soil: other flags are moot
     return SoilForces(tangential, normal, np.hypot(tangential, normal), fee, pressure, beta,
                       n_gamma, n_c, n_a, n_q, flags)
+
+
+@functools.lru_cache(maxsize=32)
+def _without_carried(options: ModelOptions) -> ModelOptions:
+    """``options`` with the carried-load term off (made once per options: the env's steps call it)."""
+    return replace(options, carried_load=False)
 
 
 def soil_forces_single(soil: SoilParams, depth: float, rho: float, alpha: float, blade_length: float,
@@ -297,13 +331,12 @@ def soil_forces_single(soil: SoilParams, depth: float, rho: float, alpha: float,
         ``(F_T, F_N, beta, flags)``; same equations and clamps as :func:`soil_forces`.
     """
     if options.carried_load:
+        f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, blade_length, load_weight, bucket,
+                                                   _without_carried(options), beta_guess, velocity=velocity)
         theta = alpha - rho
         ax, gz = acceleration[0] / GRAVITY, 1.0 + acceleration[1] / GRAVITY
         c_t = ax * math.cos(theta) + gz * math.sin(theta)
         c_n = gz * math.cos(theta) - ax * math.sin(theta)
-        f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, blade_length, load_weight, bucket,
-                                                   replace(options, carried_load=False), beta_guess,
-                                                   velocity=velocity)
         w_carried = load_weight if carried_weight is None else carried_weight
         if not options.carried_in_soil:  # handed over from the surcharge as the tip leaves (ModelOptions)
             w_carried = (1.0 - min(max(depth, 0.0) / options.contact_depth, 1.0)) * w_carried

@@ -27,7 +27,7 @@ column) by :func:`fit_payload`.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -37,8 +37,8 @@ from .cyclelog import CycleLog
 from .errors import CalibrationError, ParameterError
 from .kinematics import DEFAULT_SLOPE_WINDOW, ContactState
 
-__all__ = ["PayloadOptions", "fit_payload", "kept_fill", "kept_volume", "payload_contact_state", "with_kept_fill",
-           "with_payload"]
+__all__ = ["PayloadOptions", "as_payload", "fit_payload", "kept_fill", "kept_volume", "kept_volume_float",
+           "payload_contact_state", "with_kept_fill", "with_payload"]
 
 
 @dataclass(frozen=True)
@@ -68,6 +68,24 @@ class PayloadOptions:
         """Plain-JSON form."""
         return {"retention": self.retention, "heap_factor": self.heap_factor, "sharpness": self.sharpness}
 
+    @classmethod
+    def from_dict(cls, data: Mapping[str, float]) -> PayloadOptions:
+        """From :meth:`to_dict`'s form (some keys may be left out); an unknown key raises ParameterError."""
+        names = ("retention", "heap_factor", "sharpness")
+        unknown = sorted(str(k) for k in set(data) - set(names))
+        if unknown:
+            raise ParameterError(f"payload: unknown key(s) {unknown}; expected some of {list(names)}")
+        return cls(**data)
+
+
+def as_payload(value: PayloadOptions | Mapping[str, float] | None) -> PayloadOptions | None:
+    """``None``, a :class:`PayloadOptions` or a mapping of its fields (:meth:`PayloadOptions.from_dict`)."""
+    if value is None or isinstance(value, PayloadOptions):
+        return value
+    if isinstance(value, Mapping):
+        return PayloadOptions.from_dict(value)
+    raise ParameterError(f"payload must be a PayloadOptions, a dict or None, got {type(value).__name__}")
+
 
 def kept_volume(removed, capacity: float, options: PayloadOptions, initial: float = 0.0):
     """Kept soil ``V`` [m^3] for a removed volume ``removed`` [m^3] (module docstring).
@@ -93,6 +111,18 @@ def kept_volume(removed, capacity: float, options: PayloadOptions, initial: floa
     u = options.retention * removed
     if isinstance(u, np.ndarray) or np.isscalar(u):
         u = np.maximum(u, 0.0)
+    p = options.sharpness
+    return initial + u / (1.0 + (u / free) ** p) ** (1.0 / p)
+
+
+def kept_volume_float(removed: float, capacity: float, options: PayloadOptions, initial: float = 0.0) -> float:
+    """:func:`kept_volume` of one Python float (the env's step: no NumPy scalars), the same formula."""
+    free = options.heap_factor * capacity - initial
+    if free <= 0.0:
+        return initial
+    u = options.retention * removed
+    if u <= 0.0:
+        return initial
     p = options.sharpness
     return initial + u / (1.0 + (u / free) ** p) ** (1.0 / p)
 

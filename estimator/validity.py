@@ -84,9 +84,9 @@ class ModelOptions:
         bucket pushes on it with its weight and, when the tip's acceleration is known, its inertia,
         ``m (g - a)`` with ``m = W_load / g``, resolved in the blade frame and added to F_T and F_N
         in and out of soil (:func:`~wheelloader.estimator.force_model.carried_load_factors`). The
-        env's plant (the FEE world) and the planner's CasADi model do not implement it: the env
-        always uses the paper's model, and a planner given these options must refuse them
-        (:attr:`extra_terms` names the opt-in terms that are on).
+        env and the planner use it through their ``force_model="fee-payload"`` (with
+        ``carried_in_soil=False``), not through these options (:attr:`extra_terms` names the
+        opt-in terms that are on).
     carried_in_soil : bool
         With ``carried_load``: True (default) puts the carried load on in and out of soil; False ramps it
         in as the tip leaves the soil, by ``1 - min(d / contact_depth, 1)`` (the complement of the surcharge

@@ -20,6 +20,9 @@ _CONFIGS = [
      "keep_pile": True, "relax": True, "relax_iterations": 50},
     {"soil": {"phi": (0.4, 0.7), "base": "dirt"}, "loader": {"max_push_force": 1500.0}, "stall_patience": 3},
     {"exit_min_fill": 0.05, "keep_pile": True},
+    {"force_model": "fee-payload", "soil": "dirt", "loader": {"max_push_force": 1500.0}, "stall_patience": 3},
+    {"force_model": "fee-payload", "payload": {"retention": 0.7, "heap_factor": 0.4, "sharpness": 3.0},
+     "soil": "random", "truth": {"stone_rate": 3.0}, "keep_pile": True},
 ]
 
 
