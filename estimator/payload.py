@@ -27,6 +27,7 @@ column) by :func:`fit_payload`.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
@@ -35,10 +36,11 @@ import numpy as np
 from .checks import check_range
 from .cyclelog import CycleLog
 from .errors import CalibrationError, ParameterError
-from .kinematics import DEFAULT_SLOPE_WINDOW, ContactState
+from .kinematics import DEFAULT_SLOPE_WINDOW, GRAVITY, ContactState
 
-__all__ = ["PayloadOptions", "as_payload", "fit_payload", "kept_fill", "kept_volume", "kept_volume_float",
-           "payload_contact_state", "with_kept_fill", "with_payload"]
+__all__ = ["PAYLOAD_FIELDS", "PayloadOptions", "as_payload", "fit_payload", "kept_fill", "kept_volume",
+           "kept_volume_float", "logged_kept", "payload_contact_state", "removed_volume", "with_kept_fill",
+           "with_payload"]
 
 
 @dataclass(frozen=True)
@@ -127,6 +129,20 @@ def kept_volume_float(removed: float, capacity: float, options: PayloadOptions, 
     return initial + u / (1.0 + (u / free) ** p) ** (1.0 / p)
 
 
+def removed_volume(kept: float, capacity: float, options: PayloadOptions, initial: float = 0.0) -> float:
+    """The removed volume [m^3] whose kept soil is ``kept`` (:func:`kept_volume` inverted, in closed form:
+    ``u = v / (1 - (v / C_free)^p)^(1/p)``, ``v = kept - V_0``, ``R = u / r``); inf at or above the heaped
+    capacity."""
+    free = options.heap_factor * capacity - initial
+    v = kept - initial
+    if v <= 0.0:
+        return 0.0
+    if free <= 0.0 or v >= free:
+        return math.inf
+    p = options.sharpness
+    return v / (1.0 - (v / free) ** p) ** (1.0 / p) / options.retention
+
+
 def kept_fill(state: ContactState, capacity: float, options: PayloadOptions, initial: float = 0.0) -> float:
     """The kept fill [m^3] at the end of a path whose contact state carries its carving."""
     if state.carve is None:
@@ -169,40 +185,95 @@ def with_kept_fill(state: ContactState, capacity: float, options: PayloadOptions
     return replace(state, fill_volume=np.asarray(fill, dtype=float), measured_load=None)
 
 
-def fit_payload(logs: Sequence[CycleLog], *, slope_window: float = DEFAULT_SLOPE_WINDOW) -> PayloadOptions:
-    """Calibrate ``(r, h, p)`` to logs that carry the kept fill.
+#: The parameters :func:`fit_payload` may fit, in ``PayloadOptions`` order, with their bounds.
+PAYLOAD_FIELDS: tuple[str, ...] = ("retention", "heap_factor", "sharpness")
+_BOUNDS = {"retention": (1e-3, 1.0), "heap_factor": (1e-2, 10.0), "sharpness": (1.0, 50.0)}
 
-    Least squares on the relative error of the kept fill along each path, every sample where the log's fill is
-    above 2 % of the capacity weighted alike (so a cycle's end and its rise both count).
+
+def logged_kept(log: CycleLog, density: float | None = None) -> np.ndarray | None:
+    """The kept soil a log carries [m^3]: its ``fill_volume``, else its logged load ``W_load / (gamma g)`` (with
+    ``density`` [kg/m^3], else the log's ``metadata["true_soil"]["gamma"]``), else None.
 
     Raises
     ------
     CalibrationError
-        If no log carries a ``fill_volume`` column.
+        A log with a load but no density.
+    """
+    if log.fill_volume is not None:
+        return log.fill_volume
+    if log.measured_load is None:
+        return None
+    if density is None:
+        density = (log.metadata.get("true_soil") or {}).get("gamma")
+    if density is None:
+        raise CalibrationError(f"log {log.path.name!r} has a logged load (W_load) but no fill: pass its soil's "
+                               "density (density=) to turn the load into the kept volume")
+    return np.asarray(log.measured_load, dtype=float) / (check_range("density", density, 0.0, low_open=True)
+                                                         * GRAVITY)
+
+
+def fit_payload(logs: Sequence[CycleLog], *, slope_window: float = DEFAULT_SLOPE_WINDOW,
+                free: Sequence[str] = PAYLOAD_FIELDS, initial: PayloadOptions | None = None,
+                density: float | None = None) -> PayloadOptions:
+    """Calibrate the payload ``(r, h, p)`` to logs that carry the kept fill or the load.
+
+    Least squares on the relative error of the kept fill along each path, every sample where the log's fill is
+    above 2 % of the capacity weighted alike (so a cycle's end and its rise both count). A log's kept fill is
+    its ``fill_volume`` (the plant's kept soil; the env's fill under ``"fee-payload"``), else its logged load
+    over ``gamma g`` (:func:`logged_kept`); logs with neither are skipped.
+
+    Parameters
+    ----------
+    logs : sequence of CycleLog
+        The cycles.
+    slope_window : float
+        As :meth:`CycleLog.contact_state` (the carving of each path gives the removed volume).
+    free : sequence of str
+        The parameters fitted (names of :data:`PAYLOAD_FIELDS`); the others stay at ``initial``'s. A cycle
+        that does not fill the bucket to its heap identifies the retention only: ``free=("retention",)``.
+    initial : PayloadOptions, optional
+        The start of the fit and the values of the held parameters (default ``(0.9, 0.7, 2.0)``).
+    density : float, optional
+        Soil density [kg/m^3] of logs that carry a load but no fill (default: each log's true soil).
+
+    Raises
+    ------
+    CalibrationError
+        If no log carries a fill or a load.
     """
     from scipy.optimize import least_squares
 
+    unknown = sorted(set(free) - set(PAYLOAD_FIELDS))
+    if unknown or not free:
+        raise ParameterError(f"fit_payload: free must name some of {list(PAYLOAD_FIELDS)}, got {list(free)}")
+    start = initial or PayloadOptions(0.9, 0.7, 2.0)
     removed, kept, caps = [], [], []
     for log in logs:
-        if log.fill_volume is None:
+        logged = logged_kept(log, density)
+        if logged is None:
             continue
         state = log.contact_state(slope_window=slope_window, fill="model")
-        mask = log.fill_volume > 0.02 * log.bucket.capacity
+        mask = logged > 0.02 * log.bucket.capacity
         removed.append(state.carve.removed_history[mask])
-        kept.append(log.fill_volume[mask])
+        kept.append(logged[mask])
         caps.append(np.full(int(mask.sum()), log.bucket.capacity))
     if not removed or sum(r.size for r in removed) == 0:
-        raise CalibrationError("fit_payload needs logs with a logged fill_volume (the plant's kept soil)")
+        raise CalibrationError("fit_payload needs logs with a logged fill_volume or load (the plant's kept soil)")
     r_all, k_all, c_all = (np.concatenate(v) for v in (removed, kept, caps))
+    names = [name for name in PAYLOAD_FIELDS if name in free]
+
+    def options(theta: np.ndarray) -> PayloadOptions:
+        return replace(start, **{name: float(t) for name, t in zip(names, theta, strict=True)})
 
     def residual(theta: np.ndarray) -> np.ndarray:
-        opts = PayloadOptions(*(float(t) for t in theta))
+        opts = options(theta)
         heaped = opts.heap_factor * c_all
         u = opts.retention * r_all
         model = u / (1.0 + (u / heaped) ** opts.sharpness) ** (1.0 / opts.sharpness)
         return (model - k_all) / k_all
 
-    fit = least_squares(residual, x0=[0.9, 0.7, 2.0], bounds=([1e-3, 1e-2, 1.0], [1.0, 10.0, 50.0]),
-                        x_scale=[0.1, 0.1, 1.0])
-    r, h, p = (float(v) for v in fit.x)
-    return PayloadOptions(retention=r, heap_factor=h, sharpness=p)
+    scale = {"retention": 0.1, "heap_factor": 0.1, "sharpness": 1.0}
+    fit = least_squares(residual, x0=[getattr(start, n) for n in names],
+                        bounds=([_BOUNDS[n][0] for n in names], [_BOUNDS[n][1] for n in names]),
+                        x_scale=[scale[n] for n in names])
+    return options(fit.x)

@@ -80,7 +80,7 @@ def smooth_min(a, b, eps):
 
 
 def casadi_forces(soil, vertical_depth, rho, alpha, load_weight, bucket: Bucket,
-                  options: ModelOptions = DEFAULT_OPTIONS) -> dict[str, ca.SX]:
+                  options: ModelOptions = DEFAULT_OPTIONS, carried_weight=None) -> dict[str, ca.SX]:
     """F_T and F_N (eqs 16-17) as CasADi expressions.
 
     Parameters
@@ -96,7 +96,12 @@ def casadi_forces(soil, vertical_depth, rho, alpha, load_weight, bucket: Bucket,
     bucket : Bucket
         Width and edge thickness (constants of the solver).
     options : ModelOptions
-        Validity-domain margins.
+        Validity-domain margins; with ``carried_load`` (the ``"fee-payload"`` force model) the carried load's
+        weight is added as :func:`~wheelloader.estimator.force_model.carried_forces` adds it (weight only, no
+        inertia), ramped in as the tip leaves the soil when ``carried_in_soil`` is False, and not gated out of
+        the soil.
+    carried_weight : casadi.SX, optional
+        Weight of the carried load [N] (the payload's kept soil); default ``load_weight``.
 
     Returns
     -------
@@ -142,4 +147,11 @@ def casadi_forces(soil, vertical_depth, rho, alpha, load_weight, bucket: Bucket,
     gate = 0.5 * (1.0 + ca.tanh(vertical_depth / CONTACT_GATE))
     f_t = gate * (w * b * pressure + fee * ca.sin(delta) + adhesion * w * blade_length)  # eq 16
     f_n = gate * fee * ca.cos(delta)  # eq 17
+    if options.carried_load:  # the carried load's weight in the blade frame (force_model.carried_forces)
+        carried = load_weight if carried_weight is None else carried_weight
+        if not options.carried_in_soil:  # handed over from the surcharge as the tip leaves the soil
+            carried = (1.0 - ramp) * carried
+        theta = alpha - rho
+        f_t = f_t + carried * ca.sin(theta)
+        f_n = f_n + carried * ca.cos(theta)
     return {"F_T": f_t, "F_N": f_n, "depth": depth, "beta": beta, "fee": fee, "gate": gate}

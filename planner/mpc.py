@@ -169,7 +169,7 @@ class MPCController:
     def _replan(self, obs: np.ndarray, k: int, remaining: float) -> None:
         from wheelloader.envs.scripted import PathTracker
 
-        start = StartState.from_observation(obs, self.bucket.capacity)
+        start = StartState.from_observation(obs, self.bucket.capacity, self.optimizer.options.force_payload)
         guess = self._remaining_guess(k / self.rate)
         tic = time.perf_counter()
         try:

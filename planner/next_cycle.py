@@ -15,12 +15,12 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
-from wheelloader.estimator import Bucket, BucketPath, Loader, Pile, SoilParams, as_soil
+from wheelloader.estimator import Bucket, BucketPath, Loader, PayloadOptions, Pile, SoilParams, as_soil
 from wheelloader.estimator.errors import PlanningError
 from wheelloader.estimator.quantise import better, quantise_pile, quantise_soil
 
@@ -97,7 +97,8 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
                     options: PlannerOptions | None = None, control_rate: float = 60.0, mpc: bool = True,
                     replan_every: int = 6, replan_within: float | None = None,
                     replan_within_iterations: int | None = None, energy_weight: float | None = None,
-                    initial_guess: Any = None, exit_min_fill: float = 0.0) -> PlanOutcome:
+                    initial_guess: Any = None, exit_min_fill: float = 0.0, force_model: str | None = None,
+                    payload: PayloadOptions | None = None) -> PlanOutcome:
     """Plan the next cycle on ``pile`` with ``params``; return a ``PlanOutcome`` for the adaptation loop.
 
     The plan is accepted only when the NumPy re-simulation
@@ -123,7 +124,9 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     one) is where IPOPT starts; default :func:`~wheelloader.planner.guess.surface_dig`
     (over the air to where the slope lets the tip dig, then at a constant depth).
     ``exit_min_fill`` is the env's (passed to :func:`verify_plan` and the NLP:
-    the tip may leave the soil while less is loaded).
+    the tip may leave the soil while less is loaded). ``force_model`` and ``payload`` override the
+    options' (:attr:`PlannerOptions.force_model`): the adaptation loop plans with the model it calibrated
+    (:attr:`~wheelloader.estimator.Calibration.force_model`).
 
     The planner plans with ``params`` and ``pile`` rounded to fixed grids
     (:func:`~wheelloader.estimator.quantise.quantise_soil`, :func:`~wheelloader.estimator.quantise.quantise_pile`)
@@ -132,6 +135,10 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     differences of the calibration (another CPU's BLAS kernels) then give the same plan.
     """
     tic = time.perf_counter()
+    if force_model is not None or payload is not None:
+        base = options or PlannerOptions()
+        options = replace(base, force_model=base.force_model if force_model is None else force_model,
+                          payload=base.payload if payload is None else payload)
     params = quantise_soil(as_soil(params))
     pile = quantise_pile(pile)
     opt = optimizer_for(bucket, loader, options)
@@ -277,5 +284,5 @@ def _kept_target(pile: Pile, opt, rate: float, exit_min_fill: float) -> float:
 def _kept_terms(plan: Plan, check: PlanCheck, params: SoilParams, opt) -> KeptTerms:
     """The kept objective's terms of ``plan`` by the NumPy check (its carved fill and energy, exact lift)."""
     options = opt.options
-    return evaluate(check.fill, check.energy, float(plan.z[-1]), params.gamma, opt.bucket.capacity,
+    return evaluate(check.carved, check.energy, float(plan.z[-1]), params.gamma, opt.bucket.capacity,
                     options.kept_payload, options.kept_dump_height)

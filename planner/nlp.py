@@ -18,6 +18,9 @@ acceleration ramps).
 * Energy: the env's bookkeeping (:func:`~wheelloader.envs.bookkeeping.step_work`),
   ``max(0, F_T ds_t + F_N ds_n)`` plus ``max(0, W_load dz)`` per interval
   (with a smooth max).
+* Force model (:attr:`PlannerOptions.force_model`): ``"fee"`` counts ``V`` as the fill; under ``"fee-payload"``
+  the fill is the payload's kept soil ``kept_volume(V)`` (in the objective, the ``min_fill`` bound and the payload's
+  lifting work) and its weight is carried as the tip leaves the soil (``casadi_forces(carried_weight=)``).
 * Objective: ``- V_N / capacity + lambda * E / 1 kJ + mu * sum |du|^2``
   (fill against energy; ``mu`` a small smoothing weight), optionally with a
   lower bound on the final fill ("least energy for a fill target"); or the opt-in energy per m^3 of kept
@@ -52,6 +55,7 @@ import numpy as np
 
 from wheelloader.envs.bookkeeping import step_work
 from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, Loader
+from wheelloader.estimator.payload import kept_volume
 from wheelloader.estimator.validity import alpha_lower_limit
 
 from . import nlp_cache
@@ -68,6 +72,20 @@ _CACHE: dict[tuple, dict] = {}
 #: and fade out within centimetres above it (a product ``depth * (rho - limit) >= 0`` would be degenerate
 #: out of soil and blow up IPOPT's multipliers).
 VALIDITY_RELAX = 30.0
+
+
+#: Smoothing of the removed volume before the payload's kept soil [m^3]: ``kept_volume``'s second derivative is
+#: infinite at 0 for a sharpness below 2 (the start node's V is 0), so V enters through a smooth positive part
+#: (5e-7 m^3 at V = 0).
+KEPT_SMOOTHING = 1e-6
+
+
+def _kept_of(bucket: Bucket, payload):
+    """The fill the NLP counts for a carved volume ``V``: ``V`` itself, or under ``"fee-payload"`` the payload's
+    kept soil of it (:func:`~wheelloader.estimator.payload.kept_volume`)."""
+    if payload is None:
+        return lambda v: v
+    return lambda v: kept_volume(smooth_pos(v, KEPT_SMOOTHING), bucket.capacity, payload)
 
 
 def _smooth_work(v):
@@ -175,7 +193,10 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     alpha = grid.window_slope_angle(xs, p_win)
     vertical = grid.window_height(xs, p_win) - zs
     w_load = p_soil[0] * GRAVITY * vs
-    out = casadi_forces(p_soil, vertical, alpha - ths, alpha, w_load, bucket, options.model_options)
+    payload = options.force_payload
+    kept_of = _kept_of(bucket, payload)  # the fill the plan counts: V, or the payload's kept soil of it
+    carried = None if payload is None else p_soil[0] * GRAVITY * kept_of(vs)
+    out = casadi_forces(p_soil, vertical, alpha - ths, alpha, w_load, bucket, options.model_options, carried)
     rho = alpha - ths
     forces = ca.Function("forces", [xs, zs, ths, vs, p_soil, p_win], [out["F_T"], out["F_N"]])
     node = ca.Function("node", [xs, zs, ths, vs, p_soil, p_win], [out["F_T"], out["F_N"], rho, vertical, alpha])
@@ -267,15 +288,15 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
                 along = u[0] * ca.cos(blade) + u[1] * ca.sin(blade)
                 g_ineq.append(along - math.cos(cone) * speed + 10.0 * shallow)
         # energy: the env's bookkeeping, with a smooth positive part (1 J wide)
-        e_soil, e_payload = step_work(f_t, f_n, dx, dz, tn, p_soil[0] * GRAVITY * vn, cos=ca.cos, sin=ca.sin,
-                                      pos=_smooth_work)
+        e_soil, e_payload = step_work(f_t, f_n, dx, dz, tn, p_soil[0] * GRAVITY * kept_of(vn), cos=ca.cos,
+                                      sin=ca.sin, pos=_smooth_work)
         energy = energy + e_soil + e_payload
     # end out of the pile
     end_clear = X[1, n] - grid.window_height(X[0, n], p_surf[:, n]) - options.end_clearance
     g_ineq.append(end_clear)
     if options.end_blade_angle is not None:  # opt-in: end curled, carrying the load
         g_ineq.append(X[2, n] - options.end_blade_angle)
-    fill_end = X[3, n]
+    fill_end = kept_of(X[3, n])
     extra: dict[str, ca.Function] = {}
     if options.objective == "kept_per_energy":
         # opt-in (planner.kept): energy per m^3 of kept soil, the load lifted on to the dump height; the kept
@@ -287,7 +308,7 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
         g_kept = [kept]
         extra["kept"] = ca.Function("kept", [w, p], [kept, lift, total, per_kept])
     else:
-        main = -X[3, n] / bucket.capacity + p_lam * energy / 1000.0
+        main = -fill_end / bucket.capacity + p_lam * energy / 1000.0
         g_kept = []
     g = ca.vertcat(*g_eq, *g_ineq, fill_end, *g_kept)
     n_eq, n_ineq = len(g_eq), len(g_ineq)

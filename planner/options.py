@@ -9,7 +9,8 @@ import numpy as np
 
 from wheelloader.estimator import DEFAULT_OPTIONS, ModelOptions, PayloadOptions, PlanningError
 from wheelloader.estimator.checks import check_choice, check_finite, check_int, check_range
-from wheelloader.estimator.force_models import DEFAULT_PAYLOAD
+from wheelloader.estimator.force_models import DEFAULT_FORCE_MODEL, DEFAULT_PAYLOAD, FORCE_MODELS, model_options_for
+from wheelloader.estimator.payload import removed_volume
 
 from .surface import SurfaceGrid
 
@@ -107,13 +108,23 @@ class PlannerOptions:
         (:mod:`wheelloader.planner.kept`): the payload model's kept fill of the carved volume, constrained to at
         least ``kept_target``.
     payload : PayloadOptions, optional
-        The payload state of ``"kept_per_energy"`` (default :data:`~wheelloader.estimator.DEFAULT_PAYLOAD`).
+        The payload state of ``"kept_per_energy"`` and of ``force_model="fee-payload"`` (default
+        :data:`~wheelloader.estimator.DEFAULT_PAYLOAD`).
     dump_height : float, optional
         The common height the load is lifted to [m] (default: the fixed Bezier path's end height,
         :func:`~wheelloader.planner.kept.dump_height`).
     kept_target : float, optional
         Least kept fill as a fraction of the nominal capacity (default None: the fixed Bezier path's kept fill on
         the same pile, :func:`~wheelloader.planner.kept.fixed_kept_fill`, as :func:`plan_next_cycle` sets it).
+    force_model : str
+        The force model the plan is made and checked with, a name of :data:`~wheelloader.estimator.FORCE_MODELS`
+        (as ``force_model=`` of :func:`~wheelloader.estimator.calibrate` and the env): ``"fee"`` (default, the
+        paper's) or ``"fee-payload"``: the NLP's state ``V`` stays the carved volume (the surcharge's fill), the
+        fill of the objective, of ``min_fill`` and of the NumPy check is the payload's kept soil
+        ``kept_volume(V)``, and its weight stays on the bucket as the tip leaves the soil
+        (:func:`~wheelloader.planner.casadi_model.casadi_forces` ``carried_weight``; weight only: within an
+        interval the plan's velocity is constant, so the inertia the env adds while it tracks the plan is not in
+        the NLP).
     surface : SurfaceGrid
         Layout of the smooth surface.
     """
@@ -146,6 +157,12 @@ class PlannerOptions:
     payload: PayloadOptions | None = None
     dump_height: float | None = None
     kept_target: float | None = None
+    force_model: str = DEFAULT_FORCE_MODEL
+
+    @property
+    def force_payload(self) -> PayloadOptions | None:
+        """The payload of the force model (``"fee-payload"``: ``payload`` or the default), None for ``"fee"``."""
+        return self.kept_payload if self.force_model == "fee-payload" else None
 
     @property
     def kept_payload(self) -> PayloadOptions:
@@ -167,13 +184,16 @@ class PlannerOptions:
 
     @property
     def model_options(self) -> ModelOptions:
-        """The force-model options the planner plans and checks with."""
-        return ModelOptions(failure_angle=self.failure_angle) if self.failure_angle != "min_n_gamma" \
+        """The force-model options the planner plans and checks with (the failure-angle rule; the carried load
+        handed over at exit under ``"fee-payload"``)."""
+        base = ModelOptions(failure_angle=self.failure_angle) if self.failure_angle != "min_n_gamma" \
             else DEFAULT_OPTIONS
+        return model_options_for(self.force_model, base)
 
     def __post_init__(self) -> None:
         err = PlanningError
         check_choice("PlannerOptions.objective", self.objective, OBJECTIVES, error=err)
+        check_choice("PlannerOptions.force_model", self.force_model, FORCE_MODELS, error=err)
         if self.payload is not None and not isinstance(self.payload, PayloadOptions):
             raise PlanningError(f"PlannerOptions.payload must be a PayloadOptions, got {type(self.payload).__name__}")
         if self.dump_height is not None:
@@ -238,7 +258,15 @@ class StartState:
         check_range("StartState.fill", self.fill, 0.0, None, error=PlanningError)
 
     @classmethod
-    def from_observation(cls, obs: np.ndarray, capacity: float) -> StartState:
-        """From a ``BucketLoadingEnv`` observation (indices 0-5 pose and rates, 9 fill fraction)."""
+    def from_observation(cls, obs: np.ndarray, capacity: float, payload: PayloadOptions | None = None) -> StartState:
+        """From a ``BucketLoadingEnv`` observation (indices 0-5 pose and rates, 9 fill fraction).
+
+        ``payload``: the env's under ``force_model="fee-payload"``, whose fill is the kept soil; the start's
+        ``fill`` (the planner's carved volume) is then the volume that keeps it
+        (:func:`~wheelloader.estimator.payload.removed_volume`), at most the capacity.
+        """
         o = [float(v) for v in np.asarray(obs, dtype=float).ravel()[:10]]
-        return cls(o[0], o[1], o[2], o[3], o[4], o[5], max(o[9], 0.0) * capacity)
+        fill = max(o[9], 0.0) * capacity
+        if payload is not None:
+            fill = min(removed_volume(fill, capacity, payload), capacity)
+        return cls(o[0], o[1], o[2], o[3], o[4], o[5], fill)

@@ -18,10 +18,12 @@ import numpy as np
 from wheelloader.envs.bookkeeping import cycle_done, cycle_progress, outside_validity, step_work
 from wheelloader.estimator import (
     DEFAULT_OPTIONS,
+    GRAVITY,
     Bucket,
     BucketPath,
     Loader,
     ModelOptions,
+    PayloadOptions,
     Pile,
     PlanningError,
     SoilParams,
@@ -29,6 +31,7 @@ from wheelloader.estimator import (
     contact_state,
     soil_forces,
 )
+from wheelloader.estimator.payload import with_payload
 
 from .options import PlannerOptions
 from .plan import Plan
@@ -41,7 +44,9 @@ HEEL_TOLERANCE = 0.02
 class PlanCheck:
     """Outcome of :func:`verify_plan` (forces in N, speeds in m/s, angles in rad).
 
-    ``ok`` is true when every check passed; ``failures`` names those that did not.
+    ``ok`` is true when every check passed; ``failures`` names those that did not. ``fill`` is the force
+    model's fill at the end [m^3] (the payload's kept soil under ``"fee-payload"``), ``carved`` the carved
+    volume (the two are equal under ``"fee"``).
     """
 
     ok: bool
@@ -59,6 +64,7 @@ class PlanCheck:
     end_clearance: float
     backward_steps: int
     details: dict[str, Any] = field(default_factory=dict)
+    carved: float = math.nan
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable mapping."""
@@ -68,22 +74,31 @@ class PlanCheck:
 
 
 def path_energy(path: BucketPath, soil: SoilParams, pile: Pile, bucket: Bucket,
-                initial_fill: float = 0.0, model_options: ModelOptions = DEFAULT_OPTIONS
-                ) -> dict[str, np.ndarray | float]:
+                initial_fill: float = 0.0, model_options: ModelOptions = DEFAULT_OPTIONS,
+                payload: PayloadOptions | None = None) -> dict[str, np.ndarray | float]:
     """Forces, fill and the env's energy bookkeeping along ``path`` with the NumPy model (``initial_fill``
     [m^3] already in the bucket at its start; ``model_options``: the force model's, e.g. the opt-in
-    failure-angle rule of the planner's :attr:`PlannerOptions.model_options`).
+    failure-angle rule of the planner's :attr:`PlannerOptions.model_options`; ``payload``: under
+    ``"fee-payload"`` (:attr:`PlannerOptions.force_payload`) the payload whose kept soil of the carved volume is
+    the fill and the carried load, weight only).
 
     Energy per step: the env's :func:`~wheelloader.envs.bookkeeping.step_work` (work on the soil plus
     lifting work on the payload), with the forces and blade angle at the step's end.
+
+    Returns a dict: ``state``, ``forces``, ``energy`` [J], ``fill`` (the model's fill at the end: the kept soil
+    under a payload), ``fill_history`` (per sample), ``carved`` and ``spilled`` [m^3].
     """
     state = contact_state(path.x, path.z, path.blade_angle, pile, bucket, initial_fill=initial_fill)
+    carved = float(state.fill_volume[-1])
+    if payload is not None:
+        state = with_payload(state, bucket.capacity, payload)
     forces = soil_forces(soil, state, bucket, model_options)
+    fill = state.fill_volume if payload is None else state.carried_volume
     e_soil, e_payload = step_work(forces.tangential[1:], forces.normal[1:], np.diff(path.x), np.diff(path.z),
-                                  path.blade_angle[1:], state.load_weight(soil.gamma)[1:])
+                                  path.blade_angle[1:], soil.gamma * GRAVITY * fill[1:])
     energy = float(np.sum(e_soil) + np.sum(e_payload))
-    return {"state": state, "forces": forces, "energy": energy, "fill": float(state.fill_volume[-1]),
-            "spilled": float(state.carve.spilled) if state.carve is not None else 0.0}
+    return {"state": state, "forces": forces, "energy": energy, "fill": float(fill[-1]), "fill_history": fill,
+            "carved": carved, "spilled": float(state.carve.spilled) if state.carve is not None else 0.0}
 
 
 def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pile, bucket: Bucket | None = None,
@@ -136,14 +151,14 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
     loader = loader or Loader()
     options = options or PlannerOptions()
     path, accel, initial_fill = _sampled(plan, rate, bucket)
-    sim = path_energy(path, soil, pile, bucket, initial_fill, options.model_options)
+    sim = path_energy(path, soil, pile, bucket, initial_fill, options.model_options, options.force_payload)
     forces, state = sim["forces"], sim["state"]
     dt = np.diff(path.t)
     vx, vz, om = np.diff(path.x) / dt, np.diff(path.z) / dt, np.diff(path.blade_angle) / dt
     in_soil = state.depth > 0.0
     bad = outside_validity(state.depth, forces.flags)
     end_clear = float(path.z[-1] - pile.surface_height(float(path.x[-1])))
-    early_exit = premature_exit(path, pile, state.depth, state.fill_volume / bucket.capacity,
+    early_exit = premature_exit(path, pile, state.depth, sim["fill_history"] / bucket.capacity,
                                 exit_clearance - tracking_margin, exit_min_fill)
     slack = 1.0 + tolerance
     off_blade = _off_blade_steps(path, state.depth, vx, vz, options)
@@ -173,7 +188,7 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
         max_acceleration=accel, validity_violations=int(np.count_nonzero(bad)),
         min_rho_in_soil=float(rho_in.min()) if rho_in.size else math.nan,
         fill=sim["fill"], spilled=sim["spilled"], energy=sim["energy"], end_clearance=end_clear,
-        backward_steps=int(np.count_nonzero(vx < -1e-6)),
+        backward_steps=int(np.count_nonzero(vx < -1e-6)), carved=sim["carved"],
         details={"flags": forces.flag_summary(), "samples": len(path), "early_exit_s": early_exit,
                  "off_blade_steps": off_blade, "heel_buried_steps": heel_buried},
     )

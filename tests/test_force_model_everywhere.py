@@ -151,3 +151,152 @@ def test_batched_fill_is_the_kept_volume_of_its_removed_volume():
     assert len(removed) == 3
     np.testing.assert_array_less(info["fill_volume"], info["carved_volume"] + 1e-12)
     assert np.all(info["fill_volume"] <= kept_volume(np.full(3, 10.0), cap, DEFAULT_PAYLOAD) + 1e-12)
+
+
+def _casadi_function(name: str, bucket):
+    """The planner's CasADi force model of ``name`` as a function of the soil vector and the contact."""
+    import casadi as ca
+
+    from wheelloader.planner import PlannerOptions
+    from wheelloader.planner.casadi_model import casadi_forces
+
+    options = PlannerOptions(force_model=name)
+    soil, vertical, rho, alpha, load, carried = (ca.SX.sym(n, k) for n, k in
+                                                 (("soil", 7), ("v", 1), ("rho", 1), ("alpha", 1), ("load", 1),
+                                                  ("carried", 1)))
+    out = casadi_forces(soil, vertical, rho, alpha, load, bucket, options.model_options, carried)
+    grad = ca.jacobian(ca.vertcat(out["F_T"], out["F_N"]), ca.vertcat(vertical, rho, carried))
+    return ca.Function("f", [soil, vertical, rho, alpha, load, carried], [out["F_T"], out["F_N"], grad]), options
+
+
+@pytest.mark.parametrize("name", FORCE_MODELS)
+def test_planner_casadi_model_is_the_estimators(name):
+    """On the paper's paths: in soil within the planner's smoothing (as for the FEE, 3 % of the peak), out of
+    the soil (5 mm above it and more) the same carried weight; finite exact derivatives everywhere."""
+    from wheelloader.estimator import Bucket, Pile, paper_paths, preset, soil_vector
+
+    pile, bucket, soil = Pile.trapezoid(), Bucket(), preset("gravel")
+    fn, options = _casadi_function(name, bucket)
+    payload = options.force_payload
+    assert payload == check_force_model(name, None)
+    for path in paper_paths():
+        # the path, then lifted out of the pile with what it carved (the payload's weight after the exit)
+        x = np.concatenate([path.x, np.full(20, path.x[-1])])
+        z = np.concatenate([path.z, path.z[-1] + np.linspace(0.01, 0.3, 20)])
+        th = np.concatenate([path.blade_angle, np.full(20, path.blade_angle[-1])])
+        state = contact_state(x, z, th, pile, bucket)
+        if payload is not None:
+            state = replace(state, carried_volume=kept_volume(state.carve.removed_history, bucket.capacity, payload))
+        ref = soil_forces(soil, state, bucket, options.model_options)
+        load = soil.gamma * 9.81 * state.fill_volume
+        carried = soil.gamma * 9.81 * (state.fill_volume if state.carried_volume is None else state.carried_volume)
+        vertical = pile.surface_height(x) - z
+        rows = [np.atleast_2d(v) for v in (vertical, state.rho, state.alpha, load, carried)]
+        f_t, f_n, grad = fn.map(x.size)(soil_vector(soil, bucket.edge_thickness), *rows)
+        f_t, f_n = np.asarray(f_t).ravel(), np.asarray(f_n).ravel()
+        assert np.all(np.isfinite(np.asarray(grad)))
+        valid = ref.flags == 0
+        gap = np.max(np.hypot(f_t - ref.tangential, f_n - ref.normal)[valid]) / np.max(ref.resultant)
+        assert gap < 0.03, f"{name} {path.name}: CasADi vs NumPy gap {gap:.3%}"
+        out = vertical < -0.005
+        assert out[-1]
+        np.testing.assert_allclose(f_t[out], ref.tangential[out], rtol=1e-4, atol=1.0)
+        np.testing.assert_allclose(f_n[out], ref.normal[out], rtol=1e-4, atol=1.0)
+        if payload is not None:
+            assert ref.resultant[-1] > 500.0  # the kept soil's weight
+
+
+@pytest.mark.parametrize("name", FORCE_MODELS)
+def test_planner_plans_and_checks_with_the_model(name):
+    """A plan with ``PlannerOptions(force_model=name)``: the NLP's fill at the end is the model's fill of its
+    carved volume, and the NumPy check (the estimator's model) agrees with it and passes."""
+    from wheelloader.estimator import Pile
+    from wheelloader.planner import PlannerOptions, plan_next_cycle
+
+    pile = Pile.trapezoid()
+    options = PlannerOptions(force_model=name, max_iter=130, midpoints=True)
+    out = plan_next_cycle("gravel", pile, options=options, mpc=False)
+    assert out.success and out.check.ok, out.message
+    payload = options.force_payload
+    cap = 0.2
+    if payload is None:
+        assert out.check.fill == out.check.carved
+        model_end = out.plan.fill[-1]
+    else:
+        assert out.check.fill == pytest.approx(float(kept_volume(out.check.carved, cap, payload)), rel=1e-12)
+        assert out.check.fill < 0.8 * out.check.carved and out.check.fill <= payload.heap_factor * cap
+        model_end = float(kept_volume(out.plan.fill[-1], cap, payload))
+    assert out.check.fill == pytest.approx(model_end, rel=0.1)  # the NLP's smooth surface against the pile's
+    assert f"predicted fill {out.check.fill / cap:.0%}" in out.message
+
+
+def test_removed_volume_inverts_kept_volume():
+    from wheelloader.estimator.payload import removed_volume
+
+    for payload in (DEFAULT_PAYLOAD, PayloadOptions(0.7, 0.5, 1.0), PayloadOptions(1.0, 1.0, 50.0)):
+        for removed in (0.0, 1e-4, 0.05, 0.1, 0.15):
+            kept = float(kept_volume(removed, 0.2, payload))
+            assert removed_volume(kept, 0.2, payload) == pytest.approx(removed, rel=1e-9, abs=1e-15)
+        assert removed_volume(payload.heap_factor * 0.2, 0.2, payload) == np.inf
+
+
+def test_mpc_start_fill_is_the_carved_volume_of_the_observed_kept_fill():
+    from wheelloader.planner import StartState
+
+    env = BucketLoadingEnv(force_model="fee-payload", sensor_noise=0.0)
+    obs, _ = env.reset(seed=0)
+    for _ in range(60):
+        obs, _, _, _, info = env.step(np.array([0.6, -0.05, 0.0], dtype=np.float32))
+    assert 0.0 < info["fill_volume"] < info["carved_volume"]
+    start = StartState.from_observation(obs, env.cfg.bucket.capacity, env.cfg.payload)
+    assert start.fill == pytest.approx(info["carved_volume"], rel=1e-4)
+    assert StartState.from_observation(obs, env.cfg.bucket.capacity).fill == pytest.approx(info["fill_volume"],
+                                                                                           rel=1e-4)
+
+
+def test_fit_payload_recovers_the_env_retention_from_a_logged_fill_or_load():
+    from wheelloader.estimator import fit_payload
+
+    truth = PayloadOptions(0.7, 0.6, 3.0)
+    logs = [_dig("fee-payload", seed=s, payload=truth)[0].last_cycle_log() for s in (0, 1)]
+    start = replace(truth, retention=0.95)
+    fitted = fit_payload(logs, free=("retention",), initial=start)
+    assert fitted.retention == pytest.approx(0.7, rel=1e-6)
+    assert (fitted.heap_factor, fitted.sharpness) == (0.6, 3.0)
+    # a log with the load instead of the fill (its soil's density from the metadata, or given)
+    gamma = logs[0].metadata["true_soil"]["gamma"]
+    loads = [replace(log, fill_volume=None, measured_load=log.fill_volume * gamma * 9.81) for log in logs]
+    assert fit_payload(loads, free=("retention",), initial=start).retention == pytest.approx(0.7, rel=1e-6)
+    bare = [replace(log, metadata={}) for log in loads]
+    from wheelloader.estimator import CalibrationError
+
+    with pytest.raises(CalibrationError, match="density"):
+        fit_payload(bare, free=("retention",))
+    assert fit_payload(bare, free=("retention",), initial=start, density=gamma).retention == pytest.approx(0.7,
+                                                                                                       rel=1e-6)
+    with pytest.raises(ParameterError, match="free"):
+        fit_payload(logs, free=("retension",))
+
+
+def test_adaptation_loop_calibrates_predicts_and_plans_with_one_model():
+    """A loop on a fee-payload plant, calibrating fee-payload: the calibration carries the model, the loop's
+    prediction uses it, the planner is asked for it, and the record's fill is the kept soil."""
+    from wheelloader.adaptation import Calibrating, PlanOutcome, bezier_on_face, hidden_default_soil
+    from wheelloader.estimator import Pile, preset
+    from wheelloader.loop import run_loop
+    from wheelloader.references.fee_env import FEEEnvPlant
+
+    asked = []
+
+    def planner(params, pile, **model):
+        asked.append(model)
+        return PlanOutcome(bezier_on_face(pile), True, "Bezier", 0.0)
+
+    strategy = Calibrating(preset("sand"), planner=planner, force_model="fee-payload")
+    records, logs = run_loop(FEEEnvPlant(keep_env=True, force_model="fee-payload"), strategy, Pile.trapezoid(),
+                             hidden_default_soil(), 3, seed=1)
+    assert strategy.previous.force_model == "fee-payload" and strategy.previous.payload == DEFAULT_PAYLOAD
+    assert asked == [{"force_model": "fee-payload", "payload": DEFAULT_PAYLOAD}] * 3
+    assert records[2].prediction_rmse_percent < 8.0
+    assert records[2].fill_fraction == pytest.approx(logs[2].fill_volume[-1] / 0.2)
+    assert records[2].fill_fraction <= DEFAULT_PAYLOAD.heap_factor

@@ -1,24 +1,20 @@
 """The cycle-to-cycle adaptation loop: dig, calibrate, predict, plan, dig again.
 
-One loop runs ``cycles`` digging cycles in a :class:`~wheelloader.envs.BucketLoadingEnv`
-(the plant: hidden soil, sensor noise, optional truths beyond the model) on a
-pile that each cycle carves for the next. A :class:`Strategy` decides, between
-cycles, which soil parameters to believe and which path to dig next:
+One loop runs ``cycles`` digging cycles in a :class:`~wheelloader.envs.BucketLoadingEnv` (the plant: hidden soil,
+sensor noise, optional truths beyond the model) on a pile that each cycle carves for the next. A :class:`Strategy`
+decides, between cycles, which soil parameters to believe and which path to dig next:
 
-* ``fixed``: the default Bezier path (moved to the current pile face) and
-  nominal parameters, never recalibrated — the baseline;
+* ``fixed``: the default Bezier path (moved to the current pile face) and nominal parameters, never
+  recalibrated — the baseline;
 * ``ours``: calibrate with the default method on the last ``window`` cycles together
   (:data:`DEFAULT_WINDOW`; warm-started from the previous fit), plan with them;
 * ``paper``: calibrate with the paper's multi-stage method, plan with them;
-* ``oracle``: plan with the plant's true soil (an upper bound on what
-  calibration can give).
+* ``oracle``: plan with the plant's true soil (an upper bound on what calibration can give).
 
-Nothing hides a failure: a calibration that raises or reports
-``success=False`` keeps the previous parameters, and so does (with
-``keep_untrustworthy=False``; not the default, see :class:`Calibrating`) a fit whose verdict says the data
-could not determine the soil while an earlier, trustworthy fit exists; a plan that fails falls back
-to the Bezier path moved to the current face, and both are reported in the
-cycle's record.
+Nothing hides a failure: a calibration that raises or reports ``success=False`` keeps the previous parameters,
+and so does (with ``keep_untrustworthy=False``; not the default, see :class:`Calibrating`) a fit whose verdict
+says the data could not determine the soil while an earlier, trustworthy fit exists; a plan that fails falls
+back to the Bezier path moved to the current face, and both are reported in the cycle's record.
 """
 
 from __future__ import annotations
@@ -38,12 +34,14 @@ from wheelloader.estimator import (
     CalibrationOptions,
     CycleLog,
     ModelOptions,
+    PayloadOptions,
     Pile,
     SoilParams,
     WheelloaderError,
     calibrate,
     preset,
 )
+from wheelloader.estimator.force_models import DEFAULT_FORCE_MODEL, check_force_model, model_options_for
 from wheelloader.planner import (
     LOOP_EXIT_MIN_FILL,
     PlannerOptions,
@@ -132,9 +130,9 @@ class Strategy:
     """
 
     name = "strategy"
-    #: Force-model options and bucket-load source the strategy predicts with (the paper's model by default).
-    model_options: ModelOptions = DEFAULT_OPTIONS
-    fill: str = "log"
+    #: Force-model options, bucket-load source, force model and payload the strategy predicts (and calibrates and
+    #: plans) with: the paper's model by default.
+    model_options, fill, force_model, payload = DEFAULT_OPTIONS, "log", DEFAULT_FORCE_MODEL, None
 
     def __init__(self, nominal: SoilParams, rate: float = 60.0) -> None:
         self.params = nominal
@@ -188,12 +186,16 @@ class Calibrating(Strategy):
     fill : str
         Bucket-load source of the calibration and predictions (``"log"`` or ``"model"``, see
         :func:`~wheelloader.estimator.calibrate`).
+    force_model, payload : str, PayloadOptions
+        The model calibrated (:data:`~wheelloader.estimator.FORCE_MODELS`); predictions and plans use the
+        calibration's (the planner gets ``force_model=``, ``payload=`` when it is not ``"fee"``).
     """
 
     def __init__(self, nominal: SoilParams, method: str = "default", planner: Any = None, rate: float = 60.0,
                  name: str | None = None, *, window: int | None = None, forgetting: float | None = None,
                  keep_untrustworthy: bool = True, options: ModelOptions | None = None,
-                 fill: str = "log") -> None:
+                 fill: str = "log", force_model: str = DEFAULT_FORCE_MODEL,
+                 payload: PayloadOptions | None = None) -> None:
         super().__init__(nominal, rate)
         self.method = method
         self.planner = planner
@@ -211,6 +213,7 @@ class Calibrating(Strategy):
         self.keep_untrustworthy = keep_untrustworthy
         self.model_options = DEFAULT_OPTIONS if options is None else options
         self.fill = fill
+        self.force_model, self.payload = force_model, check_force_model(force_model, payload, error=WheelloaderError)
         self.recent: list[CycleLog] = []
 
     def update(self, log: CycleLog, true_soil: SoilParams) -> CalibrationStep:
@@ -220,7 +223,8 @@ class Calibrating(Strategy):
         try:
             result = calibrate(cycles, options=CalibrationOptions(
                 method=self.method, initial=self.previous, forgetting=self.forgetting if len(self.recent) > 1 else None,
-                model_options=self.model_options, fill=self.fill))
+                model_options=self.model_options, fill=self.fill, force_model=self.force_model,
+                payload=self.payload))
         except WheelloaderError as exc:
             return CalibrationStep(time.perf_counter() - start, False,
                                    f"calibration failed, previous parameters kept: {exc}")
@@ -233,23 +237,25 @@ class Calibrating(Strategy):
                 and self.previous.trustworthy):
             codes = ", ".join(w.code for w in result.warnings)
             return CalibrationStep(seconds, False, f"fit on {used} not trustworthy ({codes}), previous parameters kept")
-        self.previous = result
-        self.params = result.params
+        self.previous, self.params = result, result.params
+        self.force_model, self.payload = result.force_model, result.payload  # the calibration's model
         return CalibrationStep(seconds, True, f"F_R fit {result.quality.percent_r:.1f} % on {used}")
 
     def plan(self, pile: Pile) -> PlanOutcome:
         if self.planner is None:
             return super().plan(pile)
         start = time.perf_counter()
+        model = {} if self.payload is None else {"force_model": self.force_model, "payload": self.payload}
         try:
-            outcome = self.planner(self.params, pile)
+            outcome = self.planner(self.params, pile, **model)
         except WheelloaderError as exc:
             outcome = PlanOutcome(None, False, f"planner raised: {exc}", 0.0)
         outcome.seconds = time.perf_counter() - start
         if outcome.path is None or not outcome.success:
             # the last good path was planned for another (uncarved) surface: the safe fallback is the
             # baseline Bezier path moved to the current face
-            fallback = model_bezier_on_face(self.params, pile, self.rate, model_options=self.model_options)
+            options = model_options_for(self.force_model, self.model_options)
+            fallback = model_bezier_on_face(self.params, pile, self.rate, model_options=options, payload=self.payload)
             return PlanOutcome(fallback, False, f"{outcome.message}; fell back to the {fallback.name} path",
                                time.perf_counter() - start)
         self.last_good_path = outcome.path

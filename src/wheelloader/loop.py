@@ -198,7 +198,8 @@ def _record(k: int, strategy: Strategy, plan: PlanOutcome, cycle: SavedCycle, sm
     parameters planned with."""
     log, planned = cycle.log, cycle.plan
     assert log is not None
-    pred = predict(planned.params, smooth, options=strategy.model_options, fill=strategy.fill)
+    pred = predict(planned.params, smooth, options=strategy.model_options, fill=strategy.fill,
+                   force_model=strategy.force_model, payload=strategy.payload)
     quality = pred.quality
     measured = log.metadata.get("measured")
     if isinstance(measured, Mapping):
