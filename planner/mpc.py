@@ -4,11 +4,13 @@ Every ``replan_every`` control steps the controller reads the tip pose,
 velocity and fill from the observation, solves the trajectory optimisation
 for the remaining time of the cycle (shrinking horizon: the same ``N``
 intervals over less time; the end-out-of-the-pile constraint stays) with a
-few IPOPT iterations (``max_iter``, default 8), warm started with IPOPT's
-warm-start settings from the previous re-plan's last iterate (primal and dual;
-the first re-plan of a cycle from the remaining part of the plan being
-executed): the real-time-iteration idea, where the optimisation converges
-over successive control steps instead of within one. The new plan is tracked
+few solver iterations, warm started from the previous re-plan's last iterate (primal and dual; the first
+re-plan of a cycle from the remaining part of the plan being executed): the real-time-iteration idea, where
+the optimisation converges over successive control steps instead of within one. ``solver="sqp"`` (the
+default) is the real-time iteration itself: one QP per re-plan (CasADi's ``sqpmethod``, one iteration, QP
+solver ``daqp``), initialised by a converged IPOPT solve at the first re-plan of the cycle, with IPOPT as the
+fallback whenever an SQP re-plan is not usable; ``solver="ipopt"`` runs up to ``max_iter`` (8) IPOPT
+iterations per re-plan with IPOPT's warm-start settings. The new plan is tracked
 with feed-forward velocity plus proportional feedback
 (:class:`~wheelloader.envs.scripted.PathTracker`). The solver status is
 checked every time: a converged solve, or an unconverged one whose last
@@ -29,20 +31,25 @@ from typing import Any
 import numpy as np
 
 from wheelloader.estimator import Bucket, BucketPath, Loader, Pile, SoilParams, as_soil
-from wheelloader.estimator.checks import check_int, check_range
+from wheelloader.estimator.checks import check_choice, check_int, check_range
 from wheelloader.estimator.errors import PlanningError
 
 from .cycle import cycle_duration, default_start, optimizer_for
 from .trajectory import Plan, PlannerOptions, StartState, TrajectoryOptimizer
 from .verify import verify_plan
 
-#: Statuses of IPOPT the controller accepts as a usable plan.
+#: Statuses of IPOPT (and sqpmethod) the controller accepts as a usable plan.
 ACCEPTED_STATUSES = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+#: The MPC's solver by default (``benchmarks/planner.py`` measures both side by side).
+DEFAULT_MPC_SOLVER = "sqp"
+#: Solver iterations per re-plan by solver: IPOPT a few, the SQP's real-time iteration one QP.
+DEFAULT_MAX_ITER = {"ipopt": 8, "sqp": 1}
 
 
 @dataclass
 class SolveRecord:
-    """One MPC solve: when, how long, what IPOPT said and what the controller did with it."""
+    """One MPC solve: when, how long (wall and this process's CPU time [s]), what the solver said, what the
+    controller did with it and which solver made the plan (``"sqp"``, ``"ipopt"`` or ``"ipopt (fallback)"``)."""
 
     step: int
     remaining: float
@@ -51,6 +58,8 @@ class SolveRecord:
     iterations: int
     accepted: bool
     action: str
+    solver: str = "ipopt"
+    cpu_seconds: float = math.nan
 
 
 class MPCController:
@@ -81,13 +90,19 @@ class MPCController:
     reference_weight : float
         Weight [1/m^2] of staying near the plan being executed (keeps successive
         re-plans from jumping between local optima).
-    max_iter : int
-        IPOPT iteration limit per re-plan (default 8, in the spirit of the
-        real-time iteration: a few Newton steps per control step, each re-plan
-        continuing from the previous one's last iterate). A re-plan that stops
+    solver : {"sqp", "ipopt"}
+        The re-plans' solver (default :data:`DEFAULT_MPC_SOLVER`, ``"sqp"``: the real-time iteration, one QP
+        per re-plan, with IPOPT at the first re-plan of a cycle and as the fallback of an SQP re-plan that
+        is not usable; ``"ipopt"``: IPOPT alone). Sets the ``solver`` of the optimizer's
+        :class:`PlannerOptions` (its ``qp_solver`` is the QP solver).
+    max_iter : int, optional
+        Iteration limit per re-plan (default :data:`DEFAULT_MAX_ITER`: 8 IPOPT iterations, or 1 SQP
+        iteration; at most ``options.max_iter``): a few Newton steps per control step, each re-plan
+        continuing from the previous one's last iterate. A re-plan that stops
         at the limit is used when its last iterate satisfies the constraints
-        (IPOPT's primal infeasibility at most ``feasible_tolerance``): feasible,
-        not yet proven optimal; otherwise the last accepted plan goes on.
+        (primal infeasibility at most ``feasible_tolerance``): feasible,
+        not yet proven optimal; otherwise the last accepted plan goes on. IPOPT's fallback and first
+        solves run up to 8 iterations (at most ``options.max_iter``).
     feasible_tolerance : float
         Largest primal infeasibility of an unconverged iterate that is still
         used (default 1e-4: 0.1 mm on positions, 1e-4 of the force limits).
@@ -102,8 +117,9 @@ class MPCController:
     def __init__(self, soil: SoilParams | str | dict, pile: Pile, duration: float, *, bucket: Bucket | None = None,
                  loader: Loader | None = None, control_rate: float = 60.0, replan_every: int = 6,
                  intervals: int = 12, min_remaining: float = 0.4, initial_plan: Plan | None = None,
-                 options: PlannerOptions | None = None, reference_weight: float = 20.0, max_iter: int = 8,
-                 feasible_tolerance: float = 1e-4, exit_min_fill: float = 0.0) -> None:
+                 options: PlannerOptions | None = None, reference_weight: float = 20.0, max_iter: int | None = None,
+                 feasible_tolerance: float = 1e-4, exit_min_fill: float = 0.0,
+                 solver: str = DEFAULT_MPC_SOLVER) -> None:
         check_int("replan_every", replan_every, error=PlanningError)
         check_range("duration", duration, 0.0, None, low_open=True, error=PlanningError)
         check_range("control_rate", control_rate, 0.0, None, low_open=True, error=PlanningError)
@@ -117,14 +133,21 @@ class MPCController:
         self.rate = float(control_rate)
         self.replan_every = replan_every
         self.min_remaining = float(min_remaining)
+        check_choice("solver", solver, tuple(DEFAULT_MAX_ITER), error=PlanningError)
+        if max_iter is None:
+            max_iter = DEFAULT_MAX_ITER[solver]
+        check_int("max_iter", max_iter, minimum=1, error=PlanningError)
         base = options or PlannerOptions()
-        self.optimizer = TrajectoryOptimizer(self.bucket, self.loader,
-                                             replace(base, intervals=intervals, ipopt_warm_start=True,
-                                                     max_iter=min(base.max_iter, max_iter),
-                                                     # the same share of the horizon curls out
-                                                     curl_out_intervals=min(
-                                                         round(base.curl_out_intervals * intervals / base.intervals),
-                                                         max(intervals // 2 - 1, 0))))
+        mpc_options = replace(base, intervals=intervals, ipopt_warm_start=True, solver=solver,
+                              max_iter=min(base.max_iter, max_iter),
+                              # the same share of the horizon curls out
+                              curl_out_intervals=min(round(base.curl_out_intervals * intervals / base.intervals),
+                                                     max(intervals // 2 - 1, 0)))
+        self.optimizer = TrajectoryOptimizer(self.bucket, self.loader, mpc_options)
+        # the SQP's first solve of a cycle and its fallback: IPOPT on the same NLP
+        self.fallback = None if solver == "ipopt" else TrajectoryOptimizer(
+            self.bucket, self.loader, replace(mpc_options, solver="ipopt",
+                                              max_iter=min(base.max_iter, DEFAULT_MAX_ITER["ipopt"])))
         self.initial_plan = initial_plan
         self.reference_weight = float(reference_weight)
         self.feasible_tolerance = float(feasible_tolerance)
@@ -143,15 +166,17 @@ class MPCController:
         self._tracker = (PathTracker(self.initial_plan.path(self.rate), self.loader, self.rate)
                          if self.initial_plan is not None else None)
         self.optimizer.reset_warm_start()
+        if self.fallback is not None:
+            self.fallback.reset_warm_start()
 
     @property
     def failures(self) -> int:
         """Solves that were not accepted."""
         return sum(not r.accepted for r in self.history)
 
-    def solve_times(self) -> np.ndarray:
-        """Wall time of every solve so far [s]."""
-        return np.array([r.seconds for r in self.history])
+    def solve_times(self, cpu: bool = False) -> np.ndarray:
+        """Wall time (``cpu``: this process's CPU time) of every solve so far [s]."""
+        return np.array([r.cpu_seconds if cpu else r.seconds for r in self.history])
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         """Action for ``obs``; re-plans every ``replan_every`` steps."""
@@ -171,25 +196,28 @@ class MPCController:
 
         start = StartState.from_observation(obs, self.bucket.capacity, self.optimizer.options.force_payload)
         guess = self._remaining_guess(k / self.rate)
-        tic = time.perf_counter()
+        tic, cpu = time.perf_counter(), time.process_time()
+        # after a solve in this cycle, the solver continues from its last iterate (primal and dual);
+        # at the first one (or after an error) from the remaining part of the plan being executed
+        warm = bool(self.history) and not self.history[-1].status.startswith("error")
         try:
-            # after a solve in this cycle, IPOPT continues from its last iterate (primal and dual);
-            # at the first one (or after an error) from the remaining part of the plan being executed
-            warm = bool(self.history) and not self.history[-1].status.startswith("error")
-            plan = self.optimizer.solve(self.soil, self.pile, start, remaining,
-                                        initial_guess=None if warm else guess, warm=warm, reference=guess,
-                                        reference_weight=self.reference_weight, exit_min_fill=self.exit_min_fill)
+            if self.fallback is None:
+                plan, usable, solver = *self._solve(self.optimizer, start, remaining, guess, warm), "ipopt"
+            else:
+                plan, usable, solver = None, False, "ipopt"
+                if warm:  # the real-time iteration: one SQP step from the plan being executed, shifted to now
+                    try:
+                        plan, usable = self._solve(self.optimizer, start, remaining, guess, True, shift=True)
+                    except PlanningError:  # IPOPT's turn (its error, if any, is the one recorded)
+                        usable = False
+                    solver = "sqp" if usable else "ipopt (fallback)"
+                if not usable:  # IPOPT from the remaining plan; the SQP continues from its solution
+                    plan, usable = self._solve(self.fallback, start, remaining, guess, False, check=warm)
+                    self.optimizer.warm_start_from(self.fallback)
         except PlanningError as exc:
             self.history.append(SolveRecord(k, remaining, time.perf_counter() - tic, f"error: {exc}", 0, False,
-                                            self._fallback_name()))
+                                            self._fallback_name(), "", time.process_time() - cpu))
             return
-        feasible = plan.raw.get("primal_infeasibility", math.inf) <= self.feasible_tolerance
-        usable = (plan.status in ACCEPTED_STATUSES or feasible) and _finite(plan)
-        if not usable and warm and _finite(plan):
-            # a warm re-plan continues from the last iterate: where it has not converged yet, it is used when
-            # the NumPy re-simulation of the rest of the cycle passes every check
-            usable = verify_plan(plan, self.soil, self.pile, self.bucket, self.loader, self.optimizer.options,
-                                 rate=self.rate, exit_min_fill=self.exit_min_fill).ok
         seconds = time.perf_counter() - tic
         if usable:
             self.plan = plan
@@ -198,7 +226,27 @@ class MPCController:
             action = "new plan"
         else:
             action = self._fallback_name()
-        self.history.append(SolveRecord(k, remaining, seconds, plan.status, plan.iterations, usable, action))
+        self.history.append(SolveRecord(k, remaining, seconds, plan.status, plan.iterations, usable, action,
+                                        solver, time.process_time() - cpu))
+
+    def _solve(self, optimizer: TrajectoryOptimizer, start: StartState, remaining: float,
+               guess: BucketPath | None, warm: bool, shift: bool = False, check: bool | None = None
+               ) -> tuple[Plan, bool]:
+        """One re-plan with ``optimizer`` and whether its plan is usable (``shift``: from ``guess`` with the
+        last solve's multipliers, else from the last iterate when ``warm``; ``check``, default ``warm``: an
+        unconverged, infeasible-looking plan is judged by the NumPy check)."""
+        plan = optimizer.solve(self.soil, self.pile, start, remaining,
+                               initial_guess=guess if shift or not warm else None,
+                               warm=warm, reference=guess, reference_weight=self.reference_weight,
+                               exit_min_fill=self.exit_min_fill)
+        feasible = plan.raw.get("primal_infeasibility", math.inf) <= self.feasible_tolerance
+        usable = (plan.status in ACCEPTED_STATUSES or feasible) and _finite(plan)
+        if not usable and (warm if check is None else check) and _finite(plan):
+            # a warm re-plan continues from the last iterate: where it has not converged yet, it is used when
+            # the NumPy re-simulation of the rest of the cycle passes every check
+            usable = verify_plan(plan, self.soil, self.pile, self.bucket, self.loader, optimizer.options,
+                                 rate=self.rate, exit_min_fill=self.exit_min_fill).ok
+        return plan, usable
 
     def _fallback_name(self) -> str:
         return "kept the last feasible plan" if self._tracker is not None else "retreat"

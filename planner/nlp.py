@@ -98,9 +98,10 @@ def _smooth_work(v):
 #: of the expressions: as parameters, CasADi differentiates ``F_T / (margin * F_max)`` in another floating-point
 #: order, and the plans would change in their last bits.)
 _NOT_STRUCTURAL = ("max_iter", "max_wall_time", "ipopt_warm_start", "tolerance", "energy_weight", "fill_limit",
-                   "blade_angle_limits", "lift_headroom", "kept_target")
-#: The derivatives IPOPT needs, by their nlpsol option name and the name of the solver's own function.
-_DERIVATIVES = (("grad_f", "nlp_grad_f"), ("jac_g", "nlp_jac_g"), ("hess_lag", "nlp_hess_l"))
+                   "blade_angle_limits", "lift_headroom", "kept_target", "solver", "qp_solver")
+#: The derivatives each nlpsol plugin needs, by their nlpsol option name and the name of the solver's own function.
+_DERIVATIVES = {"ipopt": (("grad_f", "nlp_grad_f"), ("jac_g", "nlp_jac_g"), ("hess_lag", "nlp_hess_l")),
+                "sqpmethod": (("jac_fg", "nlp_jac_fg"), ("hess_lag", "nlp_hess_l"))}
 
 
 def structural_options(options: PlannerOptions) -> PlannerOptions:
@@ -134,22 +135,27 @@ def build(bucket: Bucket, loader: Loader, options: PlannerOptions):
         # CasADi may swallow a Ctrl-C while it builds or loads (as inside IPOPT): guarded re-raises it
         problem, functions, layout = guarded(nlp_cache.load_or_build, bucket, loader, structural, _build_nlp)
         entry = _CACHE[(bucket, loader, structural)] = {"problem": problem, "functions": functions,
-                                                         "layout": layout, "derivatives": None, "solvers": {}}
+                                                         "layout": layout, "derivatives": {}, "solvers": {}}
     settings = _solver_settings(options)
     if settings not in entry["solvers"]:
-        solver, monitor = guarded(_make_solver, entry["problem"], settings, entry["derivatives"])
-        if entry["derivatives"] is None:
-            entry["derivatives"] = {name: solver.get_function(own) for name, own in _DERIVATIVES
-                                    if solver.has_function(own)}
+        plugin = dict(settings)["plugin"]
+        solver, monitor = guarded(_make_solver, entry["problem"], settings, entry["derivatives"].get(plugin))
+        if plugin not in entry["derivatives"]:
+            entry["derivatives"][plugin] = {name: solver.get_function(own) for name, own in _DERIVATIVES[plugin]
+                                            if solver.has_function(own)}
         entry["solvers"][settings] = (solver, {**entry["functions"], "monitor": monitor})
     solver, functions = entry["solvers"][settings]
     return solver, functions, entry["layout"]
 
 
 def _solver_settings(options: PlannerOptions) -> tuple[tuple[str, object], ...]:
-    """IPOPT's options for ``options`` (hashable: the key of a solver within its NLP)."""
+    """The nlpsol plugin and its options for ``options`` (hashable: the key of a solver within its NLP)."""
+    if options.solver == "sqp":
+        # CasADi's SQP: exact Hessian of the Lagrangian, regularised to be convex for the QP solver
+        return (("plugin", "sqpmethod"), ("qpsol", options.qp_solver), ("max_iter", options.max_iter),
+                ("tol_pr", options.tolerance), ("tol_du", options.tolerance), ("convexify_strategy", "regularize"))
     settings: dict[str, object] = {
-        "ipopt.max_iter": options.max_iter, "ipopt.tol": options.tolerance,
+        "plugin": "ipopt", "ipopt.max_iter": options.max_iter, "ipopt.tol": options.tolerance,
         "ipopt.acceptable_tol": 1e-3, "ipopt.acceptable_iter": 5, "ipopt.mu_strategy": "adaptive",
     }
     if options.max_wall_time is not None:
@@ -160,16 +166,30 @@ def _solver_settings(options: PlannerOptions) -> tuple[tuple[str, object], ...]:
     return tuple(settings.items())
 
 
+#: Options that keep each QP solver of ``sqpmethod`` quiet and failures non-fatal (the SQP reports them).
+_QP_OPTIONS: dict[str, dict[str, object]] = {
+    "daqp": {}, "qpoases": {"printLevel": "none"},
+    "osqp": {"verbose": False, "osqp": {"verbose": False, "eps_abs": 1e-8, "eps_rel": 1e-8, "polish": True}},
+}
+
+
 def _make_solver(problem, settings: tuple[tuple[str, object], ...], derivatives: dict | None):
-    """IPOPT on ``problem`` (a Function ``(x, p) -> (f, g)``) with an :class:`IterationMonitor`; with
-    ``derivatives`` (another solver's ``grad_f``, ``jac_g`` and ``hess_lag`` of the same problem) nothing is
-    differentiated again."""
-    solver_opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "error_on_fail": False,
+    """The solver on ``problem`` (a Function ``(x, p) -> (f, g)``) with an :class:`IterationMonitor`; with
+    ``derivatives`` (another solver's derivative functions of the same problem and plugin: IPOPT's ``grad_f``,
+    ``jac_g`` and ``hess_lag``, sqpmethod's ``jac_fg`` and ``hess_lag``) nothing is differentiated again."""
+    opts = dict(settings)
+    plugin = opts.pop("plugin")
+    solver_opts = {"print_time": False, "error_on_fail": False,
                    # the multipliers of the parameters are never read: no Jacobian with respect to p
-                   "calc_lam_p": False, **dict(settings), **(derivatives or {})}
+                   "calc_lam_p": False, **opts, **(derivatives or {})}
+    if plugin == "ipopt":
+        solver_opts.update({"ipopt.print_level": 0, "ipopt.sb": "yes"})
+    else:
+        solver_opts.update({"print_header": False, "print_iteration": False, "print_status": False,
+                            "qpsol_options": {"error_on_fail": False, **_QP_OPTIONS[str(opts["qpsol"])]}})
     monitor = IterationMonitor(problem.size1_in(0), problem.size1_out(1))
     solver_opts["iteration_callback"] = monitor
-    return ca.nlpsol("bucket_path", "ipopt", problem, solver_opts), monitor
+    return ca.nlpsol("bucket_path", plugin, problem, solver_opts), monitor
 
 
 def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):

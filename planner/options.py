@@ -14,10 +14,14 @@ from wheelloader.estimator.payload import removed_volume
 
 from .surface import SurfaceGrid
 
-__all__ = ["OBJECTIVES", "PlannerOptions", "StartState"]
+__all__ = ["OBJECTIVES", "QP_SOLVERS", "SOLVERS", "PlannerOptions", "StartState"]
 
 #: The planner's objectives (:attr:`PlannerOptions.objective`).
 OBJECTIVES: tuple[str, ...] = ("fill_energy", "kept_per_energy")
+#: The NLP solvers (:attr:`PlannerOptions.solver`): IPOPT (interior point) or CasADi's ``sqpmethod``.
+SOLVERS: tuple[str, ...] = ("ipopt", "sqp")
+#: The QP solvers of ``solver="sqp"`` (:attr:`PlannerOptions.qp_solver`; CasADi conic plugins on dense QPs).
+QP_SOLVERS: tuple[str, ...] = ("daqp", "qpoases", "osqp")
 
 
 @dataclass(frozen=True)
@@ -101,7 +105,16 @@ class PlannerOptions:
         while it curls, its heel still above the surface. The env ends a cycle once the tip has left the
         soil, so there the curl-out is not tracked.
     tolerance : float
-        IPOPT tolerance (default 1e-4; the objective is O(1)).
+        IPOPT tolerance (default 1e-4; the objective is O(1)); with ``solver="sqp"`` the SQP's primal and dual
+        tolerances.
+    solver : {"ipopt", "sqp"}
+        The NLP solver (default ``"ipopt"``). ``"sqp"``: CasADi's ``sqpmethod`` with the exact Hessian of the
+        Lagrangian, regularised to be convex (``convexify_strategy="regularize"``), one QP per iteration
+        solved by ``qp_solver`` and a line search; with ``max_iter=1`` one QP per solve, the real-time iteration
+        of :class:`~wheelloader.planner.MPCController` (which keeps IPOPT as its fallback). Its
+        ``primal_infeasibility`` is the largest violation of the bounds and constraints (unscaled).
+    qp_solver : {"daqp", "qpoases", "osqp"}
+        The QP solver of ``solver="sqp"`` (default ``"daqp"``, the fastest in ``benchmarks/planner.py``).
     objective : {"fill_energy", "kept_per_energy"}
         What the plan optimises: the carved fill against energy (default, ``-V/capacity + lambda E``), or the
         opt-in energy per m^3 of *kept* soil with the load lifted on to ``dump_height``
@@ -146,6 +159,8 @@ class PlannerOptions:
     max_wall_time: float | None = None
     ipopt_warm_start: bool = False
     tolerance: float = 1e-4
+    solver: str = "ipopt"
+    qp_solver: str = "daqp"
     surface: SurfaceGrid = field(default_factory=SurfaceGrid)
     failure_angle: str = "min_n_gamma"
     cut_angle: float | None = None
@@ -194,6 +209,8 @@ class PlannerOptions:
         err = PlanningError
         check_choice("PlannerOptions.objective", self.objective, OBJECTIVES, error=err)
         check_choice("PlannerOptions.force_model", self.force_model, FORCE_MODELS, error=err)
+        check_choice("PlannerOptions.solver", self.solver, SOLVERS, error=err)
+        check_choice("PlannerOptions.qp_solver", self.qp_solver, QP_SOLVERS, error=err)
         if self.payload is not None and not isinstance(self.payload, PayloadOptions):
             raise PlanningError(f"PlannerOptions.payload must be a PayloadOptions, got {type(self.payload).__name__}")
         if self.dump_height is not None:

@@ -100,7 +100,9 @@ class TrajectoryOptimizer:
             else :func:`~wheelloader.planner.guess.surface_dig` (whose entry into
             the soil is then the face past which the tip stays in the soil).
         warm : bool
-            Start from the previous solution (and its multipliers) if there is one.
+            Start from the previous solution (and its multipliers) if there is one; with an
+            ``initial_guess``, from the guess with the previous solution's multipliers (the shifted warm start
+            of the MPC's real-time iteration).
         reference : BucketPath, optional
             A path to stay close to (MPC: the plan being executed), weighted by
             ``reference_weight`` [1/m^2] on the mean squared tip-position distance.
@@ -167,6 +169,8 @@ class TrajectoryOptimizer:
             monitor.watch = None
         elapsed = time.perf_counter() - tic
         stats["iter_count"] = iterations
+        if not stats.get("iterations"):  # sqpmethod: no primal infeasibility of its own; the largest violation
+            stats["primal_infeasibility"] = _violation(w, np.array(sol["g"]).ravel(), args)
         plan = self._plan_from(w, p, h, start, stats, elapsed, float(sol["f"]))
         plan.raw["face"] = face
         return plan
@@ -209,6 +213,9 @@ class TrajectoryOptimizer:
             args["lam_x0"] = self._last["lam_x"]
             args["lam_g0"] = self._last["lam_g"]
         else:
+            if warm and self._last is not None:  # the shifted warm start: the guess with the last multipliers
+                args["lam_x0"] = self._last["lam_x"]
+                args["lam_g0"] = self._last["lam_g"]
             if initial_guess is None:
                 initial_guess, face = surface_dig(pile, start, duration, self.bucket, soil.phi, self.options.rho_margin)
             elif isinstance(initial_guess, Plan) and "face" in initial_guess.raw:
@@ -219,6 +226,13 @@ class TrajectoryOptimizer:
     def reset_warm_start(self) -> None:
         """Forget the previous solution."""
         self._last = None
+
+    def warm_start_from(self, other: TrajectoryOptimizer) -> None:
+        """Continue (``solve(..., warm=True)``) from ``other``'s last solution, primal and dual (an optimizer
+        of the same NLP with another solver, e.g. the MPC's IPOPT fallback)."""
+        if other.intervals != self.intervals or other._layout["ng"] != self._layout["ng"]:
+            raise PlanningError("warm_start_from needs an optimizer of the same NLP")
+        self._last = None if other._last is None else {k: v.copy() for k, v in other._last.items()}
 
     def predict(self, soil: SoilParams | str | dict, pile: Pile, path: BucketPath, start_fill: float = 0.0) -> dict:
         """CasADi-model forces and energy along any path (for comparing with the NumPy model)."""
@@ -353,8 +367,20 @@ class _Watch:
             return True
 
 
+def _violation(w: np.ndarray, g: np.ndarray, args: dict[str, Any]) -> float:
+    """Largest violation of the bounds and constraints by ``w`` and its constraint values ``g`` (unscaled; NaN if
+    either is not finite)."""
+    if not (np.all(np.isfinite(g)) and np.all(np.isfinite(w))):
+        return math.nan
+    return max(float(np.max(args["lbg"] - g)), float(np.max(g - args["ubg"])),
+               float(np.max(args["lbx"] - w)), float(np.max(w - args["ubx"])), 0.0)
+
+
 def _final_infeasibility(stats: dict) -> float:
-    """IPOPT's primal infeasibility (largest constraint violation, scaled) at its last iterate; NaN if unknown."""
+    """IPOPT's primal infeasibility (largest constraint violation, scaled) at its last iterate, or the largest
+    violation that :meth:`TrajectoryOptimizer.solve` computed for another solver; NaN if unknown."""
+    if "primal_infeasibility" in stats:
+        return float(stats["primal_infeasibility"])
     history = stats.get("iterations") or {}
     values = history.get("inf_pr") or []
     return float(values[-1]) if len(values) else math.nan
