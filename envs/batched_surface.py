@@ -33,6 +33,8 @@ class BatchedSurfaces:
         self.carved = np.empty((n, m))  # carved surfaces
         self._w = np.full(m, self.spacing)  # trapezoid weights of the nodes
         self._w[0] = self._w[-1] = 0.5 * self.spacing
+        self._base = np.arange(n) * m  # flat index of each row's first node
+        self._base_col = self._base[:, None]
 
     def set(self, i: int, heights: np.ndarray) -> None:
         """Start row ``i`` afresh on ``heights`` (start and carved surface)."""
@@ -47,32 +49,47 @@ class BatchedSurfaces:
         """``heights`` on this grid as a :class:`Pile` (a copy)."""
         return Pile(self.x0, self.spacing, heights.copy())
 
-    def height(self, heights: np.ndarray, rows: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """Surface height of ``heights[rows]`` at ``x`` (as Pile.height_at, row-wise; x may be 2-D) [m]."""
-        m = self.nodes
-        last = m - 1
-        u = np.clip((x - self.x0) / self.spacing, 0.0, last)
-        i = u.astype(np.int64)
-        f = u - i
-        base = rows * m if x.ndim == 1 else (rows * m)[:, None]
-        flat = heights.reshape(-1)
-        za = flat[base + i]
-        return za + f * (flat[base + np.minimum(i + 1, last)] - za)
+    def _bases(self, rows: np.ndarray | None, two_d: bool) -> np.ndarray:
+        if rows is None:
+            return self._base_col if two_d else self._base
+        base = rows * self.nodes
+        return base[:, None] if two_d else base
 
-    def contact(self, rows: np.ndarray, x: np.ndarray, z: np.ndarray, th: np.ndarray, slope_window: float,
+    def height(self, heights: np.ndarray, rows: np.ndarray | None, x: np.ndarray) -> np.ndarray:
+        """Surface height of ``heights[rows]`` (every row for None) at ``x`` (as Pile.height_at, row-wise; x may
+        be 2-D) [m]."""
+        last = self.nodes - 1
+        u = np.subtract(x, self.x0)
+        u /= self.spacing
+        np.clip(u, 0.0, last, out=u)
+        i = u.astype(np.int64)
+        f = np.subtract(u, i, out=u)
+        flat = heights.reshape(-1)
+        idx = np.add(i, self._bases(rows, x.ndim == 2))
+        za = flat.take(idx)
+        idx += i < last  # the next node (the last one at the end of the grid, where f = 0)
+        dz = flat.take(idx)
+        dz -= za
+        dz *= f
+        dz += za
+        return dz  # za + f * (zb - za)
+
+    def contact(self, rows: np.ndarray | None, x: np.ndarray, z: np.ndarray, th: np.ndarray, slope_window: float,
                 floor_length: float):
         """(depth, rho, alpha, blade length in soil, surface height) against the start surfaces of ``rows``
-        (as contact_single)."""
+        (every row for None; as contact_single)."""
         w = slope_window
         h = self.height(self.start, rows, np.stack([x + w, x - w, x], axis=1))
         alpha = np.arctan((h[:, 0] - h[:, 1]) / (2.0 * w))
-        vertical = h[:, 2] - z
-        depth = np.maximum(vertical, 0.0) * np.cos(alpha)
+        surface = h[:, 2]
+        vertical = surface - z
+        depth = np.maximum(vertical, 0.0, out=vertical)
+        depth *= np.cos(alpha)
         rho = alpha - th
-        return depth, rho, alpha, blade_length_in_soil(depth, rho, floor_length), h[:, 2]
+        return depth, rho, alpha, blade_length_in_soil(depth, rho, floor_length), surface
 
-    def carve(self, rows: np.ndarray, xa: np.ndarray, za: np.ndarray, xb: np.ndarray, zb: np.ndarray):
-        """Cut the segments (xa, za)-(xb, zb) into the carved surfaces of ``rows`` (batched
+    def carve(self, rows: np.ndarray | None, xa: np.ndarray, za: np.ndarray, xb: np.ndarray, zb: np.ndarray):
+        """Cut the segments (xa, za)-(xb, zb) into the carved surfaces of ``rows`` (every row for None; batched
         SurfaceCarver.cut_segment).
 
         Returns
@@ -83,32 +100,46 @@ class BatchedSurfaces:
         """
         x0, sp, m = self.x0, self.spacing, self.nodes
         lo, hi = np.minimum(xa, xb), np.maximum(xa, xb)
-        i0 = np.maximum(0, np.ceil((lo - x0) / sp - 1e-12).astype(np.int64))
-        i1 = np.minimum(m - 1, np.floor((hi - x0) / sp + 1e-12).astype(np.int64))
-        count = i1 - i0 + 1
-        width_k = int(count.max()) if count.size else 0
+        lo -= x0
+        lo /= sp
+        lo -= 1e-12
+        i0 = np.ceil(lo, out=lo).astype(np.int64)
+        np.maximum(i0, 0, out=i0)
+        hi -= x0
+        hi /= sp
+        hi += 1e-12
+        i1 = np.floor(hi, out=hi).astype(np.int64)
+        np.minimum(i1, m - 1, out=i1)
+        width_k = int((i1 - i0).max()) + 1 if i0.size else 0
         empty = (np.zeros(0, np.int64), np.zeros(0), None)
         if width_k <= 0:
             return empty
-        cols = i0[:, None] + np.arange(width_k)
-        valid = cols <= i1[:, None]
-        cols_c = np.minimum(cols, m - 1)
-        xi = x0 + cols_c * sp
+        # (node k of the segment, row): the rows are contiguous, and summing over k goes in node order
+        cols = np.add.outer(np.arange(width_k), i0)
+        valid = cols <= i1
+        cols_c = np.minimum(cols, m - 1, out=cols)
+        xi = cols_c * sp
+        xi += x0  # x0 + col * sp
         dx = xb - xa
         flat = dx == 0.0
         safe = np.where(flat, 1.0, dx)
-        zc = za[:, None] + (zb - za)[:, None] * (xi - xa[:, None]) / safe[:, None]
-        zc = np.where(flat[:, None], np.minimum(za, zb)[:, None], zc)
+        xi -= xa
+        xi *= zb - za
+        xi /= safe
+        zc = np.add(za, xi, out=xi)  # za + (zb - za) * (xi - xa) / dx
+        if flat.any():
+            zc = np.where(flat, np.minimum(za, zb), zc)
         flat_h = self.carved.reshape(-1)
-        flat_idx = (rows * m)[:, None] + cols_c
-        old = flat_h[flat_idx]
-        cut = valid & (zc < old)
+        flat_idx = cols_c + self._bases(rows, False)
+        old = flat_h.take(flat_idx)
+        cut = zc < old
+        cut &= valid
         if not cut.any():
             return empty
-        contrib = np.where(cut, self._w[cols_c] * (old - zc), 0.0)
-        area = contrib[:, 0].copy()
-        for k in range(1, width_k):  # node order, as SurfaceCarver sums
-            area += contrib[:, k]
+        contrib = np.subtract(old, zc)
+        contrib *= self._w.take(cols_c)
+        contrib = np.where(cut, contrib, 0.0)
+        area = np.add.reduce(contrib, axis=0)  # over k in node order, as SurfaceCarver sums
         idx_u, old_u = flat_idx[cut], old[cut]
         flat_h[idx_u] = zc[cut]
         return idx_u, old_u, area

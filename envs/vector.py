@@ -157,7 +157,7 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         low, high = self.cfg.obs_bounds()
         self.single_observation_space = spaces.Box(low, high, dtype=np.float32)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
-        self._low64, self._high64 = low.astype(np.float64), high.astype(np.float64)
+        self._low32, self._high32 = low.astype(np.float32), high.astype(np.float32)
         n = num_envs
         self._surf = BatchedSurfaces(self.cfg.pile, n)
         self._records = (BatchedCycleRecorder(n, max_episode_steps, self.cfg.dt, keep=1) if record_cycles
@@ -188,6 +188,7 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         self._prev_done = np.zeros(n, dtype=bool)
         self._noise_n = np.zeros((n, NOISE_CHUNK, 2))
         self._noise_u = np.zeros((n, NOISE_CHUNK, 2))
+        self._noise_base = np.arange(n) * NOISE_CHUNK  # flat index of row i's first pair in _pairs(...)
         self._renderer = None
         self._started = False
 
@@ -345,8 +346,8 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         f_t, f_n = model_excess(tr, f_t, f_n, depth, speed, self.cfg.bucket.width)
         stone = self._stone[g]
         if new_stones:
-            u = self._noise_u[rows, j]
-            stone = stone_step(tr, stone, depth, dist, u[:, 0], u[:, 1], self.cfg.stone_decay)
+            u = _pairs(self._noise_u).take(rows * NOISE_CHUNK + j)  # self._noise_u[rows, j] as (real, imag)
+            stone = stone_step(tr, stone, depth, dist, u.real, u.imag, self.cfg.stone_decay)
             self._stone[g] = stone
         return f_t + stone, f_n + 0.5 * stone
 
@@ -433,9 +434,9 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         kept0 = self._kept.copy()
         payload = cfg.payload
         rows = np.arange(self.num_envs)
-        undo = self._carve(rows, x, z, xn, zn)
+        undo = self._carve(None, x, z, xn, zn)
         fill = self._fill.copy()
-        depth, rho, alpha, lt, h_surf = self._surf.contact(rows, xn, zn, thn, cfg.slope_window,
+        depth, rho, alpha, lt, h_surf = self._surf.contact(None, xn, zn, thn, cfg.slope_window,
                                                            cfg.bucket.floor_length)
         f_t, f_n, flags, beta = self._forces(rows, depth, rho, alpha, lt, fill)
         if payload is not None:  # "fee-payload": the kept soil's weight and inertia, in and out of soil
@@ -488,9 +489,9 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         self._e_pay += e_pay
         # measurement
         rng_r = cfg.sensor_range
-        noise = self._noise_n[rows, j]
-        self._mt = np.clip(f_t + cfg.sensor_noise * noise[:, 0], -rng_r, rng_r)
-        self._mn = np.clip(f_n + cfg.sensor_noise * noise[:, 1], -rng_r, rng_r)
+        noise = _pairs(self._noise_n).take(self._noise_base + j)  # self._noise_n[rows, j] as (real, imag)
+        self._mt = np.clip(f_t + cfg.sensor_noise * noise.real, -rng_r, rng_r)
+        self._mn = np.clip(f_n + cfg.sensor_noise * noise.imag, -rng_r, rng_r)
         self._x, self._z, self._th, self._vx, self._vz, self._om = xn, zn, thn, vx, vz, om
         self._depth, self._rho, self._alpha = depth, rho, alpha
         cap = cfg.bucket.capacity
@@ -514,8 +515,9 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
                     cycle=np.zeros(self.num_envs, dtype=int))
         return info, terms.total(), terminated
 
-    def _carve(self, rows: np.ndarray, xa, za, xb, zb):
-        """Carve the rows' segments and fill their buckets (the rest spills); returns what undoes the cut."""
+    def _carve(self, rows: np.ndarray | None, xa, za, xb, zb):
+        """Carve the rows' segments (every row for None) and fill their buckets (the rest spills); returns what
+        undoes the cut."""
         idx_u, old_u, area = self._surf.carve(rows, xa, za, xb, zb)
         if area is None:
             return idx_u, old_u
@@ -534,17 +536,24 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         cfg = self.cfg
         n = self.num_envs
         look = cfg.lookahead
-        obs = np.empty((n, 12 + len(look)))
-        obs[:, 0], obs[:, 1], obs[:, 2] = self._x, self._z, self._th
-        obs[:, 3], obs[:, 4], obs[:, 5] = self._vx, self._vz, self._om
-        obs[:, 6], obs[:, 7], obs[:, 8] = self._depth, self._rho, self._alpha
-        obs[:, 9] = self._kept / cfg.bucket.capacity
-        obs[:, 10], obs[:, 11] = self._mt * 1e-3, self._mn * 1e-3
+        # float32 columns clipped to the float32 bounds: the same values as clipping in float64 and rounding after
+        # (rounding is monotone and the bounds are float32 numbers)
+        obs = np.empty((n, 12 + len(look)), dtype=np.float32)
+        np.stack((self._x, self._z, self._th, self._vx, self._vz, self._om, self._depth, self._rho, self._alpha,
+                  self._kept / cfg.bucket.capacity, self._mt * 1e-3, self._mn * 1e-3), axis=1, out=obs[:, :12])
         if look:
-            ahead = self._x[:, None] + np.asarray(look)[None, :]
-            obs[:, 12:] = self._surf.height(self._surf.carved, np.arange(n), ahead) - self._z[:, None]
-        np.clip(obs, self._low64, self._high64, out=obs)
-        return obs.astype(np.float32)
+            ahead = np.add.outer(self._x, look)
+            h = self._surf.height(self._surf.carved, None, ahead)
+            h -= self._z[:, None]
+            obs[:, 12:] = h
+        np.clip(obs, self._low32, self._high32, out=obs)
+        return obs
+
+def _pairs(noise: np.ndarray) -> np.ndarray:
+    """The ``(n, NOISE_CHUNK, 2)`` draws as a flat view of ``(first, second)`` pairs (complex numbers): one gather
+    of row ``i``'s pair ``j`` at ``i * NOISE_CHUNK + j`` instead of a 2-D fancy index."""
+    return noise.view(np.complex128).reshape(-1)
+
 
 def _signature() -> inspect.Signature:
     """``__init__``'s signature: ``num_envs``, ``max_episode_steps``, ``render_mode`` and the settings of

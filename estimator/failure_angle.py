@@ -116,8 +116,12 @@ def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
         alpha, rho, phi, delta = (np.ravel(v) for v in arrays)
     s = rho + delta + phi
     lo, hi = (np.broadcast_to(v, alpha.shape) for v in beta_bounds(alpha, rho, phi, delta, options))
-    g_lo, _ = log_ngamma_slope(lo, alpha, phi, s)
-    g_hi, _ = log_ngamma_slope(hi, alpha, phi, s)
+    m = alpha.size
+    if isinstance(phi, np.ndarray):
+        g_lo, g_hi = _slope_only(lo, alpha, phi, s), _slope_only(hi, alpha, phi, s)
+    else:  # both ends in one evaluation (element-wise, so the same values)
+        both = _slope_only(np.concatenate((lo, hi)), np.concatenate((alpha, alpha)), phi, np.concatenate((s, s)))
+        g_lo, g_hi = both[:m], both[m:]
     at_lo = g_lo >= 0.0
     at_hi = (g_hi <= 0.0) & ~at_lo
     inner = ~(at_lo | at_hi)
@@ -129,36 +133,130 @@ def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
         if guess is not None:
             g0 = np.broadcast_to(np.asarray(guess, dtype=float), alpha.shape)[inner]
             x = np.where((g0 > a) & (g0 < b), g0, x)
-        # iterate only on the samples that have not converged yet (a batch is as slow as its slowest sample)
-        out = np.empty_like(x)
-        active = np.arange(x.size)
-        per_sample_phi = isinstance(ph, np.ndarray)
-        with np.errstate(divide="ignore", invalid="ignore"):  # only the Newton step divides
-            for _ in range(max_iter):
-                g, dg = log_ngamma_slope(x, al, ph, ss)
-                pos = g > 0.0
-                b = np.where(pos, x, b)
-                a = np.where(pos, a, x)
-                newton = x - g / dg
-                # a Newton step onto a bracket end is kept (the root then sits within rounding of that end)
-                ok = (dg > 0.0) & (newton >= a) & (newton <= b)
-                x_new = np.where(ok, newton, 0.5 * (a + b))
-                going = np.abs(x_new - x) >= tol
-                out[active] = x_new
-                if not going.any():
-                    break
-                if not going.all():
-                    active, x_new, a, b, al, ss = (v[going] for v in (active, x_new, a, b, al, ss))
-                    if per_sample_phi:
-                        ph = ph[going]
-                x = x_new
-        beta[inner] = out
+        beta[inner] = _bracketed_newton(x, a, b, al, ph, ss, tol, max_iter)
     if not return_where:
         return beta.reshape(shape)
     at_rho_limit = (math.pi - s - options.eps2) <= (0.5 * math.pi - alpha)
     where = np.where(at_lo, BETA_AT_EPS1,
                      np.where(at_hi, np.where(at_rho_limit, BETA_AT_RHO_LIMIT, BETA_AT_SLOPE_LIMIT), BETA_INTERIOR))
     return beta.reshape(shape), where.reshape(shape)
+
+
+#: Below this many unconverged samples :func:`_bracketed_newton` finishes them one by one (:func:`_newton_tail`):
+#: a NumPy iteration on a few samples costs about 30 array calls whatever their number.
+_TAIL = 8
+
+
+def _slope_only(beta, alpha, phi, s):
+    """``g`` of :func:`log_ngamma_slope` (the same operations in the same order, so the same values), with
+    the four tangents in one ``np.tan`` call."""
+    t = np.empty((4, beta.size))
+    np.add(alpha, beta, out=t[0])
+    np.add(t[0], phi, out=t[1])
+    t[2] = beta
+    np.add(beta, s, out=t[3])
+    np.tan(t, out=t)
+    with np.errstate(divide="ignore"):
+        np.divide(1.0, t[1:], out=t[1:])
+    g = t[1] - t[0]  # -t1 + c2
+    g -= t[2]
+    g -= t[3]
+    return g
+
+
+def _bracketed_newton(x, a, b, al, ph, ss, tol: float, max_iter: int) -> np.ndarray:
+    """:func:`optimal_beta`'s safeguarded Newton iteration on the interior samples, from ``x`` inside ``(a, b)``.
+
+    Each sample follows its own sequence of iterates (element-wise operations only): it stops once a step is
+    shorter than ``tol`` or after ``max_iter`` steps. The slope and curvature are :func:`log_ngamma_slope`'s
+    operations in the same order (``-t1 + c2`` computed as ``c2 - t1``, ``-t1*t1 - c2*c2`` as
+    ``-(t1*t1 + c2*c2)``: the same roundings), so every iterate is the one the plain loop gives, bit for bit.
+    Only the unconverged samples are iterated; the last few go through :func:`_newton_tail`.
+    """
+    out = np.empty_like(x)
+    active = np.arange(x.size)
+    per_sample_phi = isinstance(ph, np.ndarray)
+    it = 0
+    with np.errstate(divide="ignore", invalid="ignore"):  # only the Newton step divides
+        while it < max_iter:
+            k = x.size
+            if k <= _TAIL:
+                phs = ph.tolist() if per_sample_phi else [ph] * k
+                for m, xm, am, bm, alm, phm, ssm in zip(active.tolist(), x.tolist(), a.tolist(), b.tolist(),
+                                                        al.tolist(), phs, ss.tolist(), strict=True):
+                    out[m] = _newton_tail(xm, am, bm, alm, phm, ssm, tol, max_iter - it)
+                return out
+            t = np.empty((4, k))
+            np.add(al, x, out=t[0])  # alpha + beta
+            np.add(t[0], ph, out=t[1])  # alpha + beta + phi
+            t[2] = x
+            np.add(x, ss, out=t[3])  # beta + s
+            np.tan(t, out=t)
+            np.divide(1.0, t[1:], out=t[1:])  # t1, c2, c3, c4
+            g = t[1] - t[0]
+            g -= t[2]
+            g -= t[3]
+            sq = t * t
+            dg = sq[0] + sq[1]
+            np.subtract(sq[2], dg, out=dg)
+            dg += sq[3]
+            pos = g > 0.0
+            b = np.where(pos, x, b)
+            a = np.where(pos, a, x)
+            np.divide(g, dg, out=g)
+            newton = np.subtract(x, g, out=g)
+            # a Newton step onto a bracket end is kept (the root then sits within rounding of that end)
+            ok = dg > 0.0
+            ok &= newton >= a
+            ok &= newton <= b
+            mid = a + b
+            mid *= 0.5
+            x_new = np.where(ok, newton, mid)
+            step = np.subtract(x_new, x, out=mid)
+            np.abs(step, out=step)
+            going = step >= tol
+            out[active] = x_new
+            it += 1
+            left = np.count_nonzero(going)
+            if left == 0:
+                break
+            if left < k:
+                active, x_new, a, b, al, ss = (v[going] for v in (active, x_new, a, b, al, ss))
+                if per_sample_phi:
+                    ph = ph[going]
+            x = x_new
+    return out
+
+
+def _newton_tail(x: float, a: float, b: float, al: float, ph: float, ss: float, tol: float, steps: int) -> float:
+    """:func:`_bracketed_newton`'s iteration for one sample on Python floats, for at most ``steps`` steps.
+
+    The tangents come from ``np.tan`` (element for element the values NumPy gives inside an array; ``math.tan``
+    may differ in the last bit); the rest is the same IEEE arithmetic as NumPy's, so the iterates are the same.
+    """
+    tan, arr, inf = np.tan, np.array, math.inf
+    x_new = x
+    for _ in range(steps):
+        u = al + x
+        t1, t2, t3, t4 = tan(arr((u, u + ph, x, x + ss))).tolist()
+        c2 = 1.0 / t2 if t2 != 0.0 else math.copysign(inf, t2)
+        c3 = 1.0 / t3 if t3 != 0.0 else math.copysign(inf, t3)
+        c4 = 1.0 / t4 if t4 != 0.0 else math.copysign(inf, t4)
+        g = -t1 + c2 - c3 - c4
+        dg = -t1 * t1 - c2 * c2 + c3 * c3 + c4 * c4
+        if g > 0.0:
+            b = x
+        else:
+            a = x
+        x_new = 0.5 * (a + b)
+        if dg > 0.0:
+            newton = x - g / dg
+            if a <= newton <= b:
+                x_new = newton
+        if not abs(x_new - x) >= tol:
+            return x_new
+        x = x_new
+    return x_new
 
 
 def optimal_beta_scalar(alpha: float, rho: float, phi: float, delta: float,
