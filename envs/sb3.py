@@ -8,6 +8,8 @@ in :mod:`wheelloader` imports it.
   over :class:`~wheelloader.envs.vector.BucketLoadingVectorEnv` (one process,
   NumPy-batched), through the vector env's public API only: ``reset`` with
   ``reset_mask``, ``get_attr``/``set_attr``/``call`` and ``render``;
+* :class:`SerialVecEnv`: SB3's ``DummyVecEnv`` of single envs without its per-step deep copy of the infos
+  (the single env returns fresh info dicts and observations every step, so nothing needs copying);
 * :func:`make_sb3_vec_env`: the adapter, seeded and wrapped in ``VecMonitor``
   (episode statistics, so that ``evaluate_policy`` needs no warning).
 
@@ -40,7 +42,7 @@ except ImportError as exc:  # pragma: no cover - depends on the installation
 
 import wheelloader.envs  # noqa: F401,E402  (registers the env ids)
 
-__all__ = ["BATCHED_FROM", "BatchedVecEnv", "make_sb3_vec_env"]
+__all__ = ["BATCHED_FROM", "BatchedVecEnv", "SerialVecEnv", "make_sb3_vec_env"]
 
 
 class BatchedVecEnv(VecEnv):
@@ -162,6 +164,34 @@ class BatchedVecEnv(VecEnv):
         return [int(i) for i in indices]
 
 
+class SerialVecEnv(DummyVecEnv):
+    """SB3's ``DummyVecEnv`` of single envs, stepped without its deep copy of the infos.
+
+    ``DummyVecEnv.step_wait`` keeps one info dict per env between steps and returns a deep copy of them (about
+    a third of the time of a step of this env). The single env builds a new info dict, observation and
+    reset info at every step and reset, so this class hands them over as they are: the same observations,
+    rewards, dones and infos (``TimeLimit.truncated``, ``terminal_observation``) in the same order as
+    ``DummyVecEnv`` (``tests/test_train.py`` steps both side by side). Everything else is ``DummyVecEnv``'s.
+    """
+
+    def step_wait(self):
+        obs_buf = self.buf_obs[None]
+        rewards, dones = self.buf_rews, self.buf_dones
+        infos = []
+        for i, (env, action) in enumerate(zip(self.envs, self.actions, strict=True)):
+            obs, rewards[i], terminated, truncated, info = env.step(action)
+            done = terminated or truncated
+            dones[i] = done
+            info["TimeLimit.truncated"] = truncated and not terminated
+            if done:
+                info["terminal_observation"] = obs
+                obs, self.reset_infos[i] = env.reset()
+            obs_buf[i] = obs
+            infos.append(info)
+        self.buf_infos = infos
+        return obs_buf.copy(), rewards.copy(), dones.copy(), list(infos)
+
+
 def _info_list(info: dict[str, Any], n: int) -> list[dict[str, Any]]:
     """Gymnasium's vector info (arrays with ``_key`` masks; a nested dict for a dict-valued key, such as
     ``soil``) as one dict per sub-env."""
@@ -178,8 +208,8 @@ def _info_list(info: dict[str, Any], n: int) -> list[dict[str, Any]]:
     return out
 
 
-#: From this many envs on, ``make_sb3_vec_env(backend="auto")`` uses the batched adapter; below it SB3's
-#: ``DummyVecEnv`` of single envs, which is faster there (the crossover measured by
+#: From this many envs on, ``make_sb3_vec_env(backend="auto")`` uses the batched adapter; below it
+#: :class:`SerialVecEnv` of single envs, which is faster there (the crossover measured by
 #: ``benchmarks/env_speed.py --sb3``, docs/results/env_speed).
 BATCHED_FROM = 48
 
@@ -197,11 +227,11 @@ def make_sb3_vec_env(env_id: str = "wheelloader/BucketLoading-v0", n_envs: int =
         Number of sub-envs.
     seed : int, optional
         Sub-env ``i`` is seeded with ``seed + i`` at the first reset.
-    backend : {"auto", "batched", "dummy"}
-        ``"batched"``: :class:`BatchedVecEnv` over the NumPy-batched env; ``"dummy"``: SB3's ``DummyVecEnv``
-        of single envs; ``"auto"`` (default): batched from :data:`BATCHED_FROM` envs on, else dummy. Both
-        give the same episodes for the same seed and actions (same-step auto-reset, terminal observations,
-        the time-limit flag; ``tests/test_train.py``).
+    backend : {"auto", "batched", "serial", "dummy"}
+        ``"batched"``: :class:`BatchedVecEnv` over the NumPy-batched env; ``"serial"``: :class:`SerialVecEnv`
+        of single envs; ``"dummy"``: SB3's ``DummyVecEnv`` of single envs; ``"auto"`` (default): batched from
+        :data:`BATCHED_FROM` envs on, else serial. All give the same episodes for the same seed and actions
+        (same-step auto-reset, terminal observations, the time-limit flag; ``tests/test_train.py``).
     monitor : bool
         Wrap in ``VecMonitor`` (episode returns and lengths in ``info["episode"]``; default True).
     render_mode : str, optional
@@ -209,14 +239,15 @@ def make_sb3_vec_env(env_id: str = "wheelloader/BucketLoading-v0", n_envs: int =
     **env_kwargs
         Keyword arguments of the env.
     """
-    backend = check_choice("backend", backend, ("auto", "batched", "dummy"))
+    backend = check_choice("backend", backend, ("auto", "batched", "serial", "dummy"))
     count = check_int("n_envs", n_envs)
     if backend == "auto":
-        backend = "batched" if count >= BATCHED_FROM else "dummy"
+        backend = "batched" if count >= BATCHED_FROM else "serial"
     if backend == "batched":
         env: VecEnv = BatchedVecEnv(env_id, count, render_mode=render_mode, **env_kwargs)
     else:
-        env = DummyVecEnv([functools.partial(gym.make, env_id, render_mode=render_mode, **env_kwargs)] * count)
+        kind = SerialVecEnv if backend == "serial" else DummyVecEnv
+        env = kind([functools.partial(gym.make, env_id, render_mode=render_mode, **env_kwargs)] * count)
     if seed is not None:
         env.seed(seed)
     return VecMonitor(env) if monitor else env

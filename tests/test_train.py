@@ -75,6 +75,44 @@ def test_batched_adapter_matches_dummy_vec_env(common):
     dummy.close()
 
 
+def test_serial_vec_env_is_dummy_vec_env_without_copies():
+    """make_sb3_vec_env's serial backend (the default below BATCHED_FROM envs) gives what SB3's DummyVecEnv gives,
+    bit for bit: observations, rewards, dones and every info (terminal observation, time-limit flag, episode
+    statistics), through time-limit and exit ends; each step's infos are new dicts."""
+    from wheelloader.envs.sb3 import BATCHED_FROM, SerialVecEnv, make_sb3_vec_env
+
+    kwargs = {"soil": "random", "max_episode_steps": 30}
+    serial = make_sb3_vec_env(n_envs=3, seed=4, **kwargs)
+    dummy = make_sb3_vec_env(n_envs=3, seed=4, backend="dummy", **kwargs)
+    assert isinstance(serial.venv, SerialVecEnv) and BATCHED_FROM > 3
+    np.testing.assert_array_equal(serial.reset(), dummy.reset())
+    rng = np.random.default_rng(1)
+    ends, previous = 0, None
+    for t in range(120):
+        act = rng.uniform(-1, 1, (3, 3)).astype(np.float32)
+        act[:, 0] = np.abs(act[:, 0])
+        act[:, 1] = np.abs(act[:, 1]) if t % 40 >= 20 else act[:, 1]
+        out_s, out_d = serial.step(act), dummy.step(act)
+        for a, b in zip(out_s[:3], out_d[:3], strict=True):
+            assert a.dtype == b.dtype
+            np.testing.assert_array_equal(a, b)
+        for info_s, info_d in zip(out_s[3], out_d[3], strict=True):
+            assert info_s.keys() == info_d.keys()
+            for key, value in info_d.items():
+                if key == "episode":  # its "t" is the wall time since the start
+                    assert {k: info_s[key][k] for k in "rl"} == {k: value[k] for k in "rl"}
+                else:
+                    np.testing.assert_array_equal(info_s[key], value, err_msg=key)
+        if previous is not None:
+            assert all(a is not b for a, b in zip(previous, out_s[3], strict=True))
+        previous = out_s[3]
+        ends += int(out_s[2].sum())
+    assert ends >= 3
+    assert serial.reset_infos == dummy.reset_infos
+    serial.close()
+    dummy.close()
+
+
 def test_run_episode_metrics(common):
     """A fixed Bezier path fills the bucket on gravel; the random policy is reproducible per seed."""
     ep = common.run_episode(common.PathPolicy(0), "gravel", 3)
