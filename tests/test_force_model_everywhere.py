@@ -300,3 +300,33 @@ def test_adaptation_loop_calibrates_predicts_and_plans_with_one_model():
     assert records[2].prediction_rmse_percent < 8.0
     assert records[2].fill_fraction == pytest.approx(logs[2].fill_volume[-1] / 0.2)
     assert records[2].fill_fraction <= DEFAULT_PAYLOAD.heap_factor
+
+
+def test_cli_calibrate_predict_and_plan_follow_the_calibrations_model(tmp_path, capsys):
+    """``wheelloader calibrate --force-model`` records the model in params.json; ``predict`` and ``plan`` use it."""
+    import json
+
+    from wheelloader.cli import main
+    from wheelloader.estimator import CycleLog, calibrate, predict
+    from wheelloader.estimator.calibration import CalibrationOptions
+
+    logs = [_dig("fee-payload", seed=s)[0].last_cycle_log() for s in (0, 1)]
+    for k, log in enumerate(logs):
+        log.save(tmp_path / f"log{k}.csv")
+    params = tmp_path / "params.json"
+    assert main(["calibrate", str(tmp_path / "log0.csv"), "--force-model", "fee-payload", "-o", str(params)]) == 0
+    settings = json.loads(params.read_text())["calibration"]["settings"]
+    assert settings["force_model"] == "fee-payload" and settings["payload"] == DEFAULT_PAYLOAD.to_dict()
+    assert main(["predict", str(params), str(tmp_path / "log1.csv"), "-o", str(tmp_path / "forces.csv")]) == 0
+    cal = calibrate(CycleLog.load(tmp_path / "log0.csv"), options=CalibrationOptions(force_model="fee-payload"))
+    expected = predict(cal, CycleLog.load(tmp_path / "log1.csv"))
+    got = np.genfromtxt(tmp_path / "forces.csv", delimiter=",", names=True)
+    np.testing.assert_allclose(got["F_T"], expected.tangential, rtol=1e-6, atol=1e-3)
+    assert main(["plan", str(params), "-o", str(tmp_path / "plan.csv")]) == 0
+    assert "force model fee-payload" in capsys.readouterr().out
+    summary = json.loads((tmp_path / "plan.summary.json").read_text())
+    assert summary["force_model"] == "fee-payload"
+    assert summary["plan"]["fill_m3"] < 0.8 * summary["plan"]["carved_m3"]
+    assert main(["calibrate", str(tmp_path / "log0.csv"), "--force-model", "fea", "-o",
+                 str(tmp_path / "p2.json")]) == 2
+    assert "force_model" in capsys.readouterr().err

@@ -333,14 +333,18 @@ class Calibration:
 
 @dataclass(frozen=True)
 class SavedModel:
-    """What a params.json says beyond the soil: the calibration's model options, fill source and band model.
+    """What a params.json says beyond the soil: the calibration's model options, fill source, band model, force
+    model and payload.
 
-    Attributes are None when the file does not hold them (a bare 8-parameter JSON, a preset, an older file).
+    Attributes are None when the file does not hold them (a bare 8-parameter JSON, a preset, an older file; its
+    force model is then the paper's, ``"fee"``).
     """
 
     options: Any = None
     fill: str | None = None
     band_model: Any = None
+    force_model: str | None = None
+    payload: Any = None
 
 
 def load_saved_model(path: str | Path) -> SavedModel:
@@ -353,11 +357,16 @@ def load_saved_model(path: str | Path) -> SavedModel:
     except (OSError, json.JSONDecodeError, UnicodeDecodeError, RecursionError):
         return SavedModel()
     settings = (data.get("calibration") or {}).get("settings") or {} if isinstance(data, dict) else {}
+    from ..force_models import check_force_model
+    from ..payload import as_payload
+
     options = settings.get("model_options")
     band = settings.get("band_model")
     try:
+        name = settings.get("force_model")
+        payload = None if name is None else check_force_model(name, as_payload(settings.get("payload")))
         return SavedModel(None if options is None else ModelOptions(**options), settings.get("fill"),
-                          None if band is None else BandModel.from_dict(band))
+                          None if band is None else BandModel.from_dict(band), name, payload)
     except (TypeError, ParameterError) as exc:
         raise ParameterError(f"{path}: calibration settings: {exc}") from None
 

@@ -39,6 +39,10 @@ def register(subparsers: Any) -> None:
                    help="calibration method: varpro (ours, the default; alias 'default'), single-stage or "
                         "multi-stage (the paper's baselines; aliases 'single', 'multi')")
     p.add_argument("--initial", help="warm start: params.json of a previous cycle (or a soil preset name)")
+    p.add_argument("--force-model", default="fee", metavar="NAME",
+                   help="force model fitted: fee (the paper's, default) or fee-payload (the payload as a state: its "
+                        "kept soil carried after the tip leaves the soil); params.json records it, and 'wheelloader "
+                        "predict' and 'wheelloader plan' use it")
     p.add_argument("--sigma", type=float, default=3.0,
                    help="multi-stage stage-2 Gaussian filter sigma [samples] (default: %(default)s)")
     p.add_argument("--compare", action="store_true",
@@ -126,14 +130,17 @@ def run_calibrate(args: argparse.Namespace) -> int:
     _check_sigma(args.sigma, len(cycle))
     initial = check_physical(load_soil(args.initial), "--initial", args.strict) if args.initial else None
     with run:
+        model = {"force_model": args.force_model}
         if several:
             cal = calibrate(cycles, options=CalibrationOptions(method=method, initial=initial,
-                                                               forgetting=args.forgetting))
+                                                               forgetting=args.forgetting, **model))
         else:
-            cal = calibrate(cycle, options=CalibrationOptions(method=method, initial=initial, sigma=args.sigma))
+            cal = calibrate(cycle, options=CalibrationOptions(method=method, initial=initial, sigma=args.sigma,
+                                                              **model))
         others = []
         if args.compare:
-            others = [calibrate(cycle, options=CalibrationOptions(method=m, initial=initial, sigma=args.sigma))
+            others = [calibrate(cycle, options=CalibrationOptions(method=m, initial=initial, sigma=args.sigma,
+                                                                  **model))
                       for m in METHODS if m != cal.method]
         write_json(run.staged(args.output), cal.to_dict())
         if args.plot:
@@ -203,7 +210,7 @@ def run_predict(args: argparse.Namespace) -> int:
     band = args.band if args.band > 0.0 and saved.band_model is not None else None
     with run:
         pred = predict(soil, target, pile=pile, options=saved.options, fill=saved.fill, band=band,
-                       band_model=saved.band_model)
+                       band_model=saved.band_model, force_model=saved.force_model, payload=saved.payload)
         elapsed = time.perf_counter() - start
         pred.save_csv(run.staged(args.output), overwrite=True)
         if args.plot:

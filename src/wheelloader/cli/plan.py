@@ -115,13 +115,14 @@ def _output_paths(given: str) -> tuple[Path, Path]:
 
 def _summary(args: argparse.Namespace, *, soil, lam: float, duration: float, start, ok: bool, outcome,
              solver_ok: bool, cap: float, baseline, base_check, points: list, timing: dict[str, float],
-             nlp_origin: str, output: Path) -> dict[str, Any]:
+             nlp_origin: str, output: Path, force_model: str = "fee") -> dict[str, Any]:
     """The JSON summary of ``wheelloader plan``."""
     from wheelloader.estimator import default_path
 
     plan, check, retried = outcome.plan, outcome.check, outcome.first_failures or None
     return {
         "params": str(args.params), "soil": soil.to_dict(), "pile": args.pile or "trapezoid",
+        "force_model": force_model,
         "energy_weight_per_kJ": lam, "duration_s": duration, "max_time_s": args.max_time,
         "start": {"x": start.x, "z": start.z, "blade_angle": start.blade_angle},
         "ok": ok,
@@ -132,7 +133,8 @@ def _summary(args: argparse.Namespace, *, soil, lam: float, duration: float, sta
         "plan": {"status": plan.status, "solver_ok": solver_ok, "iterations": plan.iterations,
                  "solve_time_s": plan.solve_time, "objective": plan.objective,
                  "predicted_energy_J_casadi": plan.energy, "predicted_fill_m3_casadi": plan.final_fill,
-                 "fill_m3": check.fill, "fill_fraction": check.fill / cap, "energy_J": check.energy,
+                 "fill_m3": check.fill, "carved_m3": check.carved, "fill_fraction": check.fill / cap,
+                 "energy_J": check.energy,
                  "energy_per_m3_J": _per_m3(check.energy, check.fill), "check": check.to_dict()},
         "baseline": {"name": baseline.name, "x_shift_m": float(baseline.x[0] - default_path(rate=args.rate).x[0]),
                      "fill_m3": base_check.fill, "fill_fraction": base_check.fill / cap,
@@ -145,6 +147,28 @@ def _summary(args: argparse.Namespace, *, soil, lam: float, duration: float, sta
         "energy_definition": "NumPy re-simulation at the CSV rate: sum of max(0, F_T ds_t + F_N ds_n) + "
                              "max(0, W_load dz) per step (the env's bookkeeping)",
     }
+
+
+def _planner_options(args: argparse.Namespace):
+    """The planner's options: ``--max-time`` and the calibration's force model (params.json records it; the
+    paper's FEE for a bare parameter file or a preset)."""
+    from wheelloader.estimator.calibration.result import SavedModel, load_saved_model
+    from wheelloader.planner import PlannerOptions
+
+    saved = load_saved_model(args.params) if Path(args.params).is_file() else SavedModel()
+    return PlannerOptions(max_wall_time=args.max_time, force_model=saved.force_model or "fee", payload=saved.payload)
+
+
+def _print_head(args: argparse.Namespace, lam: float, duration: float, opt, timing: dict[str, float],
+                nlp_origin: str, plan) -> None:
+    """Print what was planned (weight, pile, duration, force model) and how long it took."""
+    model = opt.options.force_model
+    print(f"{args.params}: planned with lambda = {lam:g}/kJ on the {args.pile or 'trapezoid'} pile, "
+          f"{duration:.2f} s cycle, {opt.intervals} intervals"
+          + ("" if model == "fee" else f", force model {model} (the fill is the payload's kept soil)"))
+    how = "loaded from the on-disk cache" if nlp_origin.startswith("loaded") else nlp_origin.split(" in ")[0]
+    print(f"timing: NLP {timing['build_s'] * 1e3:.0f} ms ({how}), planning "
+          f"{timing['plan_s'] * 1e3:.0f} ms (IPOPT {plan.iterations} it., {plan.status}, and the NumPy check)")
 
 
 def _print_verdict(ok: bool, outcome, solver_ok: bool, max_time: float | None) -> None:
@@ -181,7 +205,6 @@ def run_plan(args: argparse.Namespace) -> int:
     from wheelloader.estimator import PlanningError
     from wheelloader.estimator.cyclelog import write_columns
     from wheelloader.planner import (
-        PlannerOptions,
         bezier_on_face,
         cycle_duration,
         default_start,
@@ -205,7 +228,7 @@ def run_plan(args: argparse.Namespace) -> int:
     soil = check_physical(load_soil(args.params), args.params, args.strict)
     pile = load_pile(args.pile)
     with run:
-        options = PlannerOptions(max_wall_time=args.max_time)
+        options = _planner_options(args)
         timing: dict[str, float] = {}
         tic = time.perf_counter()
         opt = optimizer_for(options=options)
@@ -221,7 +244,8 @@ def run_plan(args: argparse.Namespace) -> int:
             raise PlanningError(outcome.message)
         plan, check = outcome.plan, outcome.check
         path = plan.path(args.rate)
-        sim = path_energy(path, soil, pile, opt.bucket)
+        sim = path_energy(path, soil, pile, opt.bucket, model_options=opt.options.model_options,
+                          payload=opt.options.force_payload)
         solver_ok = plan.status in ACCEPTED_STATUSES
         # the check judges forces, limits and poses; a plan can pass it and still load (almost) nothing, which
         # plan_next_cycle does not accept (outcome.success false): usable needs both
@@ -242,10 +266,11 @@ def run_plan(args: argparse.Namespace) -> int:
         state, forces = sim["state"], sim["forces"]
         summary = _summary(args, soil=soil, lam=lam, duration=duration, start=start, ok=ok, outcome=outcome,
                            solver_ok=solver_ok, cap=cap, baseline=baseline, base_check=base_check, points=points,
-                           timing=timing, nlp_origin=nlp_origin, output=output)
+                           timing=timing, nlp_origin=nlp_origin, output=output,
+                           force_model=opt.options.force_model)
         # the first four columns are save_path_csv's, so load_path_csv reads the file as a path
         write_columns(run.staged(output), {"t": path.t, "x": path.x, "z": path.z, "blade_angle": path.blade_angle,
-                                           "depth": state.depth, "fill": state.fill_volume, "F_T": forces.tangential,
+                                           "depth": state.depth, "fill": sim["fill_history"], "F_T": forces.tangential,
                                            "F_N": forces.normal})
         write_json(run.staged(summary_path), summary)
         if args.plot:
@@ -256,11 +281,7 @@ def run_plan(args: argparse.Namespace) -> int:
                       baseline_point=(base_check.fill, base_check.energy), plan_point=(check.fill, check.energy),
                       title=f"plan for {Path(str(args.params)).name}, λ = {lam:g}/kJ")
 
-    print(f"{args.params}: planned with lambda = {lam:g}/kJ on the {args.pile or 'trapezoid'} pile, "
-          f"{duration:.2f} s cycle, {opt.intervals} intervals")
-    how = "loaded from the on-disk cache" if nlp_origin.startswith("loaded") else nlp_origin.split(" in ")[0]
-    print(f"timing: NLP {timing['build_s'] * 1e3:.0f} ms ({how}), planning "
-          f"{timing['plan_s'] * 1e3:.0f} ms (IPOPT {plan.iterations} it., {plan.status}, and the NumPy check)")
+    _print_head(args, lam, duration, opt, timing, nlp_origin, plan)
     print(f"plan (NumPy re-simulation): {_describe(check.fill, cap, check.energy)}; "
           f"peak F_T {check.max_tangential / 1e3:.1f} kN, peak F_N {check.max_normal / 1e3:.1f} kN")
     print(f"baseline ({baseline.name} path on this face): {_describe(base_check.fill, cap, base_check.energy)}"
