@@ -23,6 +23,7 @@ from wheelloader.estimator import (
     PayloadOptions,
     contact_state,
     default_path,
+    predict,
     soil_forces,
 )
 from wheelloader.estimator.force_models import check_force_model, cycle_contact_state, model_options_for
@@ -79,6 +80,11 @@ def test_env_single_samples_are_the_estimators_arrays(name):
     model_fill = state.fill_volume if state.carried_volume is None else state.carried_volume
     np.testing.assert_allclose(log.fill_volume, model_fill, rtol=1e-9, atol=1e-12)
     assert infos[-1]["fill_volume"] == pytest.approx(model_fill[-1], rel=1e-9)
+    # and predict() on the cycle log (the path's acceleration from finite differences, not the env's step)
+    # reproduces the env's forces: within 0.1 % of the mean F_R (measured: exact for fee, 0.009 % for fee-payload)
+    pred = predict(env.soil, log, force_model=name)
+    gap = np.hypot(pred.tangential - record["true_F_T"], pred.normal - record["true_F_N"])
+    assert np.sqrt(np.mean(gap**2)) < 1e-3 * np.mean(np.hypot(record["true_F_T"], record["true_F_N"]))
 
 
 def test_payload_fill_is_kept_soil_and_its_weight_stays_after_exit():
@@ -146,9 +152,9 @@ def test_batched_fill_is_the_kept_volume_of_its_removed_volume():
         _, _, _, _, info = vec.step(act)
     cap = vec.cfg.bucket.capacity
     assert np.all(info["carved_volume"] > 0.0)
-    # what was removed is at least what was carved into the bucket; the kept soil is the payload's of it
-    removed = vec.call("episode_record", current=True)
-    assert len(removed) == 3
+    # the records log the kept soil, which is less than the carved volume and at most the heaped capacity
+    records = vec.call("episode_record", current=True)
+    assert [r["fill"][-1] for r in records] == info["fill_volume"].tolist()
     np.testing.assert_array_less(info["fill_volume"], info["carved_volume"] + 1e-12)
     assert np.all(info["fill_volume"] <= kept_volume(np.full(3, 10.0), cap, DEFAULT_PAYLOAD) + 1e-12)
 
