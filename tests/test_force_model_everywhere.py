@@ -336,3 +336,16 @@ def test_cli_calibrate_predict_and_plan_follow_the_calibrations_model(tmp_path, 
     assert main(["calibrate", str(tmp_path / "log0.csv"), "--force-model", "fea", "-o",
                  str(tmp_path / "p2.json")]) == 2
     assert "force_model" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("backend", ["batched", "serial"])
+def test_sb3_adapter_takes_the_model(backend):
+    pytest.importorskip("stable_baselines3")
+    from wheelloader.envs.sb3 import make_sb3_vec_env
+
+    env = make_sb3_vec_env(MAIN_ID, n_envs=2, seed=0, backend=backend, force_model="fee-payload")
+    env.reset()
+    for _ in range(60):
+        _, _, _, infos = env.step(np.tile(np.array([[0.6, -0.05, 0.0]], dtype=np.float32), (2, 1)))
+    dug = [info for info in infos if info["carved_volume"] > 0.0]
+    assert dug and all(info["fill_volume"] < info["carved_volume"] for info in dug)  # the kept soil, not the carving
