@@ -131,3 +131,20 @@ def test_band_scale_widens_the_band_by_its_factor(cycle):
     assert cal2.band_model.scale == 2.0 and cal1.band_model.scale == 1.0
     assert b2.coverage(np.hypot(cycle.tangential, cycle.normal)) >= b1.coverage(np.hypot(cycle.tangential,
                                                                                        cycle.normal))
+
+
+def test_the_sensitivity_benchmark_frees_what_reaches_the_threshold_on_training_families():
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location(
+        "wheelloader_benchmark_sensitivity", Path(__file__).resolve().parents[1] / "benchmarks" / "sensitivity.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    names = ("gamma", "cohesion", "adhesion", "phi", "delta", "K", "n")
+    rows = [{"split": "train", "cycles": 1, "total": dict.fromkeys(names, 0.01) | {"phi": 0.3, "delta": v}}
+            for v in (0.02, 0.5, 0.6)]
+    rows.append({"split": "test", "cycles": 1, "total": dict.fromkeys(names, 0.9)})  # never used
+    assert module.rule(rows, 1)["free"] == ["phi", "delta"]
+    fams = module.families(Path("data/mpm"), Path("data/results"))
+    assert {f["split"] for f in fams} == {"train", "validation", "test"}
+    assert all(f["cycles"] == len(f["paths"]) for f in fams)
