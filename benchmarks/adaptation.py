@@ -80,6 +80,8 @@ def _ours_options(args: argparse.Namespace) -> dict[str, Any]:
                                       failure_angle=args.failure_angle)
     if args.fill != "log":
         out["fill"] = args.fill
+    if args.force_model != "fee":
+        out["force_model"] = args.force_model
     return out
 
 
@@ -123,6 +125,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--fill", choices=("log", "model"), default="log",
                         help="ours: bucket-load source of calibration and prediction (default: %(default)s)")
     parser.add_argument("--carried-load", action="store_true", help="ours: the opt-in carried-load term")
+    parser.add_argument("--force-model", choices=("fee", "fee-payload"), default="fee",
+                        help="ours: the force model it calibrates, predicts and plans with (the plant stays the "
+                             "FEE env; default: %(default)s)")
     parser.add_argument("--slip-friction", action="store_true", help="ours: the opt-in slip-mobilised friction")
     add_planner_physics_arguments(parser, "every strategy that plans (PlannerOptions)")
     parser.add_argument("--failure-angle", choices=("min_n_gamma", "min_weight_force"), default="min_n_gamma",
