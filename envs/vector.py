@@ -182,6 +182,7 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         self._entered = np.zeros(n, dtype=bool)
         self._touched = np.zeros(n, dtype=bool)
         self._crest = np.zeros(n)
+        self._crest_of: tuple[Any, float] = (None, 0.0)
         self._stall = np.zeros(n, dtype=np.int64)
         self._k = np.zeros(n, dtype=np.int64)
         self._steps = np.zeros(n, dtype=np.int64)
@@ -291,7 +292,9 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         depth, rho, alpha, lt = contact_single(pile, x, z, th, cfg.bucket.floor_length, cfg.slope_window)
         self._depth[i], self._rho[i], self._alpha[i] = depth, rho, alpha
         self._touched[i], self._entered[i] = cycle_progress(False, False, depth > 0.0, 0.0, cfg.exit_fill_volume)
-        self._crest[i] = float(np.max(pile.heights))
+        if self._crest_of[0] is not pile:  # the crest of the last start pile (mostly the configured one)
+            self._crest_of = (pile, float(np.max(pile.heights)))
+        self._crest[i] = self._crest_of[1]
         self._noise_n[i], self._noise_u[i] = draw_noise_chunk(rng)
         f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, lt, 0.0, cfg.bucket, DEFAULT_OPTIONS)
         self._beta[i] = beta if depth > 0.0 else np.nan
@@ -418,16 +421,28 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         cfg = self.cfg
         ld = cfg.loader
         dt, dv, dw = cfg.dt, cfg.speed_step, cfg.tilt_rate_step
-        a = np.clip(np.where(np.isnan(a), 0.0, a), -1.0, 1.0)
-        x, z, th = self._x.copy(), self._z.copy(), self._th.copy()
-        vx = self._vx + np.clip(a[:, 0] * ld.max_speed - self._vx, -dv, dv)
-        vz = self._vz + np.clip(a[:, 1] * ld.max_speed - self._vz, -dv, dv)
-        om = self._om + np.clip(a[:, 2] * ld.max_tilt_rate - self._om, -dw, dw)
+        # the three axes at once, as (n, 3) arrays (the same operations per element; clip as maximum, minimum)
+        a = np.where(np.isnan(a), 0.0, a)
+        np.maximum(a, -1.0, out=a)
+        np.minimum(a, 1.0, out=a)
+        pos = np.stack((self._x, self._z, self._th), axis=1)
+        vel = np.stack((self._vx, self._vz, self._om), axis=1)
+        change = a * (ld.max_speed, ld.max_speed, ld.max_tilt_rate)
+        change -= vel
+        rate_step = np.array((dv, dv, dw))
+        np.maximum(change, -rate_step, out=change)
+        np.minimum(change, rate_step, out=change)
+        vel += change  # rate-limited velocity command
         (x0, x1), (z0, z1), (a0, a1) = cfg.x_limits, cfg.z_limits, cfg.blade_angle_limits
-        xn = np.clip(x + vx * dt, x0, x1)
-        zn = np.clip(z + vz * dt, z0, z1)
-        thn = np.clip(th + om * dt, a0, a1)
-        vx, vz, om = (xn - x) / dt, (zn - z) / dt, (thn - th) / dt
+        new = vel * dt
+        new += pos
+        np.maximum(new, (x0, z0, a0), out=new)
+        np.minimum(new, (x1, z1, a1), out=new)
+        vel = np.subtract(new, pos, out=vel)
+        vel /= dt
+        x, z, th = pos.T
+        xn, zn, thn = new.T
+        vx, vz, om = vel.T
         fill0 = self._fill.copy()
         spilled0 = self._spilled.copy()
         removed0 = self._removed.copy()
@@ -449,9 +464,9 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         redraw = j == 0 if pending is None else (j == 0) & ~pending
         for i in np.nonzero(redraw)[0]:
             self._noise_n[i], self._noise_u[i] = draw_noise_chunk(self._rngs[i])
-        dist = np.hypot(xn - x, zn - z)
         truth_on = cfg.truth.active
         if truth_on:
+            dist = np.hypot(xn - x, zn - z)
             f_t, f_n = self._truth(slice(None), rows, f_t, f_n, depth, dist / dt, dist, j, True)
         stalled = (f_t > ld.max_push_force) | (f_n > ld.max_lift_force)
         if stalled.any():
@@ -490,8 +505,8 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         # measurement
         rng_r = cfg.sensor_range
         noise = _pairs(self._noise_n).take(self._noise_base + j)  # self._noise_n[rows, j] as (real, imag)
-        self._mt = np.clip(f_t + cfg.sensor_noise * noise.real, -rng_r, rng_r)
-        self._mn = np.clip(f_n + cfg.sensor_noise * noise.imag, -rng_r, rng_r)
+        self._mt = np.minimum(np.maximum(f_t + cfg.sensor_noise * noise.real, -rng_r), rng_r)  # clip
+        self._mn = np.minimum(np.maximum(f_n + cfg.sensor_noise * noise.imag, -rng_r), rng_r)
         self._x, self._z, self._th, self._vx, self._vz, self._om = xn, zn, thn, vx, vz, om
         self._depth, self._rho, self._alpha = depth, rho, alpha
         cap = cfg.bucket.capacity
