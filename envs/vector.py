@@ -561,8 +561,8 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
             h = self._surf.height(self._surf.carved, None, ahead)
             h -= self._z[:, None]
             obs[:, 12:] = h
-        np.clip(obs, self._low32, self._high32, out=obs)
-        return obs
+        np.maximum(obs, self._low32, out=obs)  # clip
+        return np.minimum(obs, self._high32, out=obs)
 
 def _pairs(noise: np.ndarray) -> np.ndarray:
     """The ``(n, NOISE_CHUNK, 2)`` draws as a flat view of ``(first, second)`` pairs (complex numbers): one gather

@@ -80,9 +80,10 @@ class VectorApi:
         reset info of those in ``reset``."""
         out: dict[str, Any] = {}
         if stepped.any():
+            idle = np.flatnonzero(~stepped)
             for key in STEP_INFO_KEYS:
                 value = info[key]
-                value[~stepped] = 0
+                value[idle] = 0
                 out[key], out["_" + key] = value, stepped.copy()
         reset_info = self._reset_info(reset)
         out["soil"], out["_soil"] = reset_info["soil"], reset_info["_soil"]

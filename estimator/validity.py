@@ -205,4 +205,6 @@ def clamp_angles(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
     flags = np.where(rho < options.rho_min, FLAG_RHO_LOW, 0)
     flags |= np.where(rho > rho_hi, FLAG_RHO_HIGH, 0)
     flags |= np.where((alpha > options.alpha_max) | (alpha < alpha_lo), FLAG_ALPHA_CLAMPED, 0)
-    return np.clip(alpha, alpha_lo, options.alpha_max), np.clip(rho, options.rho_min, rho_hi), flags.astype(np.int64)
+    # np.clip as maximum then minimum: the same values, without np.clip's Python-level wrapper
+    return (np.minimum(np.maximum(alpha, alpha_lo), options.alpha_max),
+            np.minimum(np.maximum(rho, options.rho_min), rho_hi), flags.astype(np.int64))
