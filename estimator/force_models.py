@@ -9,6 +9,9 @@ name                      model
                           the FEE with the carved fill as its surcharge; the kept soil (retention, smooth heaped
                           capacity) is the fill, and its weight and inertia take over from the surcharge as the
                           tip leaves the soil (the opt-in carried-load term, ``carried_in_soil=False``)
+``"fee-learned"``         ``"fee-payload"`` plus a correction learned offline from the continuum (MPM) cycles,
+                          with the soil among its inputs (:mod:`~wheelloader.estimator.learned`); its payload
+                          is the one fitted with it (the shipped artifact's), unless given
 ========================  ===================================================================================
 
 :data:`DEFAULT_PAYLOAD` is the payload fitted to the project's continuum cycles except the held-out soil
@@ -28,11 +31,14 @@ from .kinematics import ContactState
 from .payload import PayloadOptions, payload_contact_state
 from .validity import ModelOptions
 
-__all__ = ["DEFAULT_FORCE_MODEL", "DEFAULT_PAYLOAD", "FORCE_MODELS", "check_force_model", "cycle_contact_state",
+__all__ = ["DEFAULT_FORCE_MODEL", "DEFAULT_PAYLOAD", "FORCE_MODELS", "PAYLOAD_MODELS", "check_force_model",
+           "cycle_contact_state",
            "model_options_for"]
 
 #: Names accepted by ``force_model=``.
-FORCE_MODELS: tuple[str, ...] = ("fee", "fee-payload")
+FORCE_MODELS: tuple[str, ...] = ("fee", "fee-payload", "fee-learned")
+#: The models built on the payload state.
+PAYLOAD_MODELS: tuple[str, ...] = ("fee-payload", "fee-learned")
 DEFAULT_FORCE_MODEL = "fee"
 #: The payload fitted to the continuum training cycles (module docstring); rounded to 4 digits.
 DEFAULT_PAYLOAD = PayloadOptions(retention=0.9649, heap_factor=0.6059, sharpness=1.926)
@@ -46,6 +52,10 @@ def check_force_model(name: object, payload: PayloadOptions | None, error: type[
         if payload is not None:
             raise error('payload options need force_model="fee-payload"')
         return None
+    if payload is None and name == "fee-learned":
+        from .learned import default_learned_model
+
+        return default_learned_model().payload
     if payload is None:
         return DEFAULT_PAYLOAD
     if not isinstance(payload, PayloadOptions):
@@ -55,13 +65,13 @@ def check_force_model(name: object, payload: PayloadOptions | None, error: type[
 
 def model_options_for(name: str, options: ModelOptions) -> ModelOptions:
     """The force-model options ``name`` needs on top of ``options`` (the payload's carried load)."""
-    return replace(options, carried_load=True, carried_in_soil=False) if name == "fee-payload" else options
+    return replace(options, carried_load=True, carried_in_soil=False) if name in PAYLOAD_MODELS else options
 
 
 def cycle_contact_state(log: CycleLog, name: str, payload: PayloadOptions | None, slope_window: float,
                         fill: str) -> ContactState:
     """A logged cycle's contact state under force model ``name`` (``fill`` applies to ``"fee"`` only)."""
-    if name == "fee-payload":
+    if name in PAYLOAD_MODELS:
         return payload_contact_state(log, payload, slope_window)
     return log.contact_state(slope_window, fill)
 

@@ -45,6 +45,7 @@ from ..soil_vector import SOIL_VECTOR_NAMES as FIT_NAMES
 from ..soil_vector import soil_from_vector, soil_vector, vector_bounds
 from .bands import BandModel, residual_noise_model
 from .fitmodel import FitData
+from .learned_fit import calibrate_learned
 from .options import DEFAULT_METHOD, METHOD_ALIASES, METHODS, CalibrationOptions, canonical_method
 from .paper_methods import fit_multi_stage, fit_single_stage
 from .priors import class_prior
@@ -280,6 +281,8 @@ def calibrate(cycles: CycleLog | list[CycleLog] | None = None, *legacy_args: Any
     """
     cycles, opts = _resolve_call(cycles, options, legacy_args, legacy_kwargs)
     logs = _coerce_cycles(cycles)
+    if opts.force_model == "fee-learned":  # the payload FEE fitted to the forces minus the learned correction
+        return calibrate_learned(logs, opts, calibrate)
     weights = cycle_weights_for(len(logs), opts.forgetting, opts.cycle_weights)
     if len(logs) > 1 and opts.method != "varpro":
         raise CalibrationError(f"calibration from several cycles ({len(logs)} given) is implemented for the varpro "

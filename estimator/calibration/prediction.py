@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -43,6 +44,9 @@ class Prediction:
         RMSE against the measured forces (in-soil samples), when available.
     band : PredictionBand or None
         Prediction band (``predict(..., band=level)``), else None.
+    outside_training : numpy.ndarray or None
+        ``force_model="fee-learned"`` only: True where a sample's inputs leave the learned correction's training
+        range (:mod:`~wheelloader.estimator.learned`; there the correction is held at the range's edge).
     """
 
     path: BucketPath
@@ -53,6 +57,7 @@ class Prediction:
     observed_normal: np.ndarray | None = field(default=None, repr=False)
     quality: FitQuality | None = None
     band: PredictionBand | None = None
+    outside_training: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def tangential(self) -> np.ndarray:
@@ -155,7 +160,7 @@ def predict(
     Prediction
     """
     soil = load_params(params)
-    _, payload, options, fill = _model_of(params, force_model, payload, options, fill)
+    force_model, payload, options, fill = _model_of(params, force_model, payload, options, fill)
     path, pile, bucket, fill_volume, load, observed_t, observed_n = _path_inputs(path_or_cycle, pile, bucket, fill)
     acceleration = None
     if options.carried_load:
@@ -167,6 +172,14 @@ def predict(
     if payload is not None:
         state = with_payload(state, bucket.capacity, payload, initial_fill)
     forces = soil_forces(soil, state, bucket, options)
+    outside = None
+    if force_model == "fee-learned":
+        from ..learned import default_learned_model, learned_forces
+
+        lf = learned_forces(default_learned_model(), state, path, bucket, soil)
+        f_t, f_n = forces.tangential + lf.tangential, forces.normal + lf.normal
+        forces = dataclasses.replace(forces, tangential=f_t, normal=f_n, resultant=np.hypot(f_t, f_n))
+        outside = lf.outside
     pband = None
     if band is not None:
         if band_model is None:
@@ -181,7 +194,7 @@ def predict(
         if np.any(mask):
             quality = FitQuality.from_forces(observed_t[mask], observed_n[mask], forces.tangential[mask],
                                              forces.normal[mask])
-    return Prediction(path, forces, state, soil, observed_t, observed_n, quality, pband)
+    return Prediction(path, forces, state, soil, observed_t, observed_n, quality, pband, outside)
 
 
 def _model_of(params, force_model, payload, options, fill):

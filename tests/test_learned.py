@@ -1,0 +1,106 @@
+"""force_model="fee-learned": the shipped artifact, the NumPy and CasADi networks, range flags, calibrate/predict."""
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from wheelloader.estimator import CycleLog, calibrate, predict
+from wheelloader.estimator.calibration import CalibrationOptions
+from wheelloader.estimator.errors import ParameterError
+from wheelloader.estimator.learned import (
+    DEFAULT_ARTIFACT,
+    INPUT_NAMES,
+    LearnedModel,
+    casadi_correction,
+    default_learned_model,
+)
+
+LOG = Path(__file__).resolve().parents[1] / "data" / "mpm" / "sand_path2.csv"
+
+
+@pytest.fixture(scope="module")
+def model():
+    return default_learned_model()
+
+
+def test_artifact_is_small_versioned_and_states_its_split(model):
+    assert DEFAULT_ARTIFACT.stat().st_size < 1_000_000
+    assert model.version != "unversioned"
+    manifest = model.manifest
+    assert manifest["command"].startswith("python benchmarks/fee_learned.py")
+    train = [f for files in manifest["split"]["train"].values() for f in files]
+    test = [f for files in manifest["split"]["test"].values() for f in files]
+    assert train and test and not set(train) & set(test)
+    # the held-out soils and pile never reach training
+    assert not [f for f in train if "dirt" in f or "modified_sand" in f or "slope25" in f]
+
+
+def test_round_trip_and_bad_artifacts(model, tmp_path):
+    again = LearnedModel.from_dict(json.loads(json.dumps(model.to_dict())))
+    x = np.tile(model.mean, (3, 1))
+    np.testing.assert_array_equal(again.correction(x), model.correction(x))
+    bad = model.to_dict() | {"format": "other"}
+    with pytest.raises(ParameterError, match="format"):
+        LearnedModel.from_dict(bad)
+    with pytest.raises(ParameterError, match="inputs"):
+        LearnedModel.from_dict(model.to_dict() | {"inputs": ["depth"]})
+    with pytest.raises(ParameterError, match="w2"):
+        LearnedModel.from_dict(model.to_dict() | {"w2": [[1.0, 2.0]]})
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.floats(-3.0, 3.0), min_size=len(INPUT_NAMES), max_size=len(INPUT_NAMES)))
+def test_casadi_twin_agrees_with_numpy(u):
+    import casadi as ca
+
+    model = default_learned_model()
+    # inputs spread over and beyond the trusted range (both sides of the clip)
+    x = model.low + (np.asarray(u) + 1.0) / 2.0 * (model.high - model.low)
+    sym = ca.SX.sym("x", 1, len(INPUT_NAMES))
+    fn = ca.Function("r", [sym], [casadi_correction(model, sym)])
+    np.testing.assert_allclose(np.asarray(fn(x[None, :])), model.correction(x[None, :]), rtol=1e-12, atol=1e-12)
+
+
+def test_inputs_outside_the_training_range_are_flagged_and_clipped(model):
+    inside = np.tile((model.low + model.high) / 2.0, (2, 1))
+    beyond = inside.copy()
+    beyond[1, 0] = model.high[0] + 1.0  # far deeper than anything trained on
+    edge = inside.copy()
+    edge[1, 0] = model.high[0]
+    assert list(model.outside(inside)) == [False, False]
+    assert list(model.outside(beyond)) == [False, True]
+    np.testing.assert_array_equal(model.correction(beyond), model.correction(edge))
+
+
+@pytest.fixture(scope="module")
+def log():
+    return CycleLog.load(LOG)
+
+
+@pytest.fixture(scope="module")
+def learned_cal(log):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return calibrate(log, options=CalibrationOptions(force_model="fee-learned", grid=(4, 4, 3), n_starts=1))
+
+
+def test_calibration_carries_the_learned_model_and_predict_reproduces_it(log, learned_cal, model):
+    assert learned_cal.force_model == "fee-learned"
+    assert learned_cal.payload == model.payload
+    assert learned_cal.settings["learned"]["version"] == model.version
+    pred = predict(learned_cal, log)
+    assert pred.outside_training is not None and pred.outside_training.shape == (len(log),)
+    np.testing.assert_allclose(pred.tangential, learned_cal.predicted_tangential, rtol=1e-9, atol=1e-6)
+    np.testing.assert_allclose(pred.normal, learned_cal.predicted_normal, rtol=1e-9, atol=1e-6)
+    # the correction is what sets it apart from the payload FEE at the same soil
+    plain = predict(learned_cal.params, log, force_model="fee-payload", payload=model.payload)
+    assert not np.allclose(plain.tangential, pred.tangential)
+
+
+def test_other_models_have_no_range_flags(log, learned_cal):
+    assert predict(learned_cal.params, log).outside_training is None
