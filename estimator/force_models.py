@@ -31,12 +31,15 @@ from .kinematics import ContactState
 from .payload import PayloadOptions, payload_contact_state
 from .validity import ModelOptions
 
-__all__ = ["DEFAULT_FORCE_MODEL", "DEFAULT_PAYLOAD", "FORCE_MODELS", "PAYLOAD_MODELS", "check_force_model",
-           "cycle_contact_state",
-           "model_options_for"]
+__all__ = ["DEFAULT_FORCE_MODEL", "DEFAULT_PAYLOAD", "FORCE_MODELS", "PAYLOAD_MODELS", "PLANT_FORCE_MODELS",
+           "check_force_model", "cycle_contact_state", "model_options_for"]
 
 #: Names accepted by ``force_model=``.
 FORCE_MODELS: tuple[str, ...] = ("fee", "fee-payload", "fee-learned")
+#: The names the env and the planner take: ``"fee-learned"`` is the estimator's (calibrate, predict) until the env
+#: and the planner carry its correction (:func:`~wheelloader.estimator.learned.casadi_correction` is its CasADi
+#: twin).
+PLANT_FORCE_MODELS: tuple[str, ...] = ("fee", "fee-payload")
 #: The models built on the payload state.
 PAYLOAD_MODELS: tuple[str, ...] = ("fee-payload", "fee-learned")
 DEFAULT_FORCE_MODEL = "fee"
@@ -44,10 +47,11 @@ DEFAULT_FORCE_MODEL = "fee"
 DEFAULT_PAYLOAD = PayloadOptions(retention=0.9649, heap_factor=0.6059, sharpness=1.926)
 
 
-def check_force_model(name: object, payload: PayloadOptions | None, error: type[Exception] = ParameterError
-                      ) -> PayloadOptions | None:
-    """Validate ``force_model``/``payload``; return the payload options the model uses (None for ``"fee"``)."""
-    check_choice("force_model", name, FORCE_MODELS, error=error)
+def check_force_model(name: object, payload: PayloadOptions | None, error: type[Exception] = ParameterError,
+                      plant: bool = False) -> PayloadOptions | None:
+    """Validate ``force_model``/``payload``; return the payload options the model uses (None for ``"fee"``).
+    ``plant=True``: a name the env and the planner take (:data:`PLANT_FORCE_MODELS`)."""
+    check_choice("force_model", name, PLANT_FORCE_MODELS if plant else FORCE_MODELS, error=error)
     if name == "fee":
         if payload is not None:
             raise error('payload options need force_model="fee-payload"')

@@ -9,7 +9,13 @@ import numpy as np
 
 from wheelloader.estimator import DEFAULT_OPTIONS, ModelOptions, PayloadOptions, PlanningError
 from wheelloader.estimator.checks import check_choice, check_finite, check_int, check_range
-from wheelloader.estimator.force_models import DEFAULT_FORCE_MODEL, DEFAULT_PAYLOAD, FORCE_MODELS, model_options_for
+from wheelloader.estimator.force_models import (
+    DEFAULT_FORCE_MODEL,
+    DEFAULT_PAYLOAD,
+    FORCE_MODELS,
+    PLANT_FORCE_MODELS,
+    model_options_for,
+)
 from wheelloader.estimator.payload import removed_volume
 
 from .surface import SurfaceGrid
@@ -209,6 +215,9 @@ class PlannerOptions:
         err = PlanningError
         check_choice("PlannerOptions.objective", self.objective, OBJECTIVES, error=err)
         check_choice("PlannerOptions.force_model", self.force_model, FORCE_MODELS, error=err)
+        if self.force_model not in PLANT_FORCE_MODELS:  # "fee-learned": calibrate and predict only, for now
+            raise err(f"PlannerOptions.force_model {self.force_model!r} is not in the planner yet; it takes "
+                      f"{list(PLANT_FORCE_MODELS)}")
         check_choice("PlannerOptions.solver", self.solver, SOLVERS, error=err)
         check_choice("PlannerOptions.qp_solver", self.qp_solver, QP_SOLVERS, error=err)
         if self.payload is not None and not isinstance(self.payload, PayloadOptions):

@@ -26,7 +26,12 @@ from wheelloader.estimator import (
     predict,
     soil_forces,
 )
-from wheelloader.estimator.force_models import check_force_model, cycle_contact_state, model_options_for
+from wheelloader.estimator.force_models import (
+    PLANT_FORCE_MODELS,
+    check_force_model,
+    cycle_contact_state,
+    model_options_for,
+)
 from wheelloader.estimator.payload import kept_volume
 
 MAIN_ID = "wheelloader/BucketLoading-v0"
@@ -66,7 +71,7 @@ def _estimator_forces(name: str, env, record, carved):
     return soil_forces(env.soil, state, cfg.bucket, model_options_for(name, DEFAULT_OPTIONS))
 
 
-@pytest.mark.parametrize("name", FORCE_MODELS)
+@pytest.mark.parametrize("name", PLANT_FORCE_MODELS)
 def test_env_single_samples_are_the_estimators_arrays(name):
     env, record, carved, infos = _dig(name)
     assert len(record["x"]) == len(carved) > 100
@@ -109,7 +114,7 @@ def test_payload_fill_is_kept_soil_and_its_weight_stays_after_exit():
     assert fee["true_F_T"][-1] == 0.0 and fee["true_F_N"][-1] == 0.0
 
 
-@pytest.mark.parametrize("name", FORCE_MODELS)
+@pytest.mark.parametrize("name", PLANT_FORCE_MODELS)
 def test_gym_make_pickle_check_env_and_vector_env_take_the_model(name):
     from gymnasium.utils.env_checker import check_env
 
@@ -175,7 +180,7 @@ def _casadi_function(name: str, bucket):
     return ca.Function("f", [soil, vertical, rho, alpha, load, carried], [out["F_T"], out["F_N"], grad]), options
 
 
-@pytest.mark.parametrize("name", FORCE_MODELS)
+@pytest.mark.parametrize("name", PLANT_FORCE_MODELS)
 def test_planner_casadi_model_is_the_estimators(name):
     """On the paper's paths: in soil within the planner's smoothing (as for the FEE, 3 % of the peak), out of
     the soil (5 mm above it and more) the same carried weight; finite exact derivatives everywhere."""
@@ -212,7 +217,7 @@ def test_planner_casadi_model_is_the_estimators(name):
             assert ref.resultant[-1] > 500.0  # the kept soil's weight
 
 
-@pytest.mark.parametrize("name", FORCE_MODELS)
+@pytest.mark.parametrize("name", PLANT_FORCE_MODELS)
 def test_planner_plans_and_checks_with_the_model(name):
     """A plan with ``PlannerOptions(force_model=name)``: the NLP's fill at the end is the model's fill of its
     carved volume, and the NumPy check (the estimator's model) agrees with it and passes."""
@@ -349,3 +354,14 @@ def test_sb3_adapter_takes_the_model(backend):
         _, _, _, infos = env.step(np.tile(np.array([[0.6, -0.05, 0.0]], dtype=np.float32), (2, 1)))
     dug = [info for info in infos if info["carved_volume"] > 0.0]
     assert dug and all(info["fill_volume"] < info["carved_volume"] for info in dug)  # the kept soil, not the carving
+
+
+def test_learned_model_is_the_estimators_only_until_the_env_and_planner_carry_it():
+    from wheelloader.estimator import PlanningError
+    from wheelloader.planner import PlannerOptions
+
+    assert set(PLANT_FORCE_MODELS) < set(FORCE_MODELS) and "fee-learned" in FORCE_MODELS
+    with pytest.raises(ParameterError, match="force_model"):
+        BucketLoadingEnv(force_model="fee-learned")
+    with pytest.raises(PlanningError, match="force_model"):
+        PlannerOptions(force_model="fee-learned")

@@ -7,12 +7,11 @@ same path for one cycle and for several.
 Methods
 -------
 ``"varpro"`` (alias ``"default"``, the default)
-    Our method (:mod:`wheelloader.estimator.calibration.varpro`): variable projection on
-    the model's linear structure, a global grid over ``(phi, delta, n)``,
-    analytic-Jacobian bounded least squares, optional warm start; with
-    ``regularize=True`` the MAP estimate under a weak prior (mid-range or
-    warm start, bound range / sqrt(12); noise per effective sample from the
-    residual autocorrelation) resolves directions the cycle leaves undetermined.
+    Our method (:mod:`wheelloader.estimator.calibration.varpro`): variable projection on the model's linear
+    structure, a global grid over ``(phi, delta, n)``, analytic-Jacobian bounded least squares, optional warm
+    start; with ``regularize=True`` the MAP estimate under a weak prior (mid-range or warm start, bound range /
+    sqrt(12); noise per effective sample from the residual autocorrelation) resolves directions the cycle leaves
+    undetermined. ``force_model="fee-learned"``: :mod:`.learned_fit`.
 ``"single-stage"``, ``"multi-stage"`` (aliases ``"single"``, ``"multi"``)
     The paper's baselines (:mod:`wheelloader.estimator.calibration.paper_methods`),
     L-BFGS-B with finite differences, as in Section III.
@@ -87,8 +86,7 @@ def _coerce_cycles(cycle: Any) -> list[CycleLog]:
     raise CalibrationError(f"cycle must be a CycleLog or a list of CycleLogs, got {type(cycle).__name__}")
 
 
-def cycle_weights_for(count: int, forgetting: float | None = None,
-                      cycle_weights: Any = None) -> list[float] | None:
+def cycle_weights_for(count: int, forgetting: float | None = None, cycle_weights: Any = None) -> list[float] | None:
     """Weights of ``count`` cycles (oldest first): ``forgetting ** (count - 1 - k)`` or the given list; None: all 1.
 
     A forgetting factor ``f`` in (0, 1] weighs the newest cycle 1, the one before ``f``, then ``f**2``,
@@ -105,8 +103,7 @@ def cycle_weights_for(count: int, forgetting: float | None = None,
         except (TypeError, ValueError):
             raise CalibrationError(f"cycle_weights must be {count} numbers > 0, got {cycle_weights!r}") from None
         if len(w) != count or not all(math.isfinite(v) and v > 0.0 for v in w):
-            raise CalibrationError(f"cycle_weights must be {count} finite numbers > 0 (one per cycle), "
-                                   f"got {cycle_weights!r}")
+            raise CalibrationError(f"cycle_weights must be {count} numbers > 0 (one per cycle), got {cycle_weights!r}")
         return w
     return None
 
@@ -257,8 +254,7 @@ def calibrate(cycles: CycleLog | list[CycleLog] | None = None, *legacy_args: Any
         and bucket, oldest first: one soil is fitted to all of them, each with the depth measured to its own
         pile surface (varpro method only). A list of one log gives exactly the one-log result.
     options : CalibrationOptions, optional
-        Every setting (method, warm start, bounds, weights, ...); default ``CalibrationOptions()``: the
-        varpro method with its defaults.
+        Every setting (method, warm start, bounds, weights, force model, ...); default the varpro method's.
     *legacy_args, **legacy_kwargs
         Deprecated (one release): the old signature ``calibrate(cycle, method, initial, bounds, *, lam,
         sigma, grid, n_starts, max_iter, options, slope_window, min_samples, regularize, forgetting,
