@@ -146,7 +146,7 @@ class MPCController:
         self.optimizer = TrajectoryOptimizer(self.bucket, self.loader, mpc_options)
         # the SQP's first solve of a cycle and its fallback: IPOPT on the same NLP
         self.fallback = None if solver == "ipopt" else TrajectoryOptimizer(
-            self.bucket, self.loader, replace(mpc_options, solver="ipopt",
+            self.bucket, self.loader, replace(mpc_options, solver="ipopt", compiled=False,
                                               max_iter=min(base.max_iter, DEFAULT_MAX_ITER["ipopt"])))
         self.initial_plan = initial_plan
         self.reference_weight = float(reference_weight)

@@ -58,13 +58,13 @@ from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, Loader
 from wheelloader.estimator.payload import kept_volume
 from wheelloader.estimator.validity import alpha_lower_limit
 
-from . import nlp_cache
+from . import codegen, nlp_cache
 from .casadi_model import casadi_forces, smooth_max, smooth_min, smooth_pos
 from .interrupt import guarded
 from .kept import KEPT_OBJECTIVE_SCALE, kept_terms, smooth_lift
 from .options import PlannerOptions
 
-__all__ = ["VALIDITY_RELAX", "build", "origin", "structural_options"]
+__all__ = ["VALIDITY_RELAX", "build", "origin", "problem_function", "structural_options"]
 
 #: The NLPs of this process by (bucket, loader, structural options): expressions, layout, derivatives, solvers.
 _CACHE: dict[tuple, dict] = {}
@@ -98,7 +98,7 @@ def _smooth_work(v):
 #: of the expressions: as parameters, CasADi differentiates ``F_T / (margin * F_max)`` in another floating-point
 #: order, and the plans would change in their last bits.)
 _NOT_STRUCTURAL = ("max_iter", "max_wall_time", "ipopt_warm_start", "tolerance", "energy_weight", "fill_limit",
-                   "blade_angle_limits", "lift_headroom", "kept_target", "solver", "qp_solver")
+                   "blade_angle_limits", "lift_headroom", "kept_target", "solver", "qp_solver", "compiled")
 #: The derivatives each nlpsol plugin needs, by their nlpsol option name and the name of the solver's own function.
 _DERIVATIVES = {"ipopt": (("grad_f", "nlp_grad_f"), ("jac_g", "nlp_jac_g"), ("hess_lag", "nlp_hess_l")),
                 "sqpmethod": (("jac_fg", "nlp_jac_fg"), ("hess_lag", "nlp_hess_l"))}
@@ -139,7 +139,15 @@ def build(bucket: Bucket, loader: Loader, options: PlannerOptions):
     settings = _solver_settings(options)
     if settings not in entry["solvers"]:
         plugin = dict(settings)["plugin"]
-        solver, monitor = guarded(_make_solver, entry["problem"], settings, entry["derivatives"].get(plugin))
+        derivatives = entry["derivatives"].get(plugin)
+        if options.compiled and options.solver == "sqp":  # the derivatives as compiled C (once per machine)
+            if derivatives is None:  # the virtual machine's solver first: its derivative functions
+                build(bucket, loader, replace(options, compiled=False))
+                derivatives = entry["derivatives"][plugin]
+            if f"compiled {plugin}" not in entry:  # None: no compiler or a failed compile (logged)
+                entry[f"compiled {plugin}"] = guarded(codegen.compiled, derivatives, f"planner_{plugin}")
+            derivatives = entry[f"compiled {plugin}"] or derivatives
+        solver, monitor = guarded(_make_solver, entry["problem"], settings, derivatives)
         if plugin not in entry["derivatives"]:
             entry["derivatives"][plugin] = {name: solver.get_function(own) for name, own in _DERIVATIVES[plugin]
                                             if solver.has_function(own)}
@@ -148,12 +156,19 @@ def build(bucket: Bucket, loader: Loader, options: PlannerOptions):
     return solver, functions, entry["layout"]
 
 
+def problem_function(bucket: Bucket, loader: Loader, options: PlannerOptions) -> ca.Function:
+    """The NLP of these settings as a CasADi Function ``(x, p) -> (f, g)`` (memoised as :func:`build`'s)."""
+    build(bucket, loader, options)
+    return _CACHE[(bucket, loader, structural_options(options))]["problem"]
+
+
 def _solver_settings(options: PlannerOptions) -> tuple[tuple[str, object], ...]:
     """The nlpsol plugin and its options for ``options`` (hashable: the key of a solver within its NLP)."""
     if options.solver == "sqp":
         # CasADi's SQP: exact Hessian of the Lagrangian, regularised to be convex for the QP solver
         return (("plugin", "sqpmethod"), ("qpsol", options.qp_solver), ("max_iter", options.max_iter),
-                ("tol_pr", options.tolerance), ("tol_du", options.tolerance), ("convexify_strategy", "regularize"))
+                ("tol_pr", options.tolerance), ("tol_du", options.tolerance), ("convexify_strategy", "regularize"),
+                ("compiled", options.compiled))
     settings: dict[str, object] = {
         "plugin": "ipopt", "ipopt.max_iter": options.max_iter, "ipopt.tol": options.tolerance,
         "ipopt.acceptable_tol": 1e-3, "ipopt.acceptable_iter": 5, "ipopt.mu_strategy": "adaptive",
@@ -179,6 +194,7 @@ def _make_solver(problem, settings: tuple[tuple[str, object], ...], derivatives:
     ``jac_g`` and ``hess_lag``, sqpmethod's ``jac_fg`` and ``hess_lag``) nothing is differentiated again."""
     opts = dict(settings)
     plugin = opts.pop("plugin")
+    opts.pop("compiled", None)  # build() passes the compiled derivatives
     solver_opts = {"print_time": False, "error_on_fail": False,
                    # the multipliers of the parameters are never read: no Jacobian with respect to p
                    "calc_lam_p": False, **opts, **(derivatives or {})}

@@ -121,6 +121,12 @@ class PlannerOptions:
         ``primal_infeasibility`` is the largest violation of the bounds and constraints (unscaled).
     qp_solver : {"daqp", "qpoases", "osqp"}
         The QP solver of ``solver="sqp"`` (default ``"daqp"``, the fastest in ``benchmarks/planner.py``).
+    compiled : bool
+        With ``solver="sqp"``: evaluate the SQP's derivatives (the Hessian of the Lagrangian and the Jacobian)
+        as C code compiled once per machine and cached on disk (:mod:`wheelloader.planner.codegen`; default
+        False: CasADi's virtual machine; IPOPT ignores it). The same iterates; the compile takes about 30 s of
+        CPU for the MPC's 12-interval NLP. Without a C compiler, or when the compile fails, the virtual
+        machine is used (a warning).
     objective : {"fill_energy", "kept_per_energy"}
         What the plan optimises: the carved fill against energy (default, ``-V/capacity + lambda E``), or the
         opt-in energy per m^3 of *kept* soil with the load lifted on to ``dump_height``
@@ -167,6 +173,7 @@ class PlannerOptions:
     tolerance: float = 1e-4
     solver: str = "ipopt"
     qp_solver: str = "daqp"
+    compiled: bool = False
     surface: SurfaceGrid = field(default_factory=SurfaceGrid)
     failure_angle: str = "min_n_gamma"
     cut_angle: float | None = None
@@ -220,6 +227,8 @@ class PlannerOptions:
                       f"{list(PLANT_FORCE_MODELS)}")
         check_choice("PlannerOptions.solver", self.solver, SOLVERS, error=err)
         check_choice("PlannerOptions.qp_solver", self.qp_solver, QP_SOLVERS, error=err)
+        if not isinstance(self.compiled, bool):
+            raise PlanningError(f"PlannerOptions.compiled must be True or False, got {self.compiled!r}")
         if self.payload is not None and not isinstance(self.payload, PayloadOptions):
             raise PlanningError(f"PlannerOptions.payload must be a PayloadOptions, got {type(self.payload).__name__}")
         if self.dump_height is not None:

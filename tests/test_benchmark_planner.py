@@ -34,15 +34,20 @@ def _check_results(out: Path, soils: list[str]) -> dict:
             for view in ("numpy", "env"):
                 assert 0.0 <= row[view]["fill_fraction"] <= 1.0 + 1e-9
                 assert row[view]["energy"] >= 0.0
-        for variant in ("MPC (true soil)", "MPC from plan"):
+        for variant in ("MPC (true soil)", "MPC from plan", "MPC (true soil), IPOPT", "MPC from plan, IPOPT"):
             mpc = strategies[variant]["mpc"]
             assert mpc["solves"] == len(mpc["history"]) >= 1
-            assert all(r["seconds"] > 0.0 for r in mpc["history"])
+            assert all(r["seconds"] > 0.0 and r["cpu_seconds"] >= 0.0 for r in mpc["history"])
+            assert mpc["solver"] == ("ipopt" if variant.endswith("IPOPT") else "sqp")
+        for variant, versus in results["soils"][soil]["mpc_vs_ipopt"].items():
+            assert versus["against"] == variant + ", IPOPT" and versus["energy_per_m3_ratio"]["env"] > 0.0
         timing = results["soils"][soil]["timing"]
         assert timing["cold"]["count"] >= 1 and timing["warm"]["count"] >= 2
     targets = results["targets"]
-    for key in ("mpc_warm_solve_median_met", "full_plan_cold_median_met", "full_plan_warm_median_met"):
+    for key in ("mpc_warm_solve_median_met", "full_plan_cold_median_met", "full_plan_warm_median_met",
+                "mpc_warm_replan_cpu_median_met", "mpc_warm_replan_wall_median_met"):
         assert targets[key] in (True, False, None)
+    assert results["solver_variants"]["fatrop"]["status"] in ("refused", "built", "no fatrop plugin in this CasADi")
     assert results["timing"]["full_plan_cold"]["median"] > 0.0
     return results
 
@@ -52,7 +57,7 @@ def test_planner_benchmark_smoke(tmp_path):
     bench = _load_benchmark()
     out = tmp_path / "planner"
     rc = bench.main(["--out", str(out), "--soils", "sand", "--repeats", "1", "--paths", "1", "2",
-                     "--replan-every", "60"])
+                     "--replan-every", "60", "--no-compiled"])
     assert rc == 0
     _check_results(out, ["sand"])
     for name in ("planner_energy.png", "planner_timing.png", "planner_summary.png"):
@@ -63,7 +68,7 @@ def test_planner_benchmark_smoke(tmp_path):
 def test_planner_benchmark_quick(tmp_path):
     bench = _load_benchmark()
     out = tmp_path / "planner"
-    assert bench.main(["--quick", "--out", str(out)]) == 0
+    assert bench.main(["--quick", "--out", str(out), "--no-compiled"]) == 0
     results = _check_results(out, ["gravel", "sand", "dirt"])
     assert (out / "planner_summary.png").exists()
     assert results["repeats"] == 2

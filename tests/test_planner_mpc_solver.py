@@ -144,3 +144,70 @@ def test_solver_choices_are_checked(pile):
         MPCController("gravel", pile, 4.67, max_iter=0)
     ipopt_mpc = MPCController("gravel", pile, 4.67, solver="ipopt")
     assert ipopt_mpc.fallback is None and ipopt_mpc.optimizer.options.max_iter == 8
+
+
+def test_codegen_compiles_once_and_reloads_from_disk(tmp_path, monkeypatch):
+    import casadi as ca
+
+    from wheelloader.planner import codegen
+
+    if codegen.compiler() is None:
+        pytest.skip("no C compiler")
+    monkeypatch.setenv("WHEELLOADER_NLP_CACHE", str(tmp_path))
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("wl_test_f", [x], [ca.sin(x[0]) * x[1] ** 2])
+    jac = ca.Function("wl_test_jac", [x], [ca.jacobian(f(x), x)])
+    first = codegen.compiled({"f": f, "jac": jac}, "wl_test")
+    assert first is not None and codegen.LOG[-1]["status"] == "compiled"
+    assert codegen.LOG[-1]["compile_cpu_seconds"] >= 0.0
+    again = codegen.compiled({"f": f, "jac": jac}, "wl_test")
+    assert codegen.LOG[-1]["status"] == "loaded" and codegen.LOG[-1]["library"] == codegen.LOG[-2]["library"]
+    point = [0.3, -1.7]
+    for key, function in (("f", f), ("jac", jac)):
+        np.testing.assert_array_equal(np.array(again[key](point)), np.array(function(point)))
+    assert len(list((tmp_path / "compiled").glob("wl_test-*.so"))) == 1
+
+
+def test_compiled_without_a_compiler_falls_back_to_the_virtual_machine(pile, monkeypatch, tmp_path, caplog):
+    from wheelloader.planner import codegen, nlp
+
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-cc"))
+    # this test's solvers and its failed compile stay out of the process's memo of NLPs
+    monkeypatch.setattr(nlp, "_CACHE", {key: {**entry, "solvers": dict(entry["solvers"]),
+                                              "derivatives": dict(entry["derivatives"])}
+                                        for key, entry in nlp._CACHE.items()})
+    start = default_start(pile)
+    plans = []
+    for compiled in (False, True):
+        mpc = MPCController("dirt", pile, 4.67, replan_every=1, options=PlannerOptions(compiled=compiled))
+        obs = _observation(start)
+        for _ in range(3):
+            mpc(obs)
+        plans.append((mpc.plan.x.copy(), mpc.plan.z.copy(), [r.solver for r in mpc.history]))
+    assert codegen.LOG[-1]["status"] == "failed: no C compiler"
+    assert "no C compiler" in caplog.text
+    np.testing.assert_array_equal(plans[0][0], plans[1][0])
+    np.testing.assert_array_equal(plans[0][1], plans[1][1])
+    assert plans[0][2] == plans[1][2]
+
+
+@pytest.mark.slow
+def test_compiled_sqp_replans_equal_the_virtual_machine(pile, tmp_path, monkeypatch):
+    """The MPC's SQP with compiled derivatives (about 30 s of CPU to compile) re-plans bit for bit alike."""
+    from wheelloader.planner import codegen
+
+    if codegen.compiler() is None:
+        pytest.skip("no C compiler")
+    start = default_start(pile)
+    runs = []
+    for compiled in (False, True):
+        mpc = MPCController("gravel", pile, 4.67, replan_every=1, options=PlannerOptions(compiled=compiled))
+        obs = _observation(start)
+        for k in range(4):
+            obs[0] = start.x + 0.01 * k
+            mpc(obs)
+        runs.append(mpc)
+    assert codegen.LOG[-1]["status"] in ("compiled", "loaded")
+    assert [r.solver for r in runs[1].history][1:] == ["sqp"] * 3
+    np.testing.assert_array_equal(runs[0].plan.x, runs[1].plan.x)
+    np.testing.assert_array_equal(runs[0].plan.blade_angle, runs[1].plan.blade_angle)
