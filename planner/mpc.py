@@ -49,7 +49,8 @@ DEFAULT_MAX_ITER = {"ipopt": 8, "sqp": 1}
 @dataclass
 class SolveRecord:
     """One MPC solve: when, how long (wall and this process's CPU time [s]), what the solver said, what the
-    controller did with it and which solver made the plan (``"sqp"``, ``"ipopt"`` or ``"ipopt (fallback)"``)."""
+    controller did with it, which solver made the plan (``"sqp"``, ``"ipopt"`` or ``"ipopt (fallback)"``) and its
+    primal infeasibility (IPOPT's, or the SQP's largest constraint violation)."""
 
     step: int
     remaining: float
@@ -60,6 +61,7 @@ class SolveRecord:
     action: str
     solver: str = "ipopt"
     cpu_seconds: float = math.nan
+    infeasibility: float = math.nan
 
 
 class MPCController:
@@ -227,7 +229,8 @@ class MPCController:
         else:
             action = self._fallback_name()
         self.history.append(SolveRecord(k, remaining, seconds, plan.status, plan.iterations, usable, action,
-                                        solver, time.process_time() - cpu))
+                                        solver, time.process_time() - cpu,
+                                        float(plan.raw.get("primal_infeasibility", math.nan))))
 
     def _solve(self, optimizer: TrajectoryOptimizer, start: StartState, remaining: float,
                guess: BucketPath | None, warm: bool, shift: bool = False, check: bool | None = None

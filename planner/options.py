@@ -118,7 +118,9 @@ class PlannerOptions:
         Lagrangian, regularised to be convex (``convexify_strategy="regularize"``), one QP per iteration
         solved by ``qp_solver`` and a line search; with ``max_iter=1`` one QP per solve, the real-time iteration
         of :class:`~wheelloader.planner.MPCController` (which keeps IPOPT as its fallback). Its
-        ``primal_infeasibility`` is the largest violation of the bounds and constraints (unscaled).
+        ``primal_infeasibility`` is the largest violation of the bounds and constraints (unscaled). Made for
+        warm starts: from a converged IPOPT plan it converges to the same cost, from a cold guess it
+        converges slowly (the regularised Hessian damps its steps; a full-cycle plan stays with IPOPT).
     qp_solver : {"daqp", "qpoases", "osqp"}
         The QP solver of ``solver="sqp"`` (default ``"daqp"``, the fastest in ``benchmarks/planner.py``).
     compiled : bool
