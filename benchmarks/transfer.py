@@ -3,9 +3,14 @@
 The data are the project's continuum (MPM) cycles, split by case family (soil x pile x path family), never by
 sample (the split is written to ``manifest.json``):
 
-* **train**: the saved MPM loops (``data/results/adaptation_mpm*/cycles``: gravel and sand, the loops' carved
-  piles, the four strategies' paths). They give the payload (``fit_payload``) and the data priors (below); no
-  test cycle is in them.
+* **train**: the saved MPM loops of the base and ``curlout`` runs (``data/results/adaptation_mpm/cycles``,
+  ``adaptation_mpm_curlout/cycles``: gravel and sand, the loops' carved piles, the four strategies' paths).
+  They give the payload (``fit_payload``), the data priors and the held prior (below); no validation or test
+  cycle is in them.
+* **validation**: the loops of the ``end55`` run (``data/results/adaptation_mpm_end55/cycles``: a path family
+  of its own, the curl ending at 55 deg): within each loop, every cycle predicted from each other one and from
+  each other pair of consecutive cycles. Only the prediction band's width is calibrated on them
+  (``band_scale``, below); never on test.
 * **test**: ``data/mpm``'s four smooth paths on the trapezoid pile (a path family no loop digs), per soil:
   gravel and sand (soils seen in training, paths not), modified sand and dirt (soils never seen in training:
   held out), and the 25 deg pile (``gravel_slope25_path1``: a pile never seen in training, predicted from the
@@ -23,6 +28,15 @@ Variants (calibration on the reference Gaussian-filtered at sigma 0.1 s, the mod
 * ``fee-payload + input prior``: a Gaussian prior on phi, delta and n whose mean is the median of the training
   soils' own parameters (the plant's inputs, ``soil_params`` in each log's metadata) and whose standard
   deviation is :data:`INPUT_PRIOR_STD`: the physical values, where the fits' medians are not;
+* ``fee + held``, ``fee-payload + held``: fit only what a cycle can identify (``CalibrationOptions(held=)``,
+  :class:`~wheelloader.estimator.calibration.HeldPrior`): the parameters whose total Sobol index reaches the
+  threshold on the training families (``benchmarks/sensitivity.py``, recomputed here) are fitted; the others are
+  held: gamma at the training soils' median input, K and n at the pair that predicts the training loops' next
+  cycle best (the median one-cycle error over :data:`HELD_GRID`, each cycle k = 1, 3 of every training loop
+  predicting cycle k + 1; ``fee-payload``; used for both models, whose in-soil forces are the same FEE);
+* ``fee-payload + held, soft``: the same held parameters under a Gaussian prior at those means
+  (:data:`HELD_SOFT_STD`: gamma 10 %, K 50 %, n 0.15) instead of fixed: a path that does determine them may
+  move them;
 * ``fee-payload + residual``: a learned correction beyond the FEE (``wheelloader.estimator.residual``, a ridge
   on dimensionless inputs) trained on the training cycles' residuals after their own ``fee-payload`` fits; the
   soil is fitted to the measured forces minus the residual, and the residual added to the prediction (the band
@@ -33,10 +47,13 @@ of unseen paths predicted from ONE cycle, from TWO cycles (two neighbouring path
 floor (each path fitted to itself), filtered and unfiltered; the whole-record error (every sample from the first
 entry on, the carried load after the exit included); the 90 % band's coverage of the unseen paths' in-soil
 samples; the kept fill's relative error at the path's end (the FEE's carved fill, the payload's kept soil,
-against the plant's); the median calibration time of one cycle.
+against the plant's); the median calibration time of one cycle. The band's coverage is given twice: as the
+calibration makes it (scale 1) and scaled by the factor that makes the median coverage of the validation
+predictions 90 % (``CalibrationOptions(band_scale=)``; per variant, one scale for one cycle and one for two).
 
-Run: ``python benchmarks/transfer.py --out docs/results/transfer`` (a few minutes; writes ``transfer.json``,
-``manifest.json``, ``table.md`` and ``transfer.png``).
+Run: ``python benchmarks/transfer.py --out docs/results/transfer`` (about 20 minutes at load 15; needs the
+``model`` extra (SALib) for the held variants' Sobol rule; writes ``transfer.json``, ``manifest.json``, ``table.md``,
+``validation.md`` and ``transfer.png``).
 """
 
 from __future__ import annotations
@@ -45,12 +62,13 @@ import argparse
 import json
 import math
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from wheelloader.estimator import CycleLog
-from wheelloader.estimator.calibration import CalibrationOptions, calibrate, predict
+from wheelloader.estimator.calibration import CalibrationOptions, HeldPrior, calibrate, predict
 from wheelloader.estimator.payload import PayloadOptions, fit_payload, kept_fill, payload_contact_state
 from wheelloader.estimator.residual import (
     ResidualModel,
@@ -60,11 +78,16 @@ from wheelloader.estimator.residual import (
     force_scale,
     residual_forces,
 )
+from wheelloader.estimator.soil_vector import SOIL_VECTOR_NAMES
 from wheelloader.provenance import machine_info
 from wheelloader.references.filtering import filtered
 
 VARIANTS = ("fee", "fee-payload", "fee-payload + prior", "fee-payload + fixed phi, n", "fee-payload + input prior",
-            "fee-payload + residual")
+            "fee-payload + residual", "fee + held", "fee-payload + held", "fee-payload + held, soft")
+#: Widths of the soft held prior (``fee-payload + held, soft``): gamma 10 %, K 50 % of the held mean, n 0.15.
+HELD_SOFT_STD = {"gamma": 0.1, "K": 0.5, "n": 0.15}
+#: Candidate (K [N/m^(n+2)], n) of the held prior; the one predicting the training loops best is kept.
+HELD_GRID = [(k, n) for k in (3.0e4, 1.0e5, 3.0e5, 1.0e6, 3.0e6) for n in (0.9, 1.2, 1.5)]
 #: Standard deviation of the input prior (the training soils' own parameters are known exactly; their spread
 #: across soils is what a new soil may differ by): phi and delta 5 deg, n 0.15.
 INPUT_PRIOR_STD = {"phi": math.radians(5.0), "delta": math.radians(5.0), "n": 0.15}
@@ -75,21 +98,26 @@ BAND = 0.9
 
 
 def split(data: Path, results: Path) -> dict:
-    """The train/test split by case family (module docstring)."""
-    train = sorted(str(p) for p in results.glob("adaptation_mpm*/cycles/**/*.csv.xz"))
+    """The train/validation/test split by case family (module docstring)."""
+    train = sorted(str(p) for run in ("adaptation_mpm", "adaptation_mpm_curlout")
+                   for p in (results / run / "cycles").glob("**/*.csv.xz"))
+    validation = sorted(str(p) for p in (results / "adaptation_mpm_end55" / "cycles").glob("**/*.csv.xz"))
     test = {soil: [str(data / f"{soil}_path{i}.csv") for i in range(1, 5)]
             for soil in ("gravel", "sand", "modified_sand", "dirt")}
     test["gravel_slope25"] = [str(data / "gravel_slope25_path1.csv")]
-    return {"rule": "split by case family (soil x pile x path family); train: the saved MPM loops (gravel, sand; "
-                    "their carved piles; the loops' strategies); test: data/mpm's four smooth paths on the trapezoid "
-                    "pile; held out of training entirely: the soils modified_sand and dirt, the 25 deg pile",
-            "train": train, "test": test}
+    return {"rule": "split by case family (soil x pile x path family); train: the saved MPM loops of the base and "
+                    "curlout runs (gravel, sand; their carved piles; the loops' strategies); validation: the loops "
+                    "of the end55 run (its own path family; only the band's width is calibrated on it); test: "
+                    "data/mpm's four smooth paths on the trapezoid pile; held out of training and validation "
+                    "entirely: the soils modified_sand and dirt, the 25 deg pile",
+            "train": train, "validation": validation, "test": test}
 
 
 class Pair:
     """A cycle's raw and filtered log."""
 
     def __init__(self, path: str):
+        self.path = path
         self.raw = CycleLog.load(path)
         self.filt = filtered(self.raw, SIGMA)
         self.name = Path(path).name
@@ -125,7 +153,87 @@ def data_prior(train: list[Pair], payload: PayloadOptions, residual_samples: lis
             "input_cycles": int(inputs.shape[0])}
 
 
+def loops(pairs: list[Pair]) -> list[list[Pair]]:
+    """The cycles grouped by loop (their folder), each loop's cycles in order."""
+    out: dict[str, list[Pair]] = {}
+    for pair in sorted(pairs, key=lambda p: p.path):
+        out.setdefault(str(Path(pair.path).parent), []).append(pair)
+    return list(out.values())
+
+
+def free_sets(train: list[Pair], payload: PayloadOptions) -> dict:
+    """Which parameters to fit from one and from several cycles: the Sobol rule of ``benchmarks/sensitivity.py``
+    on the training families (the first and third cycle of each gravel training loop, seed 0, and its cycles
+    1 + 2 joined)."""
+    import importlib.util
+
+    from wheelloader.estimator.calibration.sensitivity import sobol_indices
+    from wheelloader.estimator.force_models import cycle_contact_state
+
+    spec = importlib.util.spec_from_file_location("wheelloader_benchmark_sensitivity",
+                                                  Path(__file__).with_name("sensitivity.py"))
+    sens = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(sens)
+    opts = CalibrationOptions(force_model="fee-payload", payload=payload)
+    rows = []
+    for loop in loops(train):
+        if "/gravel/seed0/" not in loop[0].path:
+            continue
+        for cycles in ([loop[0]], [loop[2]], loop[:2]):
+            states = [cycle_contact_state(p.filt, opts.force_model, opts.payload, opts.slope_window, opts.fill)
+                      for p in cycles]
+            res = sobol_indices(states, cycles[0].raw.bucket, opts.model_options, base=sens.BASE, points=sens.POINTS)
+            rows.append({"split": "train", "cycles": len(cycles), "total": res.total})
+    one, several = sens.rule(rows, 1), sens.rule(rows, 2)
+    free_several = [n for n in SOIL_VECTOR_NAMES if n in one["free"] or n in several["free"]]
+    return {"threshold": sens.THRESHOLD, "one_cycle": one, "several_cycles": several, "free_one": one["free"],
+            "free_several": free_several}
+
+
+def held_prior(train: list[Pair], payload: PayloadOptions, free: dict) -> dict:
+    """The held prior's means (module docstring): inputs' medians; K and n by the training loops' next cycle."""
+    inputs = {name: float(np.median([pair.raw.metadata["soil_params"][name] for pair in train]))
+              for name in ("gamma", "cohesion", "adhesion", "phi", "delta", "n")}
+    b = train[0].raw.bucket.edge_thickness
+    inputs["K"] = float(np.median([pair.raw.metadata["soil_params"]["k_c"] / b
+                                   + pair.raw.metadata["soil_params"]["k_phi"] for pair in train]))
+    pairs = [(loop[k], loop[k + 1]) for loop in loops(train) for k in (0, 2) if len(loop) > k + 1]
+    scores = []
+    for k_value, n_value in HELD_GRID:
+        held = HeldPrior(inputs | {"K": k_value, "n": n_value}, free_one=tuple(free["free_one"]),
+                         free_several=tuple(free["free_several"]))
+        opts = CalibrationOptions(force_model="fee-payload", payload=payload, held=held)
+        errs = []
+        for a, b_pair in pairs:
+            try:
+                cal = calibrate(a.filt, options=opts)
+            except Exception:  # a loop cycle the calibration refuses (too few in-soil samples)
+                continue
+            errs.append(errors(predict(cal, b_pair.filt), b_pair)["filtered"])
+        scores.append(float(np.median(errs)))
+        print(f"  held K {k_value:.3g}, n {n_value}: training next-cycle error {scores[-1]:.1f} %", flush=True)
+    best = HELD_GRID[int(np.argmin(scores))]
+    mean = inputs | {"K": best[0], "n": best[1]}
+    return {"held": HeldPrior(mean, free_one=tuple(free["free_one"]),
+                              free_several=tuple(free["free_several"])).to_dict(),
+            "inputs_median": inputs, "grid": [{"K": k, "n": n, "median_error": e}
+                                              for (k, n), e in zip(HELD_GRID, scores, strict=True)],
+            "training_pairs": len(pairs)}
+
+
 def options_for(variant: str, payload: PayloadOptions, prior: dict) -> CalibrationOptions:
+    if variant.endswith("held, soft"):
+        held = HeldPrior.from_dict(prior["held"]["held"])
+        mean = held.mean
+        std = {"gamma": HELD_SOFT_STD["gamma"] * mean["gamma"], "K": HELD_SOFT_STD["K"] * mean["K"],
+               "n": HELD_SOFT_STD["n"]}
+        held = HeldPrior(mean, std=std, free_one=held.free_one, free_several=held.free_several)
+        return CalibrationOptions(force_model="fee-payload", payload=payload, held=held)
+    if variant.endswith("+ held"):
+        held = HeldPrior.from_dict(prior["held"]["held"])
+        if variant.startswith("fee-payload"):
+            return CalibrationOptions(force_model="fee-payload", payload=payload, held=held)
+        return CalibrationOptions(fill="model", held=held)
     if variant == "fee":
         return CalibrationOptions(fill="model")
     if variant in ("fee-payload", "fee-payload + residual"):
@@ -144,8 +252,20 @@ def options_for(variant: str, payload: PayloadOptions, prior: dict) -> Calibrati
     return CalibrationOptions(force_model="fee-payload", payload=payload, bounds=bounds)
 
 
-def errors(pred, pair: Pair, residual: ResidualModel | None = None) -> dict:
-    """In-soil F_R RMSE (filtered, unfiltered), the whole record's, and the band's coverage (filtered)."""
+def band_ratio(pred, observed_r: np.ndarray, inside: np.ndarray) -> np.ndarray:
+    """``|observed - predicted| / (z std)`` of F_R per in-soil sample, ``std`` the band's own (its calibration's
+    ``band_scale`` included): the band holds a sample iff its ratio is <= 1."""
+    centre = np.hypot(pred.tangential, pred.normal)
+    width = np.maximum(pred.band.upper_r - centre, 1e-12)
+    return np.abs(observed_r - centre)[inside] / width[inside]
+
+
+def errors(pred, pair: Pair, residual: ResidualModel | None = None, scale: float = 1.0) -> dict:
+    """In-soil F_R RMSE (filtered, unfiltered), the whole record's, and the band's coverage (filtered).
+
+    ``scale``: the band's ``band_scale`` (its calibration's); ``band_coverage`` is the coverage at that scale,
+    ``band_coverage_raw`` at scale 1, ``band_ratios`` the samples' ratios at scale 1 (:func:`band_ratio`).
+    """
     inside = pred.state.depth > 0.0
     pr = np.hypot(pred.tangential, pred.normal)
     shift = 0.0
@@ -156,13 +276,16 @@ def errors(pred, pair: Pair, residual: ResidualModel | None = None) -> dict:
     out = {}
     for key, log in (("filtered", pair.filt), ("unfiltered", pair.raw)):
         obs = np.hypot(log.tangential, log.normal)
-        scale = float(np.mean(obs[inside]))
-        out[key] = 100.0 * math.sqrt(float(np.mean((pr[inside] - obs[inside]) ** 2))) / scale
+        scale_f = float(np.mean(obs[inside]))
+        out[key] = 100.0 * math.sqrt(float(np.mean((pr[inside] - obs[inside]) ** 2))) / scale_f
         if key == "filtered":
             whole = np.arange(len(obs)) >= int(np.flatnonzero(inside)[0])
-            out["whole_record"] = 100.0 * math.sqrt(float(np.mean((pr[whole] - obs[whole]) ** 2))) / scale
+            out["whole_record"] = 100.0 * math.sqrt(float(np.mean((pr[whole] - obs[whole]) ** 2))) / scale_f
             if pred.band is not None:
-                out["band_coverage"] = 100.0 * pred.band.coverage(obs - shift, inside)
+                ratio = band_ratio(pred, obs - shift, inside) * scale
+                out["band_coverage"] = 100.0 * float(np.mean(ratio <= scale))
+                out["band_coverage_raw"] = 100.0 * float(np.mean(ratio <= 1.0))
+                out["band_ratios"] = ratio
     return out
 
 
@@ -175,27 +298,79 @@ def kept_fill_error(variant: str, pred, pair: Pair, payload: PayloadOptions) -> 
     return 100.0 * abs(model - float(pair.raw.fill_volume[-1])) / float(pair.raw.fill_volume[-1])
 
 
+def fitted_log(pair: Pair, residual: ResidualModel | None, payload: PayloadOptions) -> CycleLog:
+    """The log a variant calibrates on: the filtered log, minus the residual for the residual variant."""
+    if residual is None:
+        return pair.filt
+    return corrected_log(residual, payload_contact_state(pair.filt, payload), pair.filt)
+
+
+def validate(options: CalibrationOptions, validation: list[list[Pair]], payload: PayloadOptions,
+             residual: ResidualModel | None = None) -> list[dict]:
+    """The validation predictions (module docstring): each loop's cycles from each other cycle and each other
+    pair of consecutive cycles; per prediction its mode, F_R error and band ratios (:func:`band_ratio`, scale 1)."""
+    out = []
+    for loop in validation:
+        groups = [[p] for p in loop] + [loop[i:i + 2] for i in range(len(loop) - 1)]
+        for group in groups:
+            logs = [fitted_log(p, residual, payload) for p in group]
+            try:
+                cal = calibrate(logs if len(logs) > 1 else logs[0], options=options)
+            except Exception:  # a loop cycle the calibration refuses (too few in-soil samples)
+                continue
+            for other in loop:
+                if other not in group:
+                    e = errors(predict(cal, other.filt, band=BAND), other, residual, options.band_scale)
+                    out.append({"mode": "one cycle" if len(group) == 1 else "two cycles", "filtered": e["filtered"],
+                                "ratios": e["band_ratios"]})
+    return out
+
+
+def band_scale(records: list[dict], level: float = BAND) -> float:
+    """Smallest band scale whose median coverage over the validation predictions reaches ``level``."""
+    def median_coverage(k: float) -> float:
+        return float(np.median([np.mean(r["ratios"] <= k) for r in records]))
+
+    lo, hi = 0.01, 100.0
+    for _ in range(60):
+        mid = math.sqrt(lo * hi)
+        lo, hi = (lo, mid) if median_coverage(mid) >= level else (mid, hi)
+    return hi
+
+
+def validation_summary(records: list[dict], scales: tuple[float, float]) -> dict:
+    out = {"band_scale_one_cycle": scales[0], "band_scale_two_cycles": scales[1], "predictions": len(records)}
+    for mode, key, scale in (("one cycle", "one_cycle", scales[0]), ("two cycles", "two_cycles", scales[1])):
+        sel = [r for r in records if r["mode"] == mode]
+        out[key] = float(np.median([r["filtered"] for r in sel]))
+        out[f"band_coverage_raw_{key}"] = 100.0 * float(np.median([np.mean(r["ratios"] <= 1.0) for r in sel]))
+        out[f"band_coverage_{key}"] = 100.0 * float(np.median([np.mean(r["ratios"] <= scale) for r in sel]))
+    return out
+
+
 def evaluate(variant: str, options: CalibrationOptions, test: dict[str, list[Pair]], payload: PayloadOptions,
-             residual: ResidualModel | None = None) -> dict:
+             residual: ResidualModel | None = None, scales: tuple[float, float] = (1.0, 1.0)) -> dict:
+    """The test predictions; ``scales``: the band's scale from one cycle and from two (validation)."""
     records = []
     seconds = []
+    by_count = (replace(options, band_scale=scales[0]), replace(options, band_scale=scales[1]))
 
     def fitted(pair: Pair):
-        if residual is None:
-            return pair.filt
-        return corrected_log(residual, payload_contact_state(pair.filt, payload), pair.filt)
+        return fitted_log(pair, residual, payload)
 
     def cal_of(pairs: list[Pair]):
         t0 = time.perf_counter()
-        cal = calibrate([fitted(p) for p in pairs] if len(pairs) > 1 else fitted(pairs[0]), options=options)
+        cal = calibrate([fitted(p) for p in pairs] if len(pairs) > 1 else fitted(pairs[0]),
+                        options=by_count[len(pairs) > 1])
         if len(pairs) == 1:
             seconds.append(time.perf_counter() - t0)
         return cal
 
     def predicted(cal, pair: Pair, row: str, mode: str, trained: str) -> None:
         pred = predict(cal, pair.filt, band=BAND)
-        records.append({"row": row, "mode": mode, "train": trained, "test": pair.name,
-                        **errors(pred, pair, residual),
+        e = errors(pred, pair, residual, cal.band_model.scale)
+        e.pop("band_ratios", None)
+        records.append({"row": row, "mode": mode, "train": trained, "test": pair.name, **e,
                         "kept_fill_error": kept_fill_error(variant, pred, pair, payload)})
 
     rows = {"gravel": "gravel", "sand": "sand", "modified_sand": "modified_sand (unseen soil)",
@@ -240,23 +415,44 @@ def summarise(result: dict) -> dict:
                          "whole_record_one_cycle": med("one cycle", "whole_record"),
                          "band_coverage_one_cycle": med("one cycle", "band_coverage"),
                          "band_coverage_two_cycles": med("two cycles", "band_coverage"),
+                         "band_coverage_raw_one_cycle": med("one cycle", "band_coverage_raw"),
+                         "band_coverage_raw_two_cycles": med("two cycles", "band_coverage_raw"),
                          "kept_fill_error": med("one cycle", "kept_fill_error")}
-        out[variant] = {"rows": rows, "calibration_s_median": res["calibration_s_median"]}
+        out[variant] = {"rows": rows, "calibration_s_median": res["calibration_s_median"],
+                        "band_scales": [res["validation"]["band_scale_one_cycle"],
+                                        res["validation"]["band_scale_two_cycles"]], "validation": res["validation"]}
     return out
 
 
 def table(result: dict) -> str:
     fmt = lambda v: "-" if v is None else f"{v:.1f}"  # noqa: E731
     lines = ["| row | variant | one cycle | (unfiltered) | two cycles | floor | whole record, one cycle | "
-             "90 % band, one / two cycles | kept fill error | calibration |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "90 % band, one / two cycles (scale 1) | 90 % band scaled on validation, one / two (scales) | "
+             "kept fill error | calibration |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for row in ("all unseen", *ROWS):
         for variant, s in result["summary"].items():
             r = s["rows"][row]
             lines.append(f"| {row} | {variant} | {fmt(r['one_cycle'])} % | {fmt(r['one_cycle_unfiltered'])} % | "
                          f"{fmt(r['two_cycles'])} % | {fmt(r['floor'])} % | {fmt(r['whole_record_one_cycle'])} % | "
-                         f"{fmt(r['band_coverage_one_cycle'])} / {fmt(r['band_coverage_two_cycles'])} % | "
-                         f"{fmt(r['kept_fill_error'])} % | {s['calibration_s_median']:.2f} s |")
+                         f"{fmt(r['band_coverage_raw_one_cycle'])} / {fmt(r['band_coverage_raw_two_cycles'])} % | "
+                         f"{fmt(r['band_coverage_one_cycle'])} / {fmt(r['band_coverage_two_cycles'])} % "
+                         f"({s['band_scales'][0]:.2f} / {s['band_scales'][1]:.2f}) | {fmt(r['kept_fill_error'])} % | "
+                         f"{s['calibration_s_median']:.2f} s |")
+    return "\n".join(lines) + "\n"
+
+
+def validation_table(result: dict) -> str:
+    """The validation loops (end55): what the band's scale was calibrated on."""
+    lines = ["| variant | one cycle | two cycles | 90 % band, one / two cycles (scale 1) | band scale, one / two | "
+             "scaled band, one / two cycles | predictions |", "|---|---|---|---|---|---|---|"]
+    for variant, s in result["summary"].items():
+        v = s["validation"]
+        lines.append(f"| {variant} | {v['one_cycle']:.1f} % | {v['two_cycles']:.1f} % | "
+                     f"{v['band_coverage_raw_one_cycle']:.1f} / {v['band_coverage_raw_two_cycles']:.1f} % | "
+                     f"{v['band_scale_one_cycle']:.2f} / {v['band_scale_two_cycles']:.2f} | "
+                     f"{v['band_coverage_one_cycle']:.1f} / "
+                     f"{v['band_coverage_two_cycles']:.1f} % | {v['predictions']} |")
     return "\n".join(lines) + "\n"
 
 
@@ -294,23 +490,35 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "manifest.json").write_text(json.dumps(manifest, indent=1) + "\n")
     train = [Pair(p) for p in manifest["train"]]
+    validation = loops([Pair(p) for p in manifest["validation"]])
     test = {k: [Pair(p) for p in v] for k, v in manifest["test"].items()}
-    print(f"train {len(train)} cycles, test {sum(len(v) for v in test.values())}", flush=True)
+    print(f"train {len(train)} cycles, validation {sum(len(v) for v in validation)}, "
+          f"test {sum(len(v) for v in test.values())}", flush=True)
     payload = fit_payload([p.raw for p in train])
     print(f"payload {payload}", flush=True)
     samples: list = []
     prior = data_prior(train, payload, samples)
     print(f"prior {prior}", flush=True)
     residual = fit_residual(samples)
+    free = free_sets(train, payload)
+    print(f"free {free['free_one']} (one cycle), {free['free_several']} (several)", flush=True)
+    prior["held"] = held_prior(train, payload, free)
+    prior["held"]["sobol"] = free
+    print(f"held {prior['held']['held']}", flush=True)
     result = {"benchmark": "transfer", "sigma_s": SIGMA, "band": BAND, "payload": payload.to_dict(), "prior": prior,
               "residual": residual.to_dict(), "variants": {}, "machine": machine_info()}
     for variant in VARIANTS:
-        result["variants"][variant] = evaluate(variant, options_for(variant, payload, prior), test, payload,
-                                               residual if variant.endswith("residual") else None)
-        print(f"{variant} done", flush=True)
+        options = options_for(variant, payload, prior)
+        res = residual if variant.endswith("residual") else None
+        checks = validate(options, validation, payload, res)
+        scales = tuple(band_scale([c for c in checks if c["mode"] == mode]) for mode in ("one cycle", "two cycles"))
+        result["variants"][variant] = evaluate(variant, options, test, payload, res, scales)
+        result["variants"][variant]["validation"] = validation_summary(checks, scales)
+        print(f"{variant} done: band scales {scales[0]:.3f} (one cycle), {scales[1]:.3f} (two)", flush=True)
     result["summary"] = summarise(result)
     (args.out / "transfer.json").write_text(json.dumps(result, indent=1) + "\n")
     (args.out / "table.md").write_text(table(result))
+    (args.out / "validation.md").write_text(validation_table(result))
     plot(result, args.out / "transfer.png")
     print(table(result), end="")
 

@@ -7,6 +7,8 @@ import json
 import os
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -28,15 +30,30 @@ def _split():
 
 def test_no_test_family_and_no_held_out_soil_or_pile_is_trained_on():
     split = _split()
-    train = split["train"]
-    assert len(train) >= 200
+    train, validation = split["train"], split["validation"]
+    assert len(train) >= 150 and len(validation) >= 40
     test = [p for paths in split["test"].values() for p in paths]
-    assert set(train).isdisjoint(test)
+    assert set(train).isdisjoint(test) and set(validation).isdisjoint(test) and set(train).isdisjoint(validation)
+    # validation is a path family of its own (the end55 loops), never trained on
+    assert all("adaptation_mpm_end55" in p for p in validation)
+    assert not any("adaptation_mpm_end55" in p for p in train)
     for path in train:  # only the loops' soils, never a held-out soil or pile
         name = Path(path).parts
         assert "gravel" in name or "sand" in name
         assert not any(s in path for s in ("dirt", "modified_sand", "slope25", "data/mpm"))
-    assert all(Path(p).is_file() for p in train + test)
+    assert all(Path(p).is_file() for p in train + validation + test)
+
+
+def test_band_scale_is_the_smallest_reaching_the_level():
+    import numpy as np
+
+    module = _load("transfer")
+    rng = np.random.default_rng(0)
+    records = [{"ratios": np.abs(rng.normal(size=400)) * s} for s in (0.5, 1.0, 2.0)]
+    k = module.band_scale(records, 0.9)
+    # the median prediction (ratios |N(0, 1)|) holds 90 % of its samples from its 360th smallest ratio on
+    assert k == pytest.approx(float(np.sort(records[1]["ratios"])[359]), rel=1e-6)
+
 
 
 def test_the_shipped_manifest_is_the_split():
