@@ -240,21 +240,21 @@ class Pile:
         z = self.heights.copy()
         limit = self.spacing * math.tan(repose_angle)
         last_pair = z.size - 2
+        # pairs (i, i+1) for i = first, first+2, ... (pairs touching the ends excluded), as views of z: the
+        # lower and upper nodes of the even pairs, then of the odd ones
+        sweeps = [(z[first:last_pair:2], z[first + 1:last_pair + 1:2]) for first in (1, 2) if first < last_pair]
         for _ in range(int(iterations)):
             moved = False
-            for first in (1, 2):  # pairs (i, i+1) for i = first, first+2, ...; pairs touching ends excluded
-                i = np.arange(first, last_pair, 2)
-                if i.size == 0:
-                    continue
-                diff = z[i + 1] - z[i]
+            for lower, upper in sweeps:
+                diff = upper - lower
                 excess = np.abs(diff) - limit
                 mask = excess > tolerance
-                if not np.any(mask):
+                if not mask.any():
                     continue
                 moved = True
                 move = np.where(mask, 0.5 * excess * np.sign(diff), 0.0)
-                z[i + 1] -= move
-                z[i] += move
+                upper -= move
+                lower += move
             if not moved:
                 break
         return self.with_heights(z)

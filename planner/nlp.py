@@ -64,7 +64,7 @@ from .interrupt import guarded
 from .kept import KEPT_OBJECTIVE_SCALE, kept_terms, smooth_lift
 from .options import PlannerOptions
 
-__all__ = ["VALIDITY_RELAX", "build", "origin", "problem_function", "structural_options"]
+__all__ = ["VALIDITY_RELAX", "build", "origin", "problem_function", "release", "structural_options"]
 
 #: The NLPs of this process by (bucket, loader, structural options): expressions, layout, derivatives, solvers.
 _CACHE: dict[tuple, dict] = {}
@@ -102,6 +102,9 @@ _NOT_STRUCTURAL = ("max_iter", "max_wall_time", "ipopt_warm_start", "tolerance",
 #: The derivatives each nlpsol plugin needs, by their nlpsol option name and the name of the solver's own function.
 _DERIVATIVES = {"ipopt": (("grad_f", "nlp_grad_f"), ("jac_g", "nlp_jac_g"), ("hess_lag", "nlp_hess_l")),
                 "sqpmethod": (("jac_fg", "nlp_jac_fg"), ("hess_lag", "nlp_hess_l"))}
+#: The structural options that only set the margins of the constraints (what
+#: :func:`~wheelloader.planner.cycle.cautious_options` widens for a re-plan): one NLP per family in memory.
+_MARGINS = ("rho_margin", "force_margin")
 
 
 def structural_options(options: PlannerOptions) -> PlannerOptions:
@@ -109,6 +112,13 @@ def structural_options(options: PlannerOptions) -> PlannerOptions:
     with the same structural options share one NLP (its expressions and derivatives)."""
     defaults = PlannerOptions()
     return replace(options, **{name: getattr(defaults, name) for name in _NOT_STRUCTURAL})
+
+
+def _margin_family(options: PlannerOptions) -> PlannerOptions:
+    """``options`` with the margins (:data:`_MARGINS`) at their defaults: NLPs of one family differ only in
+    the constants of their margins."""
+    defaults = PlannerOptions()
+    return replace(options, **{name: getattr(defaults, name) for name in _MARGINS})
 
 
 def origin(bucket: Bucket, loader: Loader, options: PlannerOptions) -> str | None:
@@ -130,6 +140,11 @@ def build(bucket: Bucket, loader: Loader, options: PlannerOptions):
     structural = structural_options(options)
     entry = _CACHE.get((bucket, loader, structural))
     if entry is None:
+        # a margin variant of this NLP (the loop's wider-margin re-plans) takes the place of the one in memory
+        # (~150 MB each): released before the build, so two are never held at once
+        for key in [key for key in _CACHE if key[:2] == (bucket, loader) and _margin_family(key[2])
+                    == _margin_family(structural)]:
+            del _CACHE[key]
         # the disk cache holds the NLP's expressions (plain CasADi Functions); the IPOPT solver with its
         # iteration callback (a Python object, not serialisable) is made on top of them in each process
         # CasADi may swallow a Ctrl-C while it builds or loads (as inside IPOPT): guarded re-raises it
@@ -160,6 +175,14 @@ def problem_function(bucket: Bucket, loader: Loader, options: PlannerOptions) ->
     """The NLP of these settings as a CasADi Function ``(x, p) -> (f, g)`` (memoised as :func:`build`'s)."""
     build(bucket, loader, options)
     return _CACHE[(bucket, loader, structural_options(options))]["problem"]
+
+
+def release() -> int:
+    """Drop this process's NLPs and solvers from memory (~150 MB each for the loop's 40 intervals); the next
+    :func:`build` of one makes it again (from the disk cache's expressions). Returns how many were dropped."""
+    dropped = len(_CACHE)
+    _CACHE.clear()
+    return dropped
 
 
 def _solver_settings(options: PlannerOptions) -> tuple[tuple[str, object], ...]:
@@ -199,7 +222,9 @@ def _make_solver(problem, settings: tuple[tuple[str, object], ...], derivatives:
                    # the multipliers of the parameters are never read: no Jacobian with respect to p
                    "calc_lam_p": False, **opts, **(derivatives or {})}
     if plugin == "ipopt":
-        solver_opts.update({"ipopt.print_level": 0, "ipopt.sb": "yes"})
+        # no gradient of the Lagrangian either (nlp_grad: computed only for lam_p, lam_x, f or g after the
+        # solve, none of which is asked for; ~380k instructions, 23 MB and 0.35 s CPU per 40-interval NLP)
+        solver_opts.update({"ipopt.print_level": 0, "ipopt.sb": "yes", "no_nlp_grad": True})
     else:
         solver_opts.update({"print_header": False, "print_iteration": False, "print_status": False,
                             "qpsol_options": {"error_on_fail": False, **_QP_OPTIONS[str(opts["qpsol"])]}})

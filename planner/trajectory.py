@@ -65,8 +65,22 @@ class TrajectoryOptimizer:
                                  ("options", self.options, PlannerOptions)):
             if not isinstance(value, cls):
                 raise PlanningError(f"{name} must be a {cls.__name__}, got {type(value).__name__}")
-        self._solver, self._functions, self._layout = build(self.bucket, self.loader, self.options)
+        build(self.bucket, self.loader, self.options)  # the NLP now, not at the first solve
         self._last: dict[str, np.ndarray] | None = None
+
+    # the NLP and its solver stay in planner.nlp's cache, not here: a wider-margin variant of the NLP may take
+    # its place in memory (nlp.build), and the next solve then builds it again
+    @property
+    def _solver(self) -> Any:
+        return build(self.bucket, self.loader, self.options)[0]
+
+    @property
+    def _functions(self) -> dict[str, Any]:
+        return build(self.bucket, self.loader, self.options)[1]
+
+    @property
+    def _layout(self) -> dict[str, Any]:
+        return build(self.bucket, self.loader, self.options)[2]
 
     # ------------------------------------------------------------------ API
     @property

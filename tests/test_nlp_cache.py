@@ -8,7 +8,15 @@ import numpy as np
 import pytest
 
 from wheelloader.estimator import Bucket, Loader, Pile
-from wheelloader.planner import PlannerOptions, TrajectoryOptimizer, cycle_duration, default_start, nlp, nlp_cache
+from wheelloader.planner import (
+    PlannerOptions,
+    TrajectoryOptimizer,
+    cautious_options,
+    cycle_duration,
+    default_start,
+    nlp,
+    nlp_cache,
+)
 
 #: A small NLP (10 intervals) keeps the builds of these tests short.
 OPTIONS = PlannerOptions(intervals=10)
@@ -154,3 +162,34 @@ def test_a_solver_made_from_another_solvers_derivatives_plans_bit_identically(mo
     alone = _plan(short)  # differentiated on its own
     _same(shared, alone)
     assert shared.iterations == 15 and not shared.success
+
+
+def test_a_margin_variant_takes_the_nlps_place_in_memory_with_the_same_plans(cache):
+    """The loop's wider-margin re-plan NLP replaces the plan's NLP in this process's memory (one NLP of a margin
+    family at a time: ~150 MB each at 40 intervals); the plan's NLP is built again at its next solve and plans
+    bit-identically. Another transcription is not a margin variant: both stay."""
+    opt = TrajectoryOptimizer(options=OPTIONS)
+    pile = Pile.trapezoid()
+    start = default_start(pile)
+    first = opt.solve("gravel", pile, start, cycle_duration(pile, start))
+    wider = cautious_options(OPTIONS)
+    TrajectoryOptimizer(options=wider)
+    assert list(nlp._CACHE) == [(Bucket(), Loader(), nlp.structural_options(wider))]
+    again = opt.solve("gravel", pile, start, cycle_duration(pile, start))  # the same optimiser object
+    assert list(nlp._CACHE) == [(Bucket(), Loader(), OPTIONS)]
+    _same(first, again)
+    TrajectoryOptimizer(options=PlannerOptions(intervals=8))
+    assert len(nlp._CACHE) == 2
+
+
+def test_release_drops_the_nlps_and_the_next_solve_builds_them_again(cache):
+    opt = TrajectoryOptimizer(options=OPTIONS)
+    pile = Pile.trapezoid()
+    start = default_start(pile)
+    first = opt.solve("gravel", pile, start, cycle_duration(pile, start))
+    (entry,) = nlp._CACHE.values()
+    (solver, _), = entry["solvers"].values()
+    assert not solver.has_function("nlp_grad")  # never evaluated (no lam_p, lam_x, f or g asked after a solve)
+    assert nlp.release() == 1 and not nlp._CACHE
+    _same(first, opt.solve("gravel", pile, start, cycle_duration(pile, start)))
+    assert len(nlp._CACHE) == 1
