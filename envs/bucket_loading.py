@@ -25,6 +25,7 @@ from wheelloader.estimator import (
 )
 from wheelloader.estimator.checks import check_optional_int
 from wheelloader.estimator.kinematics import surface_contact
+from wheelloader.estimator.learned_plant import LearnedCorrection, learned_correction
 from wheelloader.estimator.payload import kept_volume_float
 from wheelloader.estimator.pile import node_heights
 
@@ -103,9 +104,11 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
     smoothly at the heaped capacity; in soil the FEE's surcharge is the carved
     fill's, and as the tip leaves the soil the kept soil's weight and inertia
     (the step's acceleration) take over, so a loaded bucket out of the soil
-    still feels its load). The fill in the observation, ``info`` and the reward
-    is the model's fill; ``info["carved_volume"]`` is the carved volume under
-    either model.
+    still feels its load), or ``"fee-learned"`` (``"fee-payload"`` plus the
+    correction learned from the continuum, :mod:`~wheelloader.estimator.learned`,
+    at the step's pose, fills and realised speed). The fill in the observation,
+    ``info`` and the reward is the model's fill; ``info["carved_volume"]`` is
+    the carved volume under every model.
 
     ## Action Space
 
@@ -218,10 +221,11 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
       soil's friction angle, or a repose angle [rad]), ``relax_iterations``
       (sweeps of :meth:`Pile.relaxed` per new cycle, default 500: a partial
       slump of steep carved walls), ``cycles_per_episode`` (default 1).
-    * ``force_model``: ``"fee"`` (default) or ``"fee-payload"`` (a name of
-      :data:`~wheelloader.estimator.FORCE_MODELS`); ``payload``:
-      :class:`~wheelloader.estimator.PayloadOptions` or dict for
-      ``"fee-payload"`` (default :data:`~wheelloader.estimator.DEFAULT_PAYLOAD`).
+    * ``force_model``: ``"fee"`` (default), ``"fee-payload"`` or
+      ``"fee-learned"`` (:data:`~wheelloader.estimator.FORCE_MODELS`); ``payload``:
+      :class:`~wheelloader.estimator.PayloadOptions` or dict for the payload
+      models (default :data:`~wheelloader.estimator.DEFAULT_PAYLOAD`, under
+      ``"fee-learned"`` the payload fitted with its correction).
     * ``render_mode``: ``None``, ``"rgb_array"`` or ``"human"``.
     * ``max_episode_steps``: truncate the episode after this many steps
       (default None: ``gym.make`` adds its ``TimeLimit`` wrapper instead).
@@ -280,6 +284,8 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         self.max_logged_cycles = 20
         self._seed: int | None = None
         self._samples: list[tuple] | None = None  # the current cycle's samples (RECORD_KEYS order)
+        self._learned_soil: SoilParams | None = None  # the soil of _learned ("fee-learned" only)
+        self._learned: LearnedCorrection | None = None
 
     @property
     def soil(self) -> SoilParams:
@@ -301,6 +307,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
             self._seed = int(seed)
         if request.config_changed:
             self.cfg = request.config
+            self._learned_soil = None
         if self._samples is not None and len(self._samples) >= 2:
             self._finish_cycle("reset")
         carved = self._carver.pile() if self._carver is not None else None
@@ -339,6 +346,10 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         """Forces at the start pose (measured with the noise of step index ``k``), logged as sample 0."""
         f_t, f_n, beta, flags = soil_forces_single(self._soil, self._depth, self._rho, self._alpha, self._lt, 0.0,
                                                    self.cfg.bucket, DEFAULT_OPTIONS)
+        learned = self._learned_at(self._soil) if self.cfg.payload is not None else None
+        if learned is not None:  # "fee-learned" at rest with an empty bucket
+            d_t, d_n = learned.single(self._depth, self._rho, self._alpha, self._th, 0.0, 0.0, 0.0)
+            f_t, f_n = f_t + d_t, f_n + d_n
         if self._depth > 0.0:
             self._beta = beta
         noise = self._noise_n[k % NOISE_CHUNK]
@@ -487,10 +498,23 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
             f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, lt, w_load, bucket, cfg.model_options,
                                                        self._beta, acceleration=acceleration, carried_weight=carried)
             w_load = carried
+            learned = self._learned if self._learned_soil is soil else self._learned_at(soil)
+            if learned is not None:  # "fee-learned": the learned correction at this step's speed
+                d_t, d_n = learned.single(depth, rho, alpha, th, self._carver.fill, kept,
+                                          math.hypot(x - x_before, z - z_before) / cfg.dt)
+                f_t, f_n = f_t + d_t, f_n + d_n
         if cfg.truth_active:
             dist = math.hypot(x - x_before, z - z_before)
             f_t, f_n = self._truth_forces(f_t, f_n, depth, dist / cfg.dt, dist, j)
         return depth, rho, alpha, height, w_load, f_t, f_n, beta, flags
+
+    def _learned_at(self, soil: SoilParams) -> LearnedCorrection | None:
+        """The learned correction at ``soil`` under ``"fee-learned"`` (made once per soil), else None."""
+        if self._learned_soil is not soil or (self._learned is not None) != (self.cfg.force_model == "fee-learned"):
+            self._learned_soil = soil
+            self._learned = (learned_correction(soil, self.cfg.bucket) if self.cfg.force_model == "fee-learned"
+                             else None)
+        return self._learned
 
     def _end_cycle(self, cycle_done: bool) -> bool:
         """Close a stalled or finished cycle (in the multi-cycle variant start the next); whether to terminate."""

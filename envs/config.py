@@ -268,9 +268,9 @@ class EnvConfig:
     cycles_per_episode : int
         Digging cycles per episode (>= 1).
     force_model : str
-        The plant's model, a name of :data:`~wheelloader.estimator.force_models.PLANT_FORCE_MODELS` (env docstring).
+        The plant's model, a name of :data:`~wheelloader.estimator.force_models.FORCE_MODELS` (env docstring).
     payload : PayloadOptions or dict, optional
-        The payload of ``"fee-payload"`` (default :data:`~wheelloader.estimator.DEFAULT_PAYLOAD`).
+        The payload of the payload models (default :func:`~wheelloader.estimator.force_models.check_force_model`'s).
     """
 
     soil: SoilArgument = "gravel"
@@ -301,7 +301,7 @@ class EnvConfig:
 
     def __post_init__(self) -> None:
         set_ = functools.partial(object.__setattr__, self)
-        set_("payload", check_force_model(self.force_model, as_payload(self.payload), plant=True))
+        set_("payload", check_force_model(self.force_model, as_payload(self.payload)))
         pile = parse_pile(self.pile)
         set_("soil", parse_soil(self.soil))
         set_("pile", pile)

@@ -47,6 +47,7 @@ from wheelloader.estimator import (
 )
 from wheelloader.estimator.checks import check_int
 from wheelloader.estimator.force_model import carried_forces
+from wheelloader.estimator.learned_plant import LearnedCorrection, learned_correction
 from wheelloader.estimator.payload import kept_volume
 
 from .batched_records import BatchedCycleRecorder
@@ -168,6 +169,7 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         self._soils: list[SoilParams | None] = [None] * n
         self._start_piles: list[Any] = [self.cfg.pile] * n
         self._groups: list[tuple[SoilParams, np.ndarray | slice]] | None = None
+        self._learned: dict[SoilParams, LearnedCorrection] = {}  # "fee-learned": its correction by soil
         self._gamma = np.zeros(n)
         self._beta = np.full(n, np.nan)  # each row's last failure angle in soil (the warm start)
         z = np.zeros
@@ -255,6 +257,7 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
                 self._seeds[i] = seeds[i]
         if request.config_changed:
             self.cfg = request.config
+            self._learned = {}
         for i in rows:
             self._reset_env(int(i), request)
         self._prev_done[rows] = False
@@ -297,6 +300,9 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         self._crest[i] = self._crest_of[1]
         self._noise_n[i], self._noise_u[i] = draw_noise_chunk(rng)
         f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, lt, 0.0, cfg.bucket, DEFAULT_OPTIONS)
+        if cfg.force_model == "fee-learned":  # at rest with an empty bucket
+            d_t, d_n = self._correction(soil).single(depth, rho, alpha, th, 0.0, 0.0, 0.0)
+            f_t, f_n = f_t + d_t, f_n + d_n
         self._beta[i] = beta if depth > 0.0 else np.nan
         r = cfg.sensor_range
         self._mt[i] = m_t = min(max(f_t + cfg.sensor_noise * float(self._noise_n[i, 0, 0]), -r), r)
@@ -342,6 +348,22 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
             out = soil_forces(soil, state, bucket, DEFAULT_OPTIONS, beta_guess=guess[sel])
             f_t[sel], f_n[sel], flags[sel], beta[sel] = out.tangential, out.normal, out.flags, out.beta
         return f_t, f_n, flags, beta
+
+    def _correction(self, soil: SoilParams) -> LearnedCorrection:
+        """``"fee-learned"``'s correction at ``soil`` (made once per soil)."""
+        corr = self._learned.get(soil)
+        if corr is None:
+            corr = self._learned[soil] = learned_correction(soil, self.cfg.bucket)
+        return corr
+
+    def _learned_rows(self, rows: np.ndarray, depth, rho, alpha, th, carved, kept, speed):
+        """``"fee-learned"``'s correction ``(F_T, F_N)`` on the given rows, one evaluation per distinct soil."""
+        d_t, d_n = np.zeros(rows.size), np.zeros(rows.size)
+        for soil, members in self._soil_groups():
+            sel: Any = slice(None) if isinstance(members, slice) else np.nonzero(np.isin(rows, members))[0]
+            d_t[sel], d_n[sel] = self._correction(soil).rows(depth[sel], rho[sel], alpha[sel], th[sel], carved[sel],
+                                                             kept[sel], speed[sel])
+        return d_t, d_n
 
     def _truth(self, g, rows, f_t, f_n, depth, speed, dist, j, new_stones: bool):
         """The truth beyond the model (:mod:`.truth`) on the rows' forces (``new_stones``: the step moved)."""
@@ -459,6 +481,9 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
             acc = np.column_stack([(vx - self._vx) / dt, (vz - self._vz) / dt])
             d_t, d_n = carried_forces(depth, alpha - rho, self._gamma * GRAVITY * kept, acc, cfg.model_options)
             f_t, f_n = f_t + d_t, f_n + d_n
+            if cfg.force_model == "fee-learned":  # the learned correction at the step's realised speed
+                d_t, d_n = self._learned_rows(rows, depth, rho, alpha, thn, fill, kept, np.hypot(xn - x, zn - z) / dt)
+                f_t, f_n = f_t + d_t, f_n + d_n
         self._k += 1
         j = self._k % NOISE_CHUNK
         redraw = j == 0 if pending is None else (j == 0) & ~pending
@@ -486,6 +511,9 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
                 d_t, d_n = carried_forces(d2, al2 - rho2, self._gamma[s] * GRAVITY * kept0[s], None,
                                           cfg.model_options)
                 ft2, fn2 = ft2 + d_t, fn2 + d_n
+                if cfg.force_model == "fee-learned":  # at rest
+                    d_t, d_n = self._learned_rows(s, d2, rho2, al2, th[s], fill0[s], kept0[s], 0.0 * d2)
+                    ft2, fn2 = ft2 + d_t, fn2 + d_n
             if truth_on:
                 ft2, fn2 = self._truth(s, s, ft2, fn2, d2, 0.0, 0.0, None, False)
             depth[s], rho[s], alpha[s], f_t[s], f_n[s], flags[s] = d2, rho2, al2, ft2, fn2, fl2

@@ -36,10 +36,10 @@ __all__ = ["DEFAULT_FORCE_MODEL", "DEFAULT_PAYLOAD", "FORCE_MODELS", "PAYLOAD_MO
 
 #: Names accepted by ``force_model=``.
 FORCE_MODELS: tuple[str, ...] = ("fee", "fee-payload", "fee-learned")
-#: The names the env and the planner take: ``"fee-learned"`` is the estimator's (calibrate, predict) until the env
-#: and the planner carry its correction (:func:`~wheelloader.estimator.learned.casadi_correction` is its CasADi
-#: twin).
-PLANT_FORCE_MODELS: tuple[str, ...] = ("fee", "fee-payload")
+#: The names the env and the planner take: all of them (the env evaluates ``"fee-learned"``'s correction with
+#: :mod:`~wheelloader.estimator.learned_plant`, the planner with its CasADi twin
+#: :func:`~wheelloader.estimator.learned.casadi_correction`).
+PLANT_FORCE_MODELS: tuple[str, ...] = FORCE_MODELS
 #: The models built on the payload state.
 PAYLOAD_MODELS: tuple[str, ...] = ("fee-payload", "fee-learned")
 DEFAULT_FORCE_MODEL = "fee"
@@ -47,14 +47,13 @@ DEFAULT_FORCE_MODEL = "fee"
 DEFAULT_PAYLOAD = PayloadOptions(retention=0.9649, heap_factor=0.6059, sharpness=1.926)
 
 
-def check_force_model(name: object, payload: PayloadOptions | None, error: type[Exception] = ParameterError,
-                      plant: bool = False) -> PayloadOptions | None:
-    """Validate ``force_model``/``payload``; return the payload options the model uses (None for ``"fee"``).
-    ``plant=True``: a name the env and the planner take (:data:`PLANT_FORCE_MODELS`)."""
-    check_choice("force_model", name, PLANT_FORCE_MODELS if plant else FORCE_MODELS, error=error)
+def check_force_model(name: object, payload: PayloadOptions | None, error: type[Exception] = ParameterError
+                      ) -> PayloadOptions | None:
+    """Validate ``force_model``/``payload``; return the payload options the model uses (None for ``"fee"``)."""
+    check_choice("force_model", name, FORCE_MODELS, error=error)
     if name == "fee":
         if payload is not None:
-            raise error('payload options need force_model="fee-payload"')
+            raise error('payload options need force_model="fee-payload" (or "fee-learned")')
         return None
     if payload is None and name == "fee-learned":
         from .learned import default_learned_model

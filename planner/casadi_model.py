@@ -155,3 +155,29 @@ def casadi_forces(soil, vertical_depth, rho, alpha, load_weight, bucket: Bucket,
         f_t = f_t + carried * ca.sin(theta)
         f_n = f_n + carried * ca.cos(theta)
     return {"F_T": f_t, "F_N": f_n, "depth": depth, "beta": beta, "fee": fee, "gate": gate}
+
+
+#: Speed below which the planner's tip speed is smoothed [m/s] (``sqrt(v^2 + eps^2)``: differentiable at rest).
+SMOOTH_SPEED = 1e-3
+
+
+def casadi_learned(soil, depth, rho, alpha, blade_angle, carved, kept, vx, vz, bucket: Bucket) -> tuple:
+    """The learned correction of ``force_model="fee-learned"`` (``F_T``, ``F_N`` [N]) as CasADi expressions.
+
+    The inputs of :func:`~wheelloader.estimator.learned.learned_inputs` (``depth`` the perpendicular depth of
+    :func:`casadi_forces`, ``carved`` and ``kept`` the carved and the kept fill [m^3], ``vx, vz`` the tip velocity
+    [m/s]) through the network's CasADi twin :func:`~wheelloader.estimator.learned.casadi_correction` (the same
+    clip, standardisation and layers; exact derivatives), times ``s = gamma g w L^2``. The contact ramp is the
+    smooth min of :func:`casadi_forces` (1e-3 wide) and the speed ``sqrt(v^2 + SMOOTH_SPEED^2)``.
+    """
+    from wheelloader.estimator.learned import CONTACT_DEPTH, casadi_correction, default_learned_model
+
+    gamma, cohesion, adhesion, phi, delta = (soil[i] for i in range(5))
+    length = bucket.floor_length
+    weight = gamma * GRAVITY * length
+    speed = ca.sqrt(vx * vx + vz * vz + SMOOTH_SPEED * SMOOTH_SPEED)
+    x = ca.horzcat(depth / length, smooth_min(depth / CONTACT_DEPTH, 1.0, 1e-3), rho, alpha, blade_angle,
+                   carved / bucket.capacity, kept / bucket.capacity, speed / math.sqrt(GRAVITY * length),
+                   ca.tan(phi), ca.tan(delta), cohesion / weight, adhesion / weight)
+    r = casadi_correction(default_learned_model(), x) * (gamma * GRAVITY * bucket.width * length * length)
+    return r[0], r[1]

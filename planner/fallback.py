@@ -83,7 +83,7 @@ MODEL_LIFTS = (0.04, 0.0, -0.04, -0.08)
 def model_bezier_on_face(soil: SoilParams, pile: Pile, rate: float = 60.0, bucket: Bucket | None = None,
                          loader: Loader | None = None, exit_min_fill: float = LOOP_EXIT_MIN_FILL,
                          model_options: ModelOptions = DEFAULT_OPTIONS,
-                         payload: PayloadOptions | None = None) -> BucketPath:
+                         payload: PayloadOptions | None = None, learned: bool = False) -> BucketPath:
     """The default Bezier path moved to where ``soil``'s force model predicts the least energy per m^3.
 
     Starts from :func:`bezier_on_face` (geometric placement) and tries it
@@ -95,7 +95,8 @@ def model_bezier_on_face(soil: SoilParams, pile: Pile, rate: float = 60.0, bucke
     parameters make this choice better) wins. The fallback of the
     calibrating strategies when a plan fails its check; up to 28 model
     evaluations. ``model_options``: the force model's (the planner's failure-angle rule); ``payload``: its
-    payload under ``"fee-payload"`` (the carried load; the fill the candidates must keep stays the carving's).
+    payload under the payload models (the carried load; the fill the candidates must keep stays the carving's);
+    ``learned``: ``"fee-learned"``'s correction on top (:func:`~wheelloader.planner.verify.path_energy`).
 
     Like the planner, it decides on ``soil`` and ``pile`` rounded to fixed grids
     (:mod:`wheelloader.estimator.quantise`), and a later candidate wins only when it is cheaper by more
@@ -116,7 +117,7 @@ def model_bezier_on_face(soil: SoilParams, pile: Pile, rate: float = 60.0, bucke
                 continue
             part = BucketPath(path.t[:end + 1], path.x[:end + 1], path.z[:end + 1], path.blade_angle[:end + 1],
                               path.name)
-            sim = path_energy(part, soil, pile, bucket, model_options=model_options, payload=payload)
+            sim = path_energy(part, soil, pile, bucket, model_options=model_options, payload=payload, learned=learned)
             forces = sim["forces"]
             if forces.tangential.max() > loader.max_push_force or forces.normal.max() > loader.max_lift_force:
                 continue

@@ -64,7 +64,8 @@ def _dug_part(path: BucketPath, pile: Pile, bucket: Bucket, exit_min_fill: float
 def _path_terms(path: BucketPath, soil: SoilParams, pile: Pile, bucket: Bucket, options: PlannerOptions
                 ) -> KeptTerms:
     """Kept fill, energy with the lift and energy per kept m^3 of a dug path by the NumPy model."""
-    sim = path_energy(path, soil, pile, bucket, model_options=options.model_options, payload=options.force_payload)
+    sim = path_energy(path, soil, pile, bucket, model_options=options.model_options, payload=options.force_payload,
+                      learned=options.force_model == "fee-learned")
     return evaluate(sim["carved"], sim["energy"], float(path.z[-1]), soil.gamma, bucket.capacity,
                     options.kept_payload, options.kept_dump_height)
 
@@ -130,7 +131,8 @@ def plan_with_lookahead(params: SoilParams | str | dict, pile: Pile, *, options:
             iterations += _iterations(second)
             path2 = second.path if second.success and second.path is not None else model_bezier_on_face(
                 soil, next_pile, control_rate, bucket, exit_min_fill=exit_min_fill,
-                model_options=options.model_options, payload=options.force_payload)
+                model_options=options.model_options, payload=options.force_payload,
+                learned=options.force_model == "fee-learned")
             dug2, _ = _dug_part(path2, next_pile, bucket, exit_min_fill)
             terms2 = _path_terms(dug2, soil, next_pile, bucket, options)
         cost = two_cycle_cost(terms1, terms2)

@@ -20,7 +20,9 @@ acceleration ramps).
   (with a smooth max).
 * Force model (:attr:`PlannerOptions.force_model`): ``"fee"`` counts ``V`` as the fill; under ``"fee-payload"``
   the fill is the payload's kept soil ``kept_volume(V)`` (in the objective, the ``min_fill`` bound and the payload's
-  lifting work) and its weight is carried as the tip leaves the soil (``casadi_forces(carried_weight=)``).
+  lifting work) and its weight is carried as the tip leaves the soil (``casadi_forces(carried_weight=)``);
+  ``"fee-learned"`` adds the learned correction's CasADi twin at every node, at the interval's velocity
+  (:func:`~wheelloader.planner.casadi_model.casadi_learned`; the start node at the start velocity).
 * Objective: ``- V_N / capacity + lambda * E / 1 kJ + mu * sum |du|^2``
   (fill against energy; ``mu`` a small smoothing weight), optionally with a
   lower bound on the final fill ("least energy for a fill target"); or the opt-in energy per m^3 of kept
@@ -59,7 +61,7 @@ from wheelloader.estimator.payload import kept_volume
 from wheelloader.estimator.validity import alpha_lower_limit
 
 from . import codegen, nlp_cache
-from .casadi_model import casadi_forces, smooth_max, smooth_min, smooth_pos
+from .casadi_model import casadi_forces, casadi_learned, smooth_max, smooth_min, smooth_pos
 from .interrupt import guarded
 from .kept import KEPT_OBJECTIVE_SCALE, kept_terms, smooth_lift
 from .options import PlannerOptions
@@ -259,8 +261,17 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     carried = None if payload is None else p_soil[0] * GRAVITY * kept_of(vs)
     out = casadi_forces(p_soil, vertical, alpha - ths, alpha, w_load, bucket, options.model_options, carried)
     rho = alpha - ths
-    forces = ca.Function("forces", [xs, zs, ths, vs, p_soil, p_win], [out["F_T"], out["F_N"]])
-    node = ca.Function("node", [xs, zs, ths, vs, p_soil, p_win], [out["F_T"], out["F_N"], rho, vertical, alpha])
+    f_node, n_node = out["F_T"], out["F_N"]
+    velocity = []  # "fee-learned": the node's tip velocity, an input of its correction (the interval's)
+    if options.force_model == "fee-learned":
+        velocity = [ca.SX.sym("vx"), ca.SX.sym("vz")]
+        c_t, c_n = casadi_learned(p_soil, out["depth"], rho, alpha, ths, vs, kept_of(vs), *velocity, bucket)
+        f_node, n_node = f_node + c_t, n_node + c_n
+    forces = ca.Function("forces", [xs, zs, ths, vs, p_soil, p_win, *velocity], [f_node, n_node])
+    node_fn = ca.Function("node", [xs, zs, ths, vs, p_soil, p_win, *velocity], [f_node, n_node, rho, vertical, alpha])
+
+    def node(x_, z_, th_, v_, soil_, win_, vel_):
+        return node_fn(x_, z_, th_, v_, soil_, win_, *([vel_[0], vel_[1]] if velocity else []))
     # decision variables
     X = ca.SX.sym("X", 4, n + 1)
     U = ca.SX.sym("U", 3, n)
@@ -270,7 +281,7 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     energy = 0.0
     smooth = 0.0
     ft_all, fn_all = [], []
-    ft0, fn0, _, vertical_prev, _ = node(X[0, 0], X[1, 0], X[2, 0], X[3, 0], p_soil, p_surf[:, 0])
+    ft0, fn0, _, vertical_prev, _ = node(X[0, 0], X[1, 0], X[2, 0], X[3, 0], p_soil, p_surf[:, 0], p_vel0)
     ft_all.append(ft0)
     fn_all.append(fn0)
     phi, delta = p_soil[3], p_soil[4]
@@ -292,7 +303,7 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
         # kinematics (exact for piecewise-constant velocity)
         g_eq += [xn - xk - dx, zn - zk - dz, tn - tk - h * u[2]]
         # forces at the new node (and its depth below the surface)
-        f_t, f_n, rho_n, vertical, alpha_n = node(xn, zn, tn, vn, p_soil, p_surf[:, k + 1])
+        f_t, f_n, rho_n, vertical, alpha_n = node(xn, zn, tn, vn, p_soil, p_surf[:, k + 1], u)
         vertical_start = vertical_prev  # depth at node k (vertical_prev moves on below)
         # fill: area between the start surface and the segment (trapezoid rule on the node depths),
         # capped by the bounds on V
@@ -300,7 +311,7 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
             # the path between two nodes is a straight segment that can pass under a bump or graze a wall:
             # forces and validity are constrained at its midpoint too, and the fill is Simpson's rule
             xm, zm, tm, vm = 0.5 * (xk + xn), 0.5 * (zk + zn), 0.5 * (tk + tn), 0.5 * (vk + vn)
-            f_tm, f_nm, rho_m, vertical_m, alpha_m = node(xm, zm, tm, vm, p_soil, p_surf[:, k + 1])
+            f_tm, f_nm, rho_m, vertical_m, alpha_m = node(xm, zm, tm, vm, p_soil, p_surf[:, k + 1], u)
             slack_m = VALIDITY_RELAX * smooth_pos(-vertical_m - options.validity_band, 1e-3)
             g_ineq += [1.0 - f_tm / f_push, 1.0 - f_nm / f_lift, rho_m - rho_lo + slack_m, rho_hi - rho_m + slack_m,
                        alpha_hi - alpha_m + slack_m, alpha_m - alpha_lo + slack_m]

@@ -12,8 +12,8 @@ value disable the cache), else ``$XDG_CACHE_HOME/wheelloader/nlp``, else ``~/.ca
 
 Key: the bucket, loader and planner options (their ``repr``: every field at full precision), the CasADi,
 Python and package versions, a digest of the source files that shape the NLP (the planner package, the
-estimator's top-level modules and the env bookkeeping) and :data:`FORMAT`. An edit of the model code
-therefore never loads a stale NLP.
+estimator's top-level modules, the learned correction's weights and the env bookkeeping) and :data:`FORMAT`.
+An edit of the model code or a retrained correction therefore never loads a stale NLP.
 
 Safety: an entry is written to a temporary file in the cache directory and renamed into place
 (``os.replace``, atomic), so concurrent writers never leave a half-written entry; each entry ends with a
@@ -77,7 +77,10 @@ def _source_digest() -> str:
         import wheelloader.estimator as estimator
 
         planner_dir = Path(__file__).resolve().parent
-        files = sorted(planner_dir.glob("*.py")) + sorted(Path(estimator.__file__).resolve().parent.glob("*.py"))
+        estimator_dir = Path(estimator.__file__).resolve().parent
+        # the learned correction's shipped weights shape the "fee-learned" NLP
+        files = (sorted(planner_dir.glob("*.py")) + sorted(estimator_dir.glob("*.py"))
+                 + sorted(estimator_dir.glob("learned_weights/*.json")))
         files.append(Path(bookkeeping.__file__).resolve())
         digest = hashlib.sha256()
         for path in files:

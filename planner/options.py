@@ -13,7 +13,8 @@ from wheelloader.estimator.force_models import (
     DEFAULT_FORCE_MODEL,
     DEFAULT_PAYLOAD,
     FORCE_MODELS,
-    PLANT_FORCE_MODELS,
+    PAYLOAD_MODELS,
+    check_force_model,
     model_options_for,
 )
 from wheelloader.estimator.payload import removed_volume
@@ -135,8 +136,8 @@ class PlannerOptions:
         (:mod:`wheelloader.planner.kept`): the payload model's kept fill of the carved volume, constrained to at
         least ``kept_target``.
     payload : PayloadOptions, optional
-        The payload state of ``"kept_per_energy"`` and of ``force_model="fee-payload"`` (default
-        :data:`~wheelloader.estimator.DEFAULT_PAYLOAD`).
+        The payload state of ``"kept_per_energy"`` and of the payload force models (default
+        :data:`~wheelloader.estimator.DEFAULT_PAYLOAD`; under ``"fee-learned"`` the payload fitted with it).
     dump_height : float, optional
         The common height the load is lifted to [m] (default: the fixed Bezier path's end height,
         :func:`~wheelloader.planner.kept.dump_height`).
@@ -146,12 +147,14 @@ class PlannerOptions:
     force_model : str
         The force model the plan is made and checked with, a name of :data:`~wheelloader.estimator.FORCE_MODELS`
         (as ``force_model=`` of :func:`~wheelloader.estimator.calibrate` and the env): ``"fee"`` (default, the
-        paper's) or ``"fee-payload"``: the NLP's state ``V`` stays the carved volume (the surcharge's fill), the
+        paper's), ``"fee-payload"`` or ``"fee-learned"``: the NLP's state ``V`` stays the carved volume (the
+        surcharge's fill), the
         fill of the objective, of ``min_fill`` and of the NumPy check is the payload's kept soil
         ``kept_volume(V)``, and its weight stays on the bucket as the tip leaves the soil
         (:func:`~wheelloader.planner.casadi_model.casadi_forces` ``carried_weight``; weight only: within an
         interval the plan's velocity is constant, so the inertia the env adds while it tracks the plan is not in
-        the NLP).
+        the NLP); ``"fee-learned"`` adds the learned correction's CasADi twin at every node (the interval's speed;
+        :func:`~wheelloader.planner.casadi_model.casadi_learned`).
     surface : SurfaceGrid
         Layout of the smooth surface.
     """
@@ -191,13 +194,17 @@ class PlannerOptions:
 
     @property
     def force_payload(self) -> PayloadOptions | None:
-        """The payload of the force model (``"fee-payload"``: ``payload`` or the default), None for ``"fee"``."""
-        return self.kept_payload if self.force_model == "fee-payload" else None
+        """The payload of the force model (the payload models: ``payload`` or the model's default), None for
+        ``"fee"``."""
+        return self.kept_payload if self.force_model in PAYLOAD_MODELS else None
 
     @property
     def kept_payload(self) -> PayloadOptions:
-        """The payload state the kept objective uses (``payload`` or the default)."""
-        return DEFAULT_PAYLOAD if self.payload is None else self.payload
+        """The payload state the kept objective uses (``payload``, else the force model's default, else
+        :data:`~wheelloader.estimator.DEFAULT_PAYLOAD`)."""
+        if self.payload is not None:
+            return self.payload
+        return check_force_model(self.force_model, None) if self.force_model in PAYLOAD_MODELS else DEFAULT_PAYLOAD
 
     @property
     def kept_dump_height(self) -> float:
@@ -224,9 +231,6 @@ class PlannerOptions:
         err = PlanningError
         check_choice("PlannerOptions.objective", self.objective, OBJECTIVES, error=err)
         check_choice("PlannerOptions.force_model", self.force_model, FORCE_MODELS, error=err)
-        if self.force_model not in PLANT_FORCE_MODELS:  # "fee-learned": calibrate and predict only, for now
-            raise err(f"PlannerOptions.force_model {self.force_model!r} is not in the planner yet; it takes "
-                      f"{list(PLANT_FORCE_MODELS)}")
         check_choice("PlannerOptions.solver", self.solver, SOLVERS, error=err)
         check_choice("PlannerOptions.qp_solver", self.qp_solver, QP_SOLVERS, error=err)
         if not isinstance(self.compiled, bool):

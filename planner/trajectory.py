@@ -255,8 +255,9 @@ class TrajectoryOptimizer:
         windows = grid.window_parameters(grid.parameters(pile, float(path.x[0])), path.x)
         fill = pile.carve(path.x, path.z, self.bucket.width, self.bucket.capacity, start_fill).fill_history
         f = self._functions["forces"].map(len(path))
+        velocity = [v[None, :] for v in path.velocity()[:2]] if self.options.force_model == "fee-learned" else []
         ft, fn = f(np.asarray(path.x)[None, :], np.asarray(path.z)[None, :], np.asarray(path.blade_angle)[None, :],
-                   fill[None, :], soil_vector(soil, self.bucket), windows.T)
+                   fill[None, :], soil_vector(soil, self.bucket), windows.T, *velocity)
         return {"F_T": np.array(ft).ravel(), "F_N": np.array(fn).ravel(), "fill": fill}
 
     # ------------------------------------------------------------------ internals

@@ -10,7 +10,7 @@ env simulates, not only for the planner's approximation of it.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -31,6 +31,7 @@ from wheelloader.estimator import (
     contact_state,
     soil_forces,
 )
+from wheelloader.estimator.learned import default_learned_model, learned_forces
 from wheelloader.estimator.payload import with_payload
 
 from .options import PlannerOptions
@@ -75,12 +76,13 @@ class PlanCheck:
 
 def path_energy(path: BucketPath, soil: SoilParams, pile: Pile, bucket: Bucket,
                 initial_fill: float = 0.0, model_options: ModelOptions = DEFAULT_OPTIONS,
-                payload: PayloadOptions | None = None) -> dict[str, np.ndarray | float]:
+                payload: PayloadOptions | None = None, learned: bool = False) -> dict[str, np.ndarray | float]:
     """Forces, fill and the env's energy bookkeeping along ``path`` with the NumPy model (``initial_fill``
     [m^3] already in the bucket at its start; ``model_options``: the force model's, e.g. the opt-in
     failure-angle rule of the planner's :attr:`PlannerOptions.model_options`; ``payload``: under
     ``"fee-payload"`` (:attr:`PlannerOptions.force_payload`) the payload whose kept soil of the carved volume is
-    the fill and the carried load, weight only).
+    the fill and the carried load, weight only); ``learned``: ``"fee-learned"``, the learned correction added
+    (:func:`~wheelloader.estimator.learned.learned_forces`, at the path's finite-difference speed).
 
     Energy per step: the env's :func:`~wheelloader.envs.bookkeeping.step_work` (work on the soil plus
     lifting work on the payload), with the forces and blade angle at the step's end.
@@ -93,6 +95,10 @@ def path_energy(path: BucketPath, soil: SoilParams, pile: Pile, bucket: Bucket,
     if payload is not None:
         state = with_payload(state, bucket.capacity, payload)
     forces = soil_forces(soil, state, bucket, model_options)
+    if learned:
+        lf = learned_forces(default_learned_model(), state, path, bucket, soil)
+        f_t, f_n = forces.tangential + lf.tangential, forces.normal + lf.normal
+        forces = replace(forces, tangential=f_t, normal=f_n, resultant=np.hypot(f_t, f_n))
     fill = state.fill_volume if payload is None else state.carried_volume
     e_soil, e_payload = step_work(forces.tangential[1:], forces.normal[1:], np.diff(path.x), np.diff(path.z),
                                   path.blade_angle[1:], soil.gamma * GRAVITY * fill[1:])
@@ -151,7 +157,8 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
     loader = loader or Loader()
     options = options or PlannerOptions()
     path, accel, initial_fill = _sampled(plan, rate, bucket)
-    sim = path_energy(path, soil, pile, bucket, initial_fill, options.model_options, options.force_payload)
+    sim = path_energy(path, soil, pile, bucket, initial_fill, options.model_options, options.force_payload,
+                      options.force_model == "fee-learned")
     forces, state = sim["forces"], sim["state"]
     dt = np.diff(path.t)
     vx, vz, om = np.diff(path.x) / dt, np.diff(path.z) / dt, np.diff(path.blade_angle) / dt

@@ -27,11 +27,14 @@ from wheelloader.estimator import (
     soil_forces,
 )
 from wheelloader.estimator.force_models import (
+    PAYLOAD_MODELS,
     PLANT_FORCE_MODELS,
     check_force_model,
     cycle_contact_state,
     model_options_for,
 )
+from wheelloader.estimator.learned import default_learned_model, learned_forces, learned_inputs
+from wheelloader.estimator.paths import BucketPath
 from wheelloader.estimator.payload import kept_volume
 
 MAIN_ID = "wheelloader/BucketLoading-v0"
@@ -68,10 +71,18 @@ def _estimator_forces(name: str, env, record, carved):
     payload = check_force_model(name, cfg.payload)
     if payload is not None:
         state = replace(state, carried_volume=record["fill"])
-    return soil_forces(env.soil, state, cfg.bucket, model_options_for(name, DEFAULT_OPTIONS))
+    forces = soil_forces(env.soil, state, cfg.bucket, model_options_for(name, DEFAULT_OPTIONS))
+    if name == "fee-learned":  # the network at the env's inputs (learned_inputs), the speed the realised one
+        path = BucketPath(np.arange(x.size) * cfg.dt, x, z, th)
+        inputs = learned_inputs(state, path, cfg.bucket, env.soil)
+        inputs[:, 7] = np.hypot(v[:, 0], v[:, 1]) / np.sqrt(9.81 * cfg.bucket.floor_length)
+        model = default_learned_model()
+        r = model.correction(inputs) * env.soil.gamma * 9.81 * cfg.bucket.width * cfg.bucket.floor_length ** 2
+        forces = replace(forces, tangential=forces.tangential + r[:, 0], normal=forces.normal + r[:, 1])
+    return forces
 
 
-@pytest.mark.parametrize("name", PLANT_FORCE_MODELS)
+@pytest.mark.parametrize("name", FORCE_MODELS)
 def test_env_single_samples_are_the_estimators_arrays(name):
     env, record, carved, infos = _dig(name)
     assert len(record["x"]) == len(carved) > 100
@@ -85,11 +96,13 @@ def test_env_single_samples_are_the_estimators_arrays(name):
     model_fill = state.fill_volume if state.carried_volume is None else state.carried_volume
     np.testing.assert_allclose(log.fill_volume, model_fill, rtol=1e-9, atol=1e-12)
     assert infos[-1]["fill_volume"] == pytest.approx(model_fill[-1], rel=1e-9)
-    # and predict() on the cycle log (the path's acceleration from finite differences, not the env's step)
-    # reproduces the env's forces: within 0.1 % of the mean F_R (measured: exact for fee, 0.009 % for fee-payload)
+    # and predict() on the cycle log (the path's acceleration and speed from central differences, not the env's
+    # step) reproduces the env's forces: within 0.1 % of the mean F_R (measured: exact for fee, 0.009 % for
+    # fee-payload), 0.5 % for fee-learned (measured 0.11 %: the speed, an input of its correction)
     pred = predict(env.soil, log, force_model=name)
     gap = np.hypot(pred.tangential - record["true_F_T"], pred.normal - record["true_F_N"])
-    assert np.sqrt(np.mean(gap**2)) < 1e-3 * np.mean(np.hypot(record["true_F_T"], record["true_F_N"]))
+    bound = 5e-3 if name == "fee-learned" else 1e-3
+    assert np.sqrt(np.mean(gap**2)) < bound * np.mean(np.hypot(record["true_F_T"], record["true_F_N"]))
 
 
 def test_payload_fill_is_kept_soil_and_its_weight_stays_after_exit():
@@ -114,7 +127,7 @@ def test_payload_fill_is_kept_soil_and_its_weight_stays_after_exit():
     assert fee["true_F_T"][-1] == 0.0 and fee["true_F_N"][-1] == 0.0
 
 
-@pytest.mark.parametrize("name", PLANT_FORCE_MODELS)
+@pytest.mark.parametrize("name", FORCE_MODELS)
 def test_gym_make_pickle_check_env_and_vector_env_take_the_model(name):
     from gymnasium.utils.env_checker import check_env
 
@@ -139,6 +152,7 @@ def test_payload_settings_are_checked():
     assert cfg.payload == PayloadOptions(retention=0.5)
     assert BucketLoadingEnv(force_model="fee-payload").cfg.payload == DEFAULT_PAYLOAD
     assert BucketLoadingEnv().cfg.payload is None
+    assert BucketLoadingEnv(force_model="fee-learned").cfg.payload == default_learned_model().payload
     with pytest.raises(ParameterError, match="fee-payload"):
         BucketLoadingEnv(payload={"retention": 0.5})
     with pytest.raises(ParameterError, match="force_model"):
@@ -165,22 +179,28 @@ def test_batched_fill_is_the_kept_volume_of_its_removed_volume():
 
 
 def _casadi_function(name: str, bucket):
-    """The planner's CasADi force model of ``name`` as a function of the soil vector and the contact."""
+    """The planner's CasADi force model of ``name`` as a function of the soil vector and the contact (the carved
+    and kept fill [m^3], the blade angle and the tip velocity: the learned correction's inputs)."""
     import casadi as ca
 
     from wheelloader.planner import PlannerOptions
-    from wheelloader.planner.casadi_model import casadi_forces
+    from wheelloader.planner.casadi_model import casadi_forces, casadi_learned
 
     options = PlannerOptions(force_model=name)
-    soil, vertical, rho, alpha, load, carried = (ca.SX.sym(n, k) for n, k in
-                                                 (("soil", 7), ("v", 1), ("rho", 1), ("alpha", 1), ("load", 1),
-                                                  ("carried", 1)))
-    out = casadi_forces(soil, vertical, rho, alpha, load, bucket, options.model_options, carried)
-    grad = ca.jacobian(ca.vertcat(out["F_T"], out["F_N"]), ca.vertcat(vertical, rho, carried))
-    return ca.Function("f", [soil, vertical, rho, alpha, load, carried], [out["F_T"], out["F_N"], grad]), options
+    soil, vertical, rho, alpha, carved, kept, th, vx, vz = (
+        ca.SX.sym(n, k) for n, k in (("soil", 7), ("v", 1), ("rho", 1), ("alpha", 1), ("carved", 1), ("kept", 1),
+                                     ("th", 1), ("vx", 1), ("vz", 1)))
+    weight = soil[0] * 9.81
+    out = casadi_forces(soil, vertical, rho, alpha, weight * carved, bucket, options.model_options, weight * kept)
+    f_t, f_n = out["F_T"], out["F_N"]
+    if name == "fee-learned":
+        c_t, c_n = casadi_learned(soil, out["depth"], rho, alpha, th, carved, kept, vx, vz, bucket)
+        f_t, f_n = f_t + c_t, f_n + c_n
+    grad = ca.jacobian(ca.vertcat(f_t, f_n), ca.vertcat(vertical, rho, kept, vx))
+    return ca.Function("f", [soil, vertical, rho, alpha, carved, kept, th, vx, vz], [f_t, f_n, grad]), options
 
 
-@pytest.mark.parametrize("name", PLANT_FORCE_MODELS)
+@pytest.mark.parametrize("name", FORCE_MODELS)
 def test_planner_casadi_model_is_the_estimators(name):
     """On the paper's paths: in soil within the planner's smoothing (as for the FEE, 3 % of the peak), out of
     the soil (5 mm above it and more) the same carried weight; finite exact derivatives everywhere."""
@@ -195,14 +215,20 @@ def test_planner_casadi_model_is_the_estimators(name):
         x = np.concatenate([path.x, np.full(20, path.x[-1])])
         z = np.concatenate([path.z, path.z[-1] + np.linspace(0.01, 0.3, 20)])
         th = np.concatenate([path.blade_angle, np.full(20, path.blade_angle[-1])])
+        t = np.concatenate([path.t, path.t[-1] + np.arange(1, 21) * np.mean(np.diff(path.t))])
         state = contact_state(x, z, th, pile, bucket)
         if payload is not None:
             state = replace(state, carried_volume=kept_volume(state.carve.removed_history, bucket.capacity, payload))
         ref = soil_forces(soil, state, bucket, options.model_options)
-        load = soil.gamma * 9.81 * state.fill_volume
-        carried = soil.gamma * 9.81 * (state.fill_volume if state.carried_volume is None else state.carried_volume)
+        lifted = BucketPath(t, x, z, th)
+        if name == "fee-learned":
+            lf = learned_forces(default_learned_model(), state, lifted, bucket, soil)
+            ref = replace(ref, tangential=ref.tangential + lf.tangential, normal=ref.normal + lf.normal,
+                          resultant=np.hypot(ref.tangential + lf.tangential, ref.normal + lf.normal))
+        kept = state.fill_volume if state.carried_volume is None else state.carried_volume
         vertical = pile.surface_height(x) - z
-        rows = [np.atleast_2d(v) for v in (vertical, state.rho, state.alpha, load, carried)]
+        vx, vz, _ = lifted.velocity()
+        rows = [np.atleast_2d(v) for v in (vertical, state.rho, state.alpha, state.fill_volume, kept, th, vx, vz)]
         f_t, f_n, grad = fn.map(x.size)(soil_vector(soil, bucket.edge_thickness), *rows)
         f_t, f_n = np.asarray(f_t).ravel(), np.asarray(f_n).ravel()
         assert np.all(np.isfinite(np.asarray(grad)))
@@ -217,7 +243,7 @@ def test_planner_casadi_model_is_the_estimators(name):
             assert ref.resultant[-1] > 500.0  # the kept soil's weight
 
 
-@pytest.mark.parametrize("name", PLANT_FORCE_MODELS)
+@pytest.mark.parametrize("name", FORCE_MODELS)
 def test_planner_plans_and_checks_with_the_model(name):
     """A plan with ``PlannerOptions(force_model=name)``: the NLP's fill at the end is the model's fill of its
     carved volume, and the NumPy check (the estimator's model) agrees with it and passes."""
@@ -356,12 +382,16 @@ def test_sb3_adapter_takes_the_model(backend):
     assert dug and all(info["fill_volume"] < info["carved_volume"] for info in dug)  # the kept soil, not the carving
 
 
-def test_learned_model_is_the_estimators_only_until_the_env_and_planner_carry_it():
+def test_every_model_runs_in_the_env_and_the_planner():
     from wheelloader.estimator import PlanningError
     from wheelloader.planner import PlannerOptions
 
-    assert set(PLANT_FORCE_MODELS) < set(FORCE_MODELS) and "fee-learned" in FORCE_MODELS
-    with pytest.raises(ParameterError, match="force_model"):
-        BucketLoadingEnv(force_model="fee-learned")
+    assert PLANT_FORCE_MODELS == FORCE_MODELS and "fee-learned" in FORCE_MODELS
+    for name in FORCE_MODELS:
+        assert BucketLoadingEnv(force_model=name).cfg.force_model == name
+        options = PlannerOptions(force_model=name)
+        assert options.force_payload == check_force_model(name, None)
+        assert (options.force_payload is not None) == (name in PAYLOAD_MODELS)
+    assert PlannerOptions(force_model="fee-learned").kept_payload == default_learned_model().payload
     with pytest.raises(PlanningError, match="force_model"):
-        PlannerOptions(force_model="fee-learned")
+        PlannerOptions(force_model="fea")

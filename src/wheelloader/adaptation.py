@@ -252,10 +252,10 @@ class Calibrating(Strategy):
             outcome = PlanOutcome(None, False, f"planner raised: {exc}", 0.0)
         outcome.seconds = time.perf_counter() - start
         if outcome.path is None or not outcome.success:
-            # the last good path was planned for another (uncarved) surface: the safe fallback is the
-            # baseline Bezier path moved to the current face
-            options = model_options_for(self.force_model, self.model_options)
-            fallback = model_bezier_on_face(self.params, pile, self.rate, model_options=options, payload=self.payload)
+            # the last good path was planned for an uncarved surface: fall back to the Bezier path moved to the face
+            kw = dict(model_options=model_options_for(self.force_model, self.model_options), payload=self.payload,
+                      learned=self.force_model == "fee-learned")
+            fallback = model_bezier_on_face(self.params, pile, self.rate, **kw)
             return PlanOutcome(fallback, False, f"{outcome.message}; fell back to the {fallback.name} path",
                                time.perf_counter() - start)
         self.last_good_path = outcome.path

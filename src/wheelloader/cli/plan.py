@@ -245,7 +245,7 @@ def run_plan(args: argparse.Namespace) -> int:
         plan, check = outcome.plan, outcome.check
         path = plan.path(args.rate)
         sim = path_energy(path, soil, pile, opt.bucket, model_options=opt.options.model_options,
-                          payload=opt.options.force_payload)
+                          payload=opt.options.force_payload, learned=opt.options.force_model == "fee-learned")
         solver_ok = plan.status in ACCEPTED_STATUSES
         # the check judges forces, limits and poses; a plan can pass it and still load (almost) nothing, which
         # plan_next_cycle does not accept (outcome.success false): usable needs both
