@@ -97,7 +97,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     fill_limit = planned_fill_limit(plant, args.fill_limit)
     args.fill_limit_used = fill_limit
     loop_kwargs = {"plant": plant, "cycles": args.cycles, "planner": not args.no_planner, "fill_limit": fill_limit,
-                   "failure_angle": args.failure_angle, **planner_physics(args)}
+                   "failure_angle": args.failure_angle, "objective": args.objective, "lookahead": args.lookahead,
+                   **planner_physics(args)}
     learning = [s for s in args.strategies if s != "oracle"]
     keys = [(soil, seed, name) for soil in args.soils for seed in range(args.seeds) for name in learning]
     units = [Unit(plant_loop_unit, {**loop_kwargs, "strategy": name, "soil": soil, "seed": seed, "stale": args.stale,
@@ -253,6 +254,8 @@ def markdown(result: dict[str, Any], cycles: Path | None = None) -> str:
               + ("" if s.get("end_blade_angle") is None else f"; `--end-blade-angle {s['end_blade_angle']:g}`")
               + ("" if not s.get("curl_out_intervals") else f" `--curl-out-intervals {s['curl_out_intervals']}`")
               + ("" if s.get("midpoints") is None else f"; `--midpoints {s['midpoints']}`")
+              + ("" if s.get("objective", "fill_energy") == "fill_energy" else f"; `--objective {s['objective']}`")
+              + ("" if not s.get("lookahead") else "; `--lookahead`")
               + ("" if s.get("fill_limit_used") is None else f", planned fill ≤ {s['fill_limit_used']:.0%} of 0.2 m³")
               + ") at "
               f"{commit_label(result['machine'])}; loops run with `--ray {s.get('ray', 'off')}`; the last "
@@ -291,6 +294,11 @@ def main(argv: list[str] | None = None) -> int:
                         help="largest planned fill, share of the nominal capacity: 'default' (the planner's 0.95), "
                              "'struck' (95 %% of the plant's struck capacity where it has one: MPM 0.64) or a number")
     add_planner_physics_arguments(parser, "for every strategy that plans")
+    parser.add_argument("--objective", choices=("fill_energy", "kept_per_energy"), default="fill_energy",
+                        help="the planner's objective for every strategy that plans: carved fill against energy "
+                             "(default) or energy per m^3 of kept soil with the lift to the dump height (#33)")
+    parser.add_argument("--lookahead", action="store_true",
+                        help="choose each plan with the cycle after it in view (planner/lookahead.py)")
     parser.add_argument("--stale", choices=("error", "redig", "keep"), default="error",
                         help="a saved cycle dug along another path than the one planned now (other code, settings "
                              "or machine: plans can change with the last bits of the calibrated parameters): stop "

@@ -148,7 +148,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         raise SystemExit(f"--cycles {root}: no saved loop of {args.strategies}")
     if args.quick:
         found = {k: v[:1] for k, v in list(found.items())[:1]}
-    plant = make_plant("mpm", resolution=args.resolution, threads=1) if args.plant == "mpm" else make_plant(args.plant)
+    plant = (make_plant("mpm", resolution=args.resolution, threads=args.threads) if args.plant == "mpm"
+             else make_plant(args.plant))
     started = time.perf_counter()
     saved = Path(args.cycles_dir) if args.cycles_dir is not None else Path(args.out) / "cycles"
     keys = list(found)
@@ -182,6 +183,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--plant", choices=("mpm", "fee-env"), default="mpm",
                         help="the plant the run's cycles were dug in (default mpm)")
     parser.add_argument("--resolution", type=float, default=0.02, help="MPM grid spacing [m] (the run's; default 0.02)")
+    parser.add_argument("--threads", type=int, default=1,
+                        help="MPM lanes/threads (the run's: the plant's settings must match; default 1)")
     parser.add_argument("--strategies", nargs="+", default=["ours"], help="whose piles (default ours)")
     parser.add_argument("--quick", action="store_true", help="smoke run: the first cycle of one loop")
     parser.add_argument("--force", action="store_true",

@@ -257,7 +257,8 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
                     failure_angle: str = "min_n_gamma", cut_angle: float | None = None,
                     fill_limit: float | None = None, heel_clearance: float | None = None,
                     end_blade_angle: float | None = None, curl_out_intervals: int = 0,
-                    midpoints: bool | None = None) -> dict[str, Any]:
+                    midpoints: bool | None = None, objective: str = "fill_energy",
+                    lookahead: bool = False) -> dict[str, Any]:
     """One loop of :func:`run_loop` on the trapezoid pile as a unit of :mod:`wheelloader.sweep` (picklable
     arguments only).
 
@@ -271,7 +272,11 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
     ``heel_clearance`` its opt-in heel clearance [m] and ``end_blade_angle`` its opt-in end blade angle [rad],
     ``curl_out_intervals`` the plan's last intervals in which the bucket then curls out of the pile
     (:class:`~wheelloader.planner.PlannerOptions`), ``midpoints`` whether the plan's forces and validity are
-    constrained at the intervals' midpoints too (default: :func:`~wheelloader.adaptation.default_planner`'s).
+    constrained at the intervals' midpoints too (default: :func:`~wheelloader.adaptation.default_planner`'s),
+    ``objective`` the planner's objective (``"kept_per_energy"``: energy per m^3 of kept soil with the lift to the
+    dump height, :mod:`wheelloader.planner.kept`) and ``lookahead`` whether each plan is chosen with the cycle
+    after it in view (:func:`~wheelloader.planner.lookahead.plan_with_lookahead`); both for every strategy that
+    plans.
     """
     from wheelloader.adaptation import default_planner, make_strategy
 
@@ -280,7 +285,7 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
     plan = (default_planner(failure_angle=failure_angle if learning else "min_n_gamma", cut_angle=cut_angle,
                             fill_limit=fill_limit, heel_clearance=heel_clearance,
                             end_blade_angle=end_blade_angle, curl_out_intervals=curl_out_intervals,
-                            midpoints=midpoints)
+                            midpoints=midpoints, objective=objective, lookahead=lookahead)
             if planner else None)
     if strategy == "oracle":
         if oracle_params is None:

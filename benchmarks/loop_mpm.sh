@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# The loop judged in the MPM plant (#33 acceptance): fixed Bezier path, ours (greedy plan, kept objective) and
+# the hindsight oracle, gravel and sand x 2 seeds x 5 cycles, and the fixed path dug on every pile ours started
+# a cycle from (paired). One process at a time, resumable: every dug cycle is saved (xz) and read back when the
+# same command runs again. The phases are ordered so that a run cut short leaves whole (soil, seed) pairs:
+#   1-2 ours' loop and the fixed path on its piles, per seed (seed 0 of both soils, then seed 1);
+#   3   the fixed path's own loops (its first cycle is the paired one on the untouched pile, copied);
+#   4   the hindsight oracle's loops (parameters fitted afterwards to all of the soil's cycles).
+# Then benchmarks/loop_mpm_report.py writes the acceptance table from the JSONs and the saved cycles.
+#
+# Usage: nice -n 5 bash benchmarks/loop_mpm.sh [OUT [CYCLES]] > run.log 2>&1
+#   OUT     results (default docs/results/loop_mpm); CYCLES saved cycles (default data/results/loop_mpm/cycles)
+#   PY      the Python to run (default python)
+#   RES, N  MPM grid spacing [m] and cycles per loop (defaults 0.02 and 5; the smoke test: RES=0.06 N=2)
+set -euo pipefail
+OUT=${1:-docs/results/loop_mpm}
+CYCLES=${2:-data/results/loop_mpm/cycles}
+PY=${PY:-python}
+RES=${RES:-0.02}
+N=${N:-5}
+COMMON=(--plant mpm --resolution "$RES" --threads 2 --ray off --cycles "$N" --failure-angle min_weight_force
+        --heel-clearance 0 --end-blade-angle 55 --curl-out-intervals 8 --midpoints off
+        --objective kept_per_energy --stale error)
+adapt() { "$PY" benchmarks/plant_adaptation.py "${COMMON[@]}" --cycles-dir "$CYCLES/loops" "$@"; }
+paired() { "$PY" benchmarks/plant_paired.py --plant mpm --resolution "$RES" --threads 2 --ray off \
+    --cycles "$CYCLES/loops" --cycles-dir "$CYCLES/paired" --out "$OUT/paired"; }
+echo "phase 1: seed 0, gravel and sand: ours, then the fixed path on its piles ($(date -u))"
+adapt --soils gravel sand --seeds 1 --strategies ours --out "$OUT/phase1"
+paired
+echo "phase 2: seed 1 ($(date -u))"
+adapt --soils gravel sand --seeds 2 --strategies ours --out "$OUT/phase2"
+paired
+echo "phase 3: the fixed path's loops ($(date -u))"
+for soil in gravel sand; do
+  for seed in 0 1; do
+    src="$CYCLES/paired/$soil/seed$seed/fixed_on_ours/cycle1"
+    dst="$CYCLES/loops/$soil/seed$seed/fixed"
+    mkdir -p "$dst"
+    for f in cycle1.csv.xz cycle1.json.xz; do [ -e "$dst/$f" ] || cp "$src/$f" "$dst/$f"; done
+  done
+done
+adapt --soils gravel sand --seeds 2 --strategies fixed ours --out "$OUT/phase3"
+echo "phase 4: the hindsight oracle ($(date -u))"
+adapt --soils gravel sand --seeds 2 --strategies fixed ours oracle --out "$OUT/loops"
+echo "done ($(date -u))"
