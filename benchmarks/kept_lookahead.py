@@ -6,8 +6,14 @@ model, as ``benchmarks/adaptation.py``) for these strategies, each on its own pi
 * ``fixed``: the default Bezier path placed on the face;
 * ``greedy``: ``ours`` with the default objective (carved fill against energy), one plan per cycle;
 * ``kept``: ``ours`` with ``PlannerOptions(objective="kept_per_energy")`` (planner/kept.py);
-* ``lookahead``: ``ours`` with the greedy objective, each plan chosen among 3 candidates with the cycle after
-  it in view (planner/lookahead.py).
+* ``lookahead``: ``ours`` with the greedy objective, each plan chosen with the cycle after it in view by the
+  fast look-ahead (planner/lookahead.py ``FAST``: greedy and a fill-limit-0.80 candidate warm-started from it
+  within 20 IPOPT iterations, the next cycle scored with the geometric Bezier placement);
+* ``lookahead_full``: the same with three candidates, each followed by the greedy plan of the next cycle
+  (the first look-ahead, 294-360 IPOPT iterations between cycles).
+
+Between cycles is measured in IPOPT iterations (from the plans' messages) and in the process's CPU seconds of
+the strategy's calibration and plan (``time.process_time``; the wall seconds depend on the machine's load).
 
 Every cycle is judged the same way: the kept soil is the payload model's kept fill of the soil the env's bucket
 holds (``DEFAULT_PAYLOAD``; the env books carved soil), and the energy is the env's plus the lift of the kept
@@ -40,7 +46,9 @@ from wheelloader.estimator.synthetic import perturbed_preset
 from wheelloader.provenance import commit_label, load_label, machine_info
 
 SOILS = ("gravel", "dirt")
-STRATEGIES = ("fixed", "greedy", "kept", "lookahead")
+STRATEGIES = ("fixed", "greedy", "kept", "lookahead", "lookahead_full")
+#: The strategies run by default (``lookahead_full`` costs ~5 times greedy's planning).
+DEFAULT_STRATEGIES = ("fixed", "greedy", "kept", "lookahead")
 TRUTH = {"compaction": 0.5, "rate_resistance": 1.0e4, "stone_rate": 0.5, "stone_force": 3000.0, "drift": 0.05}
 #: The volume the "cycles to move" column counts to [m^3 of kept soil].
 MOVE_VOLUME = 0.5
@@ -64,8 +72,31 @@ def _strategy(name: str):
     if name == "fixed":
         return FixedBezier(preset(NOMINAL_SOIL))
     planner = default_planner(objective="kept_per_energy" if name == "kept" else "fill_energy",
-                              lookahead=name == "lookahead")
-    return make_strategy("ours", planner, ours_options={"name": name})
+                              lookahead={"lookahead": "fast", "lookahead_full": "full"}.get(name, False))
+    return _cpu_timed(make_strategy("ours", planner, ours_options={"name": name}))
+
+
+def _cpu_timed(strategy):
+    """``strategy`` with the CPU seconds of each plan and calibration recorded in ``strategy.cpu_s`` (one entry
+    per cycle: the calibration after the previous cycle plus this cycle's plan)."""
+    plan, update = strategy.plan, strategy.update
+    strategy.cpu_s, pending = [], [0.0]
+
+    def timed_plan(pile):
+        tic = time.process_time()
+        out = plan(pile)
+        strategy.cpu_s.append(pending[0] + time.process_time() - tic)
+        pending[0] = 0.0
+        return out
+
+    def timed_update(log, truth):
+        tic = time.process_time()
+        out = update(log, truth)
+        pending[0] = time.process_time() - tic
+        return out
+
+    strategy.plan, strategy.update = timed_plan, timed_update
+    return strategy
 
 
 def run_one(soil_name: str, seed: int, strategy: str, cycles: int) -> dict[str, Any]:
@@ -77,13 +108,16 @@ def run_one(soil_name: str, seed: int, strategy: str, cycles: int) -> dict[str, 
 
     soil = perturbed_preset(soil_name, seed)
     plant = make_plant("fee-env", keep_env=True, truth=dict(TRUTH))
+    chosen = _strategy(strategy)
     try:
-        records, logs = run_loop(plant, _strategy(strategy), Pile.trapezoid(), soil, cycles=cycles, seed=seed)
+        records, logs = run_loop(plant, chosen, Pile.trapezoid(), soil, cycles=cycles, seed=seed)
     finally:
         plant.close()
+    cpu = getattr(chosen, "cpu_s", [math.nan] * len(records))
     rows = []
-    for r, log in zip(records, logs, strict=True):
+    for r, log, cpu_s in zip(records, logs, cpu, strict=True):
         row = {"cycle": r.cycle, "path": r.path, "planning_s": r.planning_s, "between_cycles_s": r.between_cycles_s,
+               "between_cycles_cpu_s": cpu_s,
                "plan_ok": r.plan_ok, "plan_message": r.plan_message, "prediction_rmse_percent":
                r.prediction_rmse_percent, **judge(r.fill_m3, r.energy_J, float(log.path.z[-1]), soil.gamma)}
         if strategy != "fixed":  # the fixed path on this cycle's start pile (paired)
@@ -108,7 +142,10 @@ def loop_figures(loop: dict[str, Any]) -> dict[str, float]:
     out = {"kJ_per_kept_m3": sum(c["energy_J"] for c in rows) / sum(kept) / 1e3,
            "kept_fill": statistics.fmean(kept) / cap,
            "cycles_to_move": next((i + 1 for i, v in enumerate(np.cumsum(kept)) if v >= MOVE_VOLUME), math.inf),
-           "between_cycles_s_median": statistics.median(c["between_cycles_s"] for c in rows)}
+           "between_cycles_s_median": statistics.median(c["between_cycles_s"] for c in rows[1:] or rows)}
+    cpu = [c["between_cycles_cpu_s"] for c in rows[1:] if "between_cycles_cpu_s" in c]
+    if cpu and all(math.isfinite(v) for v in cpu):  # from cycle 2 (the first plan builds the NLPs)
+        out["between_cycles_cpu_s_median"] = statistics.median(cpu)
     spent = [int(m.group(1) or m.group(2)) for c in rows
              if (m := PLAN_ITERATIONS.search(c["plan_message"])) is not None]
     if spent:  # the IPOPT iterations of the plan dug (of its solve and re-plans; not the look-ahead's others)
@@ -152,15 +189,28 @@ def lookahead_stats(loop: dict[str, Any]) -> dict[str, float]:
 def table(loops: list[dict[str, Any]]) -> str:
     """The markdown table: per strategy, each loop's figures and the median over loops."""
     lines = ["| strategy | soil | seed | kJ/m^3 kept | kept fill | fixed on the same piles: kJ/m^3 kept | "
-             "kept fill | cycles kept >= fixed | cycles to move 0.5 m^3 | between cycles (median s) |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "kept fill | cycles kept >= fixed | cycles to move 0.5 m^3 | between cycles (median s) | "
+             "CPU s (median) | IPOPT it. (median) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for loop in loops:
         f = loop_figures(loop)
         fixed = (f"{f['fixed_kJ_per_kept_m3']:.1f} | {f['fixed_kept_fill']:.0%} | "
                  f"{f['kept_cycles_ge_fixed']}/{len(loop['cycles'])}") if "fixed_kJ_per_kept_m3" in f else "- | - | -"
         lines.append(f"| {loop['strategy']} | {loop['soil']} | {loop['seed']} | {f['kJ_per_kept_m3']:.1f} | "
-                     f"{f['kept_fill']:.0%} | {fixed} | {f['cycles_to_move']} | {f['between_cycles_s_median']:.1f} |")
+                     f"{f['kept_fill']:.0%} | {fixed} | {f['cycles_to_move']} | {f['between_cycles_s_median']:.1f} | "
+                     f"{_cell(f.get('between_cycles_cpu_s_median'), '.2f')} | {_cell(_iterations(loop), '.0f')} |")
     return "\n".join(lines)
+
+
+def _cell(value: float | None, fmt: str) -> str:
+    return "-" if value is None or not math.isfinite(value) else format(value, fmt)
+
+
+def _iterations(loop: dict[str, Any]) -> float | None:
+    """Median IPOPT iterations between cycles: the look-ahead's total where it weighed candidates, else the plan's."""
+    if loop["strategy"].startswith("lookahead"):
+        return lookahead_stats(loop)["ipopt_iterations_median"]
+    return loop_figures(loop).get("plan_iterations_median")
 
 
 def against_greedy(loops: list[dict[str, Any]]) -> str:
@@ -219,7 +269,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=2)
     parser.add_argument("--only-seed", type=int, help="run only this seed (parallel processes on one --out)")
     parser.add_argument("--cycles", type=int, default=10)
-    parser.add_argument("--strategies", nargs="+", choices=STRATEGIES, default=list(STRATEGIES))
+    parser.add_argument("--strategies", nargs="+", choices=STRATEGIES, default=list(DEFAULT_STRATEGIES))
     parser.add_argument("--quick", action="store_true", help="1 soil, 1 seed, 2 cycles (smoke run)")
     parser.add_argument("--report", action="store_true", help="only rebuild the table from the saved loops")
     args = parser.parse_args(argv)
@@ -253,7 +303,7 @@ def main(argv: list[str] | None = None) -> int:
                "seconds": time.perf_counter() - started,
                "cycles": cycles, "soils": list(soils), "seeds": list(seeds),
                "loops": [{k: lp[k] for k in ("soil", "seed", "strategy")} | loop_figures(lp)
-                         | (lookahead_stats(lp) if lp["strategy"] == "lookahead" else {}) for lp in loops]}
+                         | (lookahead_stats(lp) if lp["strategy"].startswith("lookahead") else {}) for lp in loops]}
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=str))
     text = table(loops) + "\n\n" + against_greedy(loops) + "\n"
     (out / "table.md").write_text(text)

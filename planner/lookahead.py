@@ -11,6 +11,12 @@ wins ties). Budgets are IPOPT iteration counts (each plan's, as :func:`plan_next
 same on any machine. It uses only the planner's public functions (:func:`plan_next_cycle`,
 :func:`model_bezier_on_face`, :func:`path_energy`).
 
+Two cheaper settings (the loop's default, :data:`FAST`): ``second="bezier"`` scores the cycle after a
+candidate with the Bezier path placed geometrically on the pile it leaves (:func:`bezier_on_face`, one NumPy
+simulation, no IPOPT) instead of its greedy plan, and ``candidate_iterations`` starts every candidate after the
+first from the first one's plan (IPOPT's start point) within that many iterations, without re-plans. The greedy
+plan is then the loop's plan, and the look-ahead adds ``candidate_iterations`` per extra candidate.
+
 Aoshima et al. (2025, Automation 6(3):31) plan over the next loadings the same way (a rollout of candidate
 plans).
 """
@@ -25,13 +31,14 @@ from typing import Any
 from wheelloader.estimator import Bucket, BucketPath, Pile, SoilParams, as_soil
 from wheelloader.estimator.quantise import better, quantise_pile, quantise_soil
 
-from .fallback import LOOP_EXIT_MIN_FILL, _kept, model_bezier_on_face
+from .fallback import LOOP_EXIT_MIN_FILL, _kept, bezier_on_face, model_bezier_on_face
 from .kept import KeptTerms, evaluate
 from .next_cycle import PlanOutcome, plan_next_cycle
 from .options import PlannerOptions
 from .verify import path_energy
 
-__all__ = ["CANDIDATES", "LookaheadChoice", "plan_with_lookahead", "two_cycle_cost"]
+__all__ = ["CANDIDATES", "FAST", "FAST_CANDIDATES", "SECOND_CYCLE", "LookaheadChoice", "plan_with_lookahead",
+           "two_cycle_cost"]
 
 #: The candidates of the next cycle: a name and the planner settings it changes (the first is the greedy plan).
 CANDIDATES: tuple[tuple[str, Mapping[str, Any]], ...] = (
@@ -39,6 +46,14 @@ CANDIDATES: tuple[tuple[str, Mapping[str, Any]], ...] = (
     ("fill limit 0.80", {"fill_limit": 0.80}),
     ("energy weight 0.04/kJ", {"energy_weight": 0.04}),
 )
+#: How the cycle after a candidate is scored: its greedy plan on the pile the candidate leaves (the loop's
+#: fallback where that plan fails), or the Bezier path placed geometrically there (no IPOPT).
+SECOND_CYCLE = ("plan", "bezier")
+#: The fast look-ahead's candidates: greedy and one with a lower fill limit.
+FAST_CANDIDATES: tuple[tuple[str, Mapping[str, Any]], ...] = CANDIDATES[:2]
+#: The fast look-ahead's settings (keywords of :func:`plan_with_lookahead`): each extra candidate warm-started
+#: from the greedy plan within 20 IPOPT iterations, the next cycle scored with the geometric Bezier placement.
+FAST: Mapping[str, Any] = {"candidates": FAST_CANDIDATES, "second": "bezier", "candidate_iterations": 20}
 
 
 @dataclass
@@ -83,6 +98,7 @@ def plan_with_lookahead(params: SoilParams | str | dict, pile: Pile, *, options:
                         candidates: Sequence[tuple[str, Mapping[str, Any]]] = CANDIDATES,
                         planner: Callable[..., PlanOutcome] = plan_next_cycle,
                         exit_min_fill: float = LOOP_EXIT_MIN_FILL, control_rate: float = 60.0,
+                        second: str = "plan", candidate_iterations: int | None = None,
                         **planner_kwargs: Any) -> PlanOutcome:
     """The next cycle's plan chosen with the cycle after it in view (module docstring).
 
@@ -99,6 +115,12 @@ def plan_with_lookahead(params: SoilParams | str | dict, pile: Pile, *, options:
         (default :func:`plan_next_cycle`).
     exit_min_fill, control_rate
         The env's end-of-cycle rule and the control rate (as the loop's).
+    second : {"plan", "bezier"}
+        How the cycle after each candidate is scored (:data:`SECOND_CYCLE`): its greedy plan (IPOPT) or the
+        geometric Bezier placement on the pile the candidate leaves (one NumPy simulation).
+    candidate_iterations : int, optional
+        When given, every candidate after the first starts from the first one's plan (where it has one) and
+        gets at most this many IPOPT iterations, without re-plans; None: each is planned as the first.
     **planner_kwargs
         Passed on to ``planner`` (e.g. ``mpc``, ``replan_within_iterations``).
 
@@ -109,6 +131,10 @@ def plan_with_lookahead(params: SoilParams | str | dict, pile: Pile, *, options:
         a :class:`LookaheadChoice` as ``lookahead`` (an attribute).
     """
     tic = time.perf_counter()
+    if second not in SECOND_CYCLE:
+        raise ValueError(f"second must be one of {SECOND_CYCLE}, got {second!r}")
+    if candidate_iterations is not None and (not isinstance(candidate_iterations, int) or candidate_iterations < 1):
+        raise ValueError(f"candidate_iterations must be a positive integer or None, got {candidate_iterations!r}")
     # the force model the loop calibrated (plan_next_cycle's force_model=, payload=) judges the candidates too
     model = {k: planner_kwargs.pop(k) for k in ("force_model", "payload") if planner_kwargs.get(k) is not None}
     options = replace(options or PlannerOptions(), **model)
@@ -119,20 +145,30 @@ def plan_with_lookahead(params: SoilParams | str | dict, pile: Pile, *, options:
     best, best_cost = None, float("inf")
     for k, (name, change) in enumerate(candidates):
         variant = replace(options, **dict(change))
+        kwargs = dict(planner_kwargs)
+        if k > 0 and candidate_iterations is not None:
+            variant = replace(variant, max_iter=candidate_iterations)
+            kwargs["replan_within_iterations"] = 0  # no re-plans: the budget is the candidate's iterations
+            warm = outcomes[0].plan if outcomes and outcomes[0].success else None
+            if warm is not None:
+                kwargs["initial_guess"] = warm
         first = planner(soil, pile, options=variant, exit_min_fill=exit_min_fill, control_rate=control_rate,
-                        **planner_kwargs)
+                        **kwargs)
         iterations += _iterations(first)
         terms1 = terms2 = None
         if first.success and first.path is not None:
             dug, next_pile = _dug_part(first.path, pile, bucket, exit_min_fill)
             terms1 = _path_terms(dug, soil, pile, bucket, variant)
-            second = planner(soil, next_pile, options=options, exit_min_fill=exit_min_fill,
-                             control_rate=control_rate, **{**planner_kwargs, "mpc": False})
-            iterations += _iterations(second)
-            path2 = second.path if second.success and second.path is not None else model_bezier_on_face(
-                soil, next_pile, control_rate, bucket, exit_min_fill=exit_min_fill,
-                model_options=options.model_options, payload=options.force_payload,
-                learned=options.force_model == "fee-learned")
+            if second == "bezier":
+                path2 = bezier_on_face(next_pile, control_rate, bucket, exit_min_fill=exit_min_fill)
+            else:
+                after = planner(soil, next_pile, options=options, exit_min_fill=exit_min_fill,
+                                control_rate=control_rate, **{**planner_kwargs, "mpc": False})
+                iterations += _iterations(after)
+                path2 = after.path if after.success and after.path is not None else model_bezier_on_face(
+                    soil, next_pile, control_rate, bucket, exit_min_fill=exit_min_fill,
+                    model_options=options.model_options, payload=options.force_payload,
+                    learned=options.force_model == "fee-learned")
             dug2, _ = _dug_part(path2, next_pile, bucket, exit_min_fill)
             terms2 = _path_terms(dug2, soil, next_pile, bucket, options)
         cost = two_cycle_cost(terms1, terms2)

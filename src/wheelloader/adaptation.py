@@ -461,7 +461,7 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
                     fill_limit: float | None = None, heel_clearance: float | None = None,
                     end_blade_angle: float | None = None, curl_out_intervals: int = 0,
                     midpoints: bool | None = None, objective: str = "fill_energy",
-                    lookahead: bool = False) -> Callable[[SoilParams, Pile], PlanOutcome]:
+                    lookahead: bool | str = False) -> Callable[[SoilParams, Pile], PlanOutcome]:
     """The planner used between cycles.
 
     A full-cycle CasADi plan within :data:`BETWEEN_CYCLES_MAX_ITER` IPOPT
@@ -478,8 +478,13 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
     have a 20 ms budget) (:class:`~wheelloader.planner.PlannerOptions`); ``objective``: the planner's objective
     (``"kept_per_energy"``: the opt-in energy per m^3 of kept soil, :mod:`wheelloader.planner.kept`);
     ``lookahead``: choose each plan with the cycle after it in view
-    (:func:`~wheelloader.planner.lookahead.plan_with_lookahead`, each of its plans within the same budgets).
+    (:func:`~wheelloader.planner.lookahead.plan_with_lookahead`): ``True`` or ``"fast"`` its fast settings
+    (:data:`~wheelloader.planner.lookahead.FAST`: greedy and one candidate warm-started from it within 20 IPOPT
+    iterations, the next cycle scored with the geometric Bezier placement), ``"full"`` three candidates each
+    followed by the greedy plan of the next cycle, each plan within the same budgets as greedy's.
     """
+    if lookahead not in (False, True, "fast", "full"):
+        raise WheelloaderError(f"lookahead must be False, True, 'fast' or 'full', got {lookahead!r}")
     extra = {} if fill_limit is None else {"fill_limit": fill_limit}
     if midpoints is None:
         midpoints = LOOP_PLANNER_MIDPOINTS and not mpc
@@ -491,10 +496,10 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
     # when a plan first fails its check (once per process: planner.optimizer_for)
     optimizer_for(options=options)
     if lookahead:
-        from wheelloader.planner.lookahead import plan_with_lookahead
+        from wheelloader.planner.lookahead import FAST, plan_with_lookahead
 
         return functools.partial(plan_with_lookahead, mpc=mpc, options=options,
                                  replan_within_iterations=BETWEEN_CYCLES_REPLAN_ITER,
-                                 exit_min_fill=LOOP_EXIT_MIN_FILL)
+                                 exit_min_fill=LOOP_EXIT_MIN_FILL, **(FAST if lookahead != "full" else {}))
     return functools.partial(plan_next_cycle, mpc=mpc, options=options,
                              replan_within_iterations=BETWEEN_CYCLES_REPLAN_ITER, exit_min_fill=LOOP_EXIT_MIN_FILL)
