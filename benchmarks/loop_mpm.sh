@@ -2,11 +2,14 @@
 # The loop judged in the MPM plant (#33 acceptance): fixed Bezier path, ours (greedy plan, kept objective) and
 # the hindsight oracle, gravel and sand x 2 seeds x 5 cycles, and the fixed path dug on every pile ours started
 # a cycle from (paired). One process at a time, resumable: every dug cycle is saved (xz) and read back when the
-# same command runs again. The phases are ordered so that a run cut short leaves whole (soil, seed) pairs:
-#   1-2 ours' loop and the fixed path on its piles, per seed (seed 0 of both soils, then seed 1);
-#   3   the fixed path's own loops (its first cycle is the paired one on the untouched pile, copied);
-#   4   the hindsight oracle's loops (parameters fitted afterwards to all of the soil's cycles).
-# Then benchmarks/loop_mpm_report.py writes the acceptance table from the JSONs and the saved cycles.
+# same command runs again. The phases are ordered so that a run cut short leaves whole comparisons:
+#   1 seed 0 of both soils: ours' loops and the fixed path on their piles (the paired comparison);
+#   2 seed 0: the hindsight oracle, its parameters fitted to the soil's cycles dug so far (ours');
+#   3 seed 1: ours and the fixed path on its piles;
+#   4 the fixed path's own loops (their first cycle is the paired one on the untouched pile, copied);
+#   5 every seed: the oracle with its parameters fitted to all of the soil's cycles (fixed and ours: phase 2's
+#     loops are dug again where the refit changes their plans).
+# Then benchmarks/loop_mpm_report.py writes the acceptance table from the phases' JSONs and the saved cycles.
 #
 # Usage: nice -n 5 bash benchmarks/loop_mpm.sh [OUT [CYCLES]] > run.log 2>&1
 #   OUT     results (default docs/results/loop_mpm); CYCLES saved cycles (default data/results/loop_mpm/cycles)
@@ -27,10 +30,12 @@ paired() { "$PY" benchmarks/plant_paired.py --plant mpm --resolution "$RES" --th
 echo "phase 1: seed 0, gravel and sand: ours, then the fixed path on its piles ($(date -u))"
 adapt --soils gravel sand --seeds 1 --strategies ours --out "$OUT/phase1"
 paired
-echo "phase 2: seed 1 ($(date -u))"
-adapt --soils gravel sand --seeds 2 --strategies ours --out "$OUT/phase2"
+echo "phase 2: seed 0: the hindsight oracle fitted to ours' cycles ($(date -u))"
+adapt --soils gravel sand --seeds 1 --strategies ours oracle --out "$OUT/phase2"
+echo "phase 3: seed 1: ours, then the fixed path on its piles ($(date -u))"
+adapt --soils gravel sand --seeds 2 --strategies ours --out "$OUT/phase3"
 paired
-echo "phase 3: the fixed path's loops ($(date -u))"
+echo "phase 4: the fixed path's loops ($(date -u))"
 for soil in gravel sand; do
   for seed in 0 1; do
     src="$CYCLES/paired/$soil/seed$seed/fixed_on_ours/cycle1"
@@ -39,7 +44,7 @@ for soil in gravel sand; do
     for f in cycle1.csv.xz cycle1.json.xz; do [ -e "$dst/$f" ] || cp "$src/$f" "$dst/$f"; done
   done
 done
-adapt --soils gravel sand --seeds 2 --strategies fixed ours --out "$OUT/phase3"
-echo "phase 4: the hindsight oracle ($(date -u))"
+adapt --soils gravel sand --seeds 2 --strategies fixed ours --out "$OUT/phase4"
+echo "phase 5: the hindsight oracle fitted to all cycles ($(date -u))"
 adapt --soils gravel sand --seeds 2 --strategies fixed ours oracle --out "$OUT/loops"
 echo "done ($(date -u))"

@@ -44,7 +44,9 @@ from wheelloader.provenance import commit_label, load_label, machine_info
 from wheelloader.ray_mode import add_ray_arguments
 from wheelloader.references import PLANT_NAMES
 
-STRATEGIES = ("fixed", "ours", "paper", "oracle")
+STRATEGIES = ("fixed", "ours", "paper", "oracle", "rl_path")
+#: The strategies run by default (``rl_path`` needs ``--rl-policy``).
+DEFAULT_STRATEGIES = ("fixed", "ours", "paper", "oracle")
 
 
 def plant_from_args(args: argparse.Namespace) -> Any:
@@ -98,6 +100,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     args.fill_limit_used = fill_limit
     loop_kwargs = {"plant": plant, "cycles": args.cycles, "planner": not args.no_planner, "fill_limit": fill_limit,
                    "failure_angle": args.failure_angle, "objective": args.objective, "lookahead": args.lookahead,
+                   "rl_policy": args.rl_policy,
                    **planner_physics(args)}
     learning = [s for s in args.strategies if s != "oracle"]
     keys = [(soil, seed, name) for soil in args.soils for seed in range(args.seeds) for name in learning]
@@ -283,7 +286,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--soils", nargs="+", default=["gravel", "sand"], help="soil presets of the plant")
     parser.add_argument("--seeds", type=int, default=2, help="plant seeds per soil (packing jitter)")
     parser.add_argument("--cycles", type=int, default=5, help="cycles per loop")
-    parser.add_argument("--strategies", nargs="+", default=list(STRATEGIES), choices=STRATEGIES)
+    parser.add_argument("--strategies", nargs="+", default=list(DEFAULT_STRATEGIES), choices=STRATEGIES,
+                        help="loops to run (default %(default)s); rl_path: a trained policy's path, rolled out in the "
+                             "FEE env of the nominal soil on each cycle's pile, dug in the plant")
+    parser.add_argument("--rl-policy", default=None, metavar="ZIP",
+                        help="the trained PPO policy (model.zip of train/ppo.py) of the rl_path strategy")
     parser.add_argument("--resolution", type=float, default=0.02, help="MPM grid spacing [m] (verified: 0.02)")
     parser.add_argument("--threads", type=int, default=1, help="Taichi CPU threads")
     parser.add_argument("--no-planner", action="store_true", help="dig Bezier paths only")
@@ -315,6 +322,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         args.soils, args.seeds, args.cycles, args.strategies, args.resolution = (["gravel"], 1, 1,
                                                                                   ["fixed", "ours"], 0.06)
+    if "rl_path" in args.strategies and not args.rl_policy:
+        parser.error("--strategies rl_path needs --rl-policy ZIP (a policy trained by train/ppo.py)")
     if args.seeds < 1 or args.cycles < 1:
         parser.error("--seeds and --cycles must be >= 1")
     out = Path(args.out)

@@ -13,10 +13,12 @@ from wheelloader.adaptation import (
     FixedBezier,
     Oracle,
     PlanOutcome,
+    PolicyPath,
     PolicyStrategy,
     bezier_on_face,
     format_table,
     hidden_default_soil,
+    make_strategy,
     model_bezier_on_face,
 )
 from wheelloader.estimator import CalibrationError, Pile, WheelloaderError, default_path, preset
@@ -163,6 +165,25 @@ def test_a_controller_strategy_digs_through_the_kept_env_and_is_refused_elsewher
 
     with pytest.raises(WheelloaderError, match="digs paths only"):  # not silently dug along the path alone
         run_loop(FEEEnvPlant(), MPCLike(preset(NOMINAL_SOIL)), Pile.trapezoid(), "gravel", 1)
+
+
+def test_a_policy_path_is_its_rollout_in_the_nominal_env_and_is_dug_by_a_path_plant():
+    """PolicyPath: the policy's path on the pile, rolled out in the FEE env of the nominal soil (deterministic), is
+    dug by a plant that takes paths only; the path is the one the env's bucket took under the policy."""
+    strategy = PolicyPath(_Steady())
+    pile = Pile.trapezoid()
+    a, b = strategy.plan(pile), strategy.plan(pile)
+    assert a.success and a.path is not None and a.controller is None and a.path.name == "policy"
+    np.testing.assert_array_equal(a.path.x, b.path.x)
+    # the controller strategy in the kept env of the nominal soil (no noise, same seed) takes the same path
+    plant = FEEEnvPlant(keep_env=True, sensor_noise=0.0)
+    _, logs = run_loop(plant, PolicyStrategy(_Steady()), pile, NOMINAL_SOIL, 1, seed=0)
+    np.testing.assert_allclose(logs[0].path.x, a.path.x, atol=1e-9)
+    records, logs = run_loop(FEEEnvPlant(), strategy, pile, "gravel", 2)  # a fresh env per cycle: a path plant
+    assert [r.path for r in records] == ["policy", "policy"] and records[0].fill_m3 > 0.0
+    assert not np.array_equal(strategy.plan(logs[1].pile).path.x, a.path.x)  # replanned on the carved pile
+    with pytest.raises(WheelloaderError, match="rl_policy"):
+        make_strategy("rl_path")
 
 
 def test_an_update_returning_the_old_tuple_still_counts_with_a_warning():

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import pytest
 
-from wheelloader.estimator import Pile
+from wheelloader.estimator import Pile, WheelloaderError
 from wheelloader.planner import PlannerOptions, bezier_on_face
 from wheelloader.planner.kept import KeptTerms
-from wheelloader.planner.lookahead import plan_with_lookahead, two_cycle_cost
+from wheelloader.planner.lookahead import FAST, plan_with_lookahead, two_cycle_cost
 from wheelloader.planner.next_cycle import PlanOutcome
 
 CANDS = (("greedy", {}), ("fill limit 0.80", {"fill_limit": 0.80}), ("energy weight 0.04/kJ", {"energy_weight": 0.04}))
@@ -75,3 +76,58 @@ def test_the_loop_selects_it():
     planner = default_planner(lookahead=True)
     assert planner.func is lookahead and planner.keywords["options"].max_iter == BETWEEN_CYCLES_MAX_ITER
     assert default_planner(objective="kept_per_energy").keywords["options"].objective == "kept_per_energy"
+    assert default_planner(lookahead="fast").keywords["second"] == "bezier"
+    full = default_planner(lookahead="full")
+    assert "second" not in full.keywords and "candidates" not in full.keywords
+    with pytest.raises(WheelloaderError, match="lookahead"):
+        default_planner(lookahead="deep")
+
+
+def _recording_stub():
+    """A planner that digs the fixed path, records each call's options and keywords, and reports a plan of
+    ``options.max_iter`` IPOPT iterations."""
+    calls = []
+
+    def planner(params, pile, *, options, **kwargs):
+        calls.append((options, kwargs))
+        plan = SimpleNamespace(iterations=options.max_iter, tag=f"plan {len(calls)}")
+        return PlanOutcome(bezier_on_face(pile), True, "stub", 0.0, plan=plan)
+
+    planner.calls = calls
+    return planner
+
+
+def test_fast_lookahead_warm_starts_the_candidates_and_scores_the_next_cycle_without_ipopt():
+    stub = _recording_stub()
+    out = plan_with_lookahead("gravel", Pile.trapezoid(), options=PlannerOptions(max_iter=130), planner=stub,
+                              replan_within_iterations=260, **FAST)
+    assert len(stub.calls) == len(FAST["candidates"]) == 2  # one plan per candidate, none for the next cycle
+    (greedy, kw0), (variant, kw1) = stub.calls
+    assert greedy.max_iter == 130 and "initial_guess" not in kw0 and kw0["replan_within_iterations"] == 260
+    assert variant.max_iter == FAST["candidate_iterations"] and variant.fill_limit == 0.80
+    assert kw1["initial_guess"].tag == "plan 1" and kw1["replan_within_iterations"] == 0
+    assert out.lookahead.iterations == 130 + FAST["candidate_iterations"]
+    # the same path on the same pile, the same geometric next cycle: a tie, which greedy wins
+    assert out.lookahead.chosen == 0 and out.lookahead.costs[0] == out.lookahead.costs[1]
+    second = out.lookahead.cycles[0][1]
+    assert second is not None and second.kept > 0.0
+
+
+def test_fast_lookahead_without_a_greedy_plan_starts_cold():
+    calls = []
+
+    def planner(params, pile, *, options, **kwargs):
+        calls.append(kwargs)
+        if options.fill_limit == 0.95:
+            return PlanOutcome(None, False, "stub failed", 0.0)
+        return PlanOutcome(bezier_on_face(pile), True, "stub", 0.0)
+
+    out = plan_with_lookahead("gravel", Pile.trapezoid(), planner=planner, **FAST)
+    assert "initial_guess" not in calls[1] and out.lookahead.chosen == 1
+
+
+def test_lookahead_settings_are_checked():
+    with pytest.raises(ValueError, match="second"):
+        plan_with_lookahead("gravel", Pile.trapezoid(), planner=_stub(), second="tree")
+    with pytest.raises(ValueError, match="candidate_iterations"):
+        plan_with_lookahead("gravel", Pile.trapezoid(), planner=_stub(), candidate_iterations=0)

@@ -159,6 +159,27 @@ def test_tiny_mpm_loop():
     assert logs[0].metadata["settings"]["relax_pile_after"] is True
 
 
+def test_tiny_mpm_loop_of_ours_with_the_kept_objective(tmp_path):
+    """The tiny version of benchmarks/loop_mpm.sh (#33): ours with the kept objective and the run's planner
+    settings, one cycle in an 8 cm MPM plant through plant_loop_unit; the plan passes its check, ends near the
+    dump height, and the cycle is saved and read back (resume)."""
+    _need_taichi()
+    from wheelloader.loop import plant_loop_unit
+    from wheelloader.planner.kept import dump_height
+    from wheelloader.references.mpm import MPMPlant
+
+    settings = {"cycles": 1, "seed": 0, "cache": tmp_path / "ours", "failure_angle": "min_weight_force",
+                "heel_clearance": 0.0, "end_blade_angle": math.radians(55), "curl_out_intervals": 8,
+                "midpoints": False, "objective": "kept_per_energy"}
+    out = plant_loop_unit(MPMPlant(resolution=0.08), "ours", "gravel", **settings)
+    record, log = out["records"][0], out["logs"][0]
+    assert record["plan_ok"] and "kept" in record["plan_message"] and record["fill_m3"] > 0.0
+    assert abs(float(log.path.z[-1]) - dump_height()) < 0.05
+    again = plant_loop_unit(MPMPlant(resolution=0.08), "ours", "gravel", **settings)
+    assert again["records"][0]["end"] == "resumed from cache"
+    assert again["records"][0]["energy_J"] == record["energy_J"]
+
+
 def test_env_plant_digs_with_the_loops_end_of_cycle_rule():
     """The env plant ends a cycle on exit only once the bucket holds LOOP_EXIT_MIN_FILL (as the loop's env), so
     a path that leaves the soil early and re-enters is dug in full."""
@@ -208,9 +229,11 @@ def test_plant_loop_unit_passes_the_planner_settings_on(monkeypatch):
     monkeypatch.setattr(adaptation, "default_planner", fake_planner)
     with pytest.raises(Built):
         plant_loop_unit(FEEEnvPlant(), "ours", "gravel", cycles=1, seed=0, cache=None, midpoints=False,
-                        curl_out_intervals=8, heel_clearance=0.0, failure_angle="min_weight_force")
+                        curl_out_intervals=8, heel_clearance=0.0, failure_angle="min_weight_force",
+                        objective="kept_per_energy", lookahead=True)
     assert seen["midpoints"] is False and seen["curl_out_intervals"] == 8 and seen["heel_clearance"] == 0.0
     assert seen["failure_angle"] == "min_weight_force"
+    assert seen["objective"] == "kept_per_energy" and seen["lookahead"] is True
 
 
 def _need_taichi():

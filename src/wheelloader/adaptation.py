@@ -23,7 +23,7 @@ import functools
 import time
 import warnings
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -290,6 +290,39 @@ class PolicyStrategy(Strategy):
         return PlanOutcome(None, True, "policy", 0.0, controller=act)
 
 
+class PolicyPath(Strategy):
+    """A trained policy on a plant that digs paths only (the MPM continuum, the DEM): on each cycle's pile the
+    policy is rolled out, deterministically, in the FEE env of the nominal soil (the loop's env settings, no
+    sensor noise, reset with ``env_seed``), and the path its bucket tip took there is dug in the plant. The
+    policy does not see the plant's forces during the cycle (an open-loop replay of what it would do in the
+    model world); no calibration."""
+
+    name = "rl"
+
+    def __init__(self, policy: Any, nominal: SoilParams | None = None, env_seed: int = 0) -> None:
+        super().__init__(nominal or preset(NOMINAL_SOIL))
+        self.policy = policy
+        self.env_seed = env_seed
+
+    def plan(self, pile: Pile) -> PlanOutcome:
+        from wheelloader.envs import BucketLoadingEnv
+
+        start = time.perf_counter()
+        env = BucketLoadingEnv(soil=self.params, pile=pile, sensor_noise=0.0, **LOOP_ENV_KWARGS)
+        try:
+            obs, _ = env.reset(seed=self.env_seed)
+            terminated = truncated = False
+            while not (terminated or truncated):
+                action, _ = self.policy.predict(obs, deterministic=True)
+                obs, _, terminated, truncated, _ = env.step(action)
+            log = env.last_cycle_log() if terminated else finish_cycle(env)
+        finally:
+            env.close()
+        path = replace(log.path, name="policy")
+        return PlanOutcome(path, True, f"policy rolled out in the FEE env of the nominal soil, {len(path.t)} samples",
+                           time.perf_counter() - start)
+
+
 def run_loop(env: Any, strategy: Strategy, cycles: int = 5, seed: int = 0,
              progress: Callable[[str], None] | None = None) -> tuple[list[CycleRecord], list[CycleLog]]:
     """Deprecated: run ``cycles`` cycles of ``strategy`` on ``env`` (a ``BucketLoadingEnv``).
@@ -313,7 +346,7 @@ def run_loop(env: Any, strategy: Strategy, cycles: int = 5, seed: int = 0,
 
 
 #: Strategy names of :func:`make_strategy` (``rl`` needs a trained policy).
-STRATEGY_NAMES: tuple[str, ...] = ("fixed", "ours", "oracle", "paper", "rl")
+STRATEGY_NAMES: tuple[str, ...] = ("fixed", "ours", "oracle", "paper", "rl", "rl_path")
 
 
 def make_strategy(name: str, planner: Any = None, rl_policy: str | None = None,
@@ -336,6 +369,12 @@ def make_strategy(name: str, planner: Any = None, rl_policy: str | None = None,
         from stable_baselines3 import PPO
 
         return PolicyStrategy(PPO.load(rl_policy, device="cpu"))
+    if name == "rl_path":
+        if not rl_policy:
+            raise WheelloaderError("strategy 'rl_path' needs a trained policy (rl_policy=PATH of a PPO .zip)")
+        from stable_baselines3 import PPO
+
+        return PolicyPath(PPO.load(rl_policy, device="cpu"))
     raise WheelloaderError(f"unknown strategy {name!r}; choose from {STRATEGY_NAMES}")
 
 

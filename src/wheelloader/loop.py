@@ -258,7 +258,7 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
                     fill_limit: float | None = None, heel_clearance: float | None = None,
                     end_blade_angle: float | None = None, curl_out_intervals: int = 0,
                     midpoints: bool | None = None, objective: str = "fill_energy",
-                    lookahead: bool = False) -> dict[str, Any]:
+                    lookahead: bool = False, rl_policy: str | None = None) -> dict[str, Any]:
     """One loop of :func:`run_loop` on the trapezoid pile as a unit of :mod:`wheelloader.sweep` (picklable
     arguments only).
 
@@ -276,7 +276,8 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
     ``objective`` the planner's objective (``"kept_per_energy"``: energy per m^3 of kept soil with the lift to the
     dump height, :mod:`wheelloader.planner.kept`) and ``lookahead`` whether each plan is chosen with the cycle
     after it in view (:func:`~wheelloader.planner.lookahead.plan_with_lookahead`); both for every strategy that
-    plans.
+    plans. ``rl_policy``: the PPO ``.zip`` of the ``rl`` (a controller: the FEE env plant only) and ``rl_path``
+    strategies (:class:`~wheelloader.adaptation.PolicyPath`: the policy's path in the FEE env, dug in the plant).
     """
     from wheelloader.adaptation import default_planner, make_strategy
 
@@ -294,7 +295,7 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
     elif strategy == "ours" and model.extra_terms:
         chosen = make_strategy(strategy, plan, ours_options={"options": model})
     else:
-        chosen = make_strategy(strategy, plan)
+        chosen = make_strategy(strategy, plan, rl_policy=rl_policy)
     name = soil if isinstance(soil, str) else "custom soil"
     records, logs = run_loop(plant, chosen, Pile.trapezoid(), soil, cycles=cycles, seed=seed, cache=cache,
                              sigma_s=sigma_s, stale=stale,

@@ -1,0 +1,282 @@
+"""The #33 acceptance table of the loop judged in the MPM plant, from ``benchmarks/loop_mpm.sh``'s outputs.
+
+Reads the loops' JSON (``OUT/loops/plant_adaptation.json``, else the latest phase's), the paired run's
+(``OUT/paired/plant_paired.json``) and the saved cycles (``CYCLES/loops/SOIL/seedN/STRATEGY/cycleK`` and
+``CYCLES/paired/SOIL/seedN/fixed_on_ours/cycleK/cycle1``), and writes ``OUT/acceptance.json``,
+``OUT/acceptance.md`` and ``OUT/acceptance.png``. Every figure is the plant's:
+
+* energy per m³: the plant's work along the path plus the lift of what the bucket holds at the end from the
+  path's end height to the fixed path's end height (:func:`wheelloader.planner.kept.dump_height`, 1.20 m;
+  density the continuum's), over the plant's fill (pooled: sums over cycles);
+* kept fill: the plant's soil inside the bucket at the end of the path, % of the nominal 0.2 m³;
+* next-cycle F_R error: the F_R RMSE of the parameters planned with against the plant's filtered force, median
+  over cycles >= 3; the floor: the same cycles, each fitted to itself (``calibrate`` with the strategy's model,
+  its error on that cycle), the best the FEE can do there;
+* failures: plans that failed the NumPy check (the loop then digs the Bezier fallback) and stalled cycles.
+
+Usage::
+
+    python benchmarks/loop_mpm_report.py --out docs/results/loop_mpm --cycles data/results/loop_mpm/cycles
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+from pathlib import Path
+from typing import Any
+
+#: Acceptance targets of #33.
+ENERGY_GAIN_TARGET = 0.15
+ORACLE_RATIO_TARGET = 1.05
+ERROR_TARGET = 15.0
+FLOOR_MARGIN = 5.0
+
+
+def lifted(energy_j: float, fill_m3: float, log: Any, z_ref: float, soil: str) -> float:
+    """The cycle's energy with its load lifted from the path's end to ``z_ref`` [J] (credited when above); density
+    the continuum's where the log has one, else the soil preset's (as ``plant_adaptation.py``)."""
+    from wheelloader.estimator import preset
+    from wheelloader.estimator.force_model import GRAVITY
+
+    density = float((log.metadata.get("continuum") or {}).get("density") or preset(soil).gamma)
+    return energy_j + density * GRAVITY * fill_m3 * (z_ref - float(log.path.z[-1]))
+
+
+def floor_percent(log: Any, failure_angle: str) -> float:
+    """F_R RMSE [%] of the cycle's own fit on it (filtered as the loop filters): the model's floor there."""
+    from wheelloader.estimator import CalibrationOptions, ModelOptions, calibrate, predict
+    from wheelloader.references.filtering import filtered
+
+    options = ModelOptions(failure_angle=failure_angle)
+    smooth = filtered(log)
+    params = calibrate(smooth, options=CalibrationOptions(model_options=options)).params
+    return float(predict(params, smooth, options=options).quality.percent_r)
+
+
+#: The folders of loop_mpm.sh's phases under OUT, in the order they run.
+PHASES = ("phase1", "phase2", "phase3", "phase4", "loops")
+
+
+def _latest_loops(out: Path) -> dict[str, Any]:
+    """The loops' rows of every phase run so far, a later phase's row of a (soil, seed, strategy, cycle) replacing
+    an earlier one's (the last oracle is fitted to the most cycles); settings and machine of the last phase."""
+    paths = [out / name / "plant_adaptation.json" for name in PHASES]
+    found = [json.loads(path.read_text()) for path in paths if path.is_file()]
+    if not found:
+        raise SystemExit(f"{out}: no plant_adaptation.json of benchmarks/loop_mpm.sh")
+    rows: dict[tuple, dict[str, Any]] = {}
+    for result in found:
+        for r in result["rows"]:
+            rows[(r["soil"], r["seed"], r["strategy"], r["cycle"])] = r
+    return {**found[-1], "rows": list(rows.values()), "oracle_fits": [r.get("oracle", {}) for r in found]}
+
+
+def collect(out: Path, cycles: Path) -> dict[str, Any]:
+    """Per cycle rows of every strategy's loop and of the fixed path on ours' piles, with the lifted energy."""
+    from wheelloader.planner.kept import dump_height
+    from wheelloader.saved_loops import load_saved_cycle
+
+    z_ref = dump_height()
+    loops = _latest_loops(out)
+    failure_angle = loops["settings"].get("failure_angle", "min_n_gamma")
+    rows = []
+    for r in loops["rows"]:
+        log = load_saved_cycle(cycles / "loops" / r["soil"] / f"seed{r['seed']}" / r["strategy"], r["cycle"])
+        if log is None:
+            raise SystemExit(f"cycle {r['cycle']} of {r['soil']} seed {r['seed']} {r['strategy']} is not saved")
+        row = {k: r[k] for k in ("soil", "seed", "strategy", "cycle", "fill_m3", "energy_J", "plan_ok", "stalled",
+                                 "prediction_rmse_percent", "calibration_s", "planning_s")}
+        row["lifted_J"] = lifted(r["energy_J"], r["fill_m3"], log, z_ref, r["soil"])
+        row["z_end"] = float(log.path.z[-1])
+        row["capacity_m3"] = log.bucket.capacity
+        if r["strategy"] in ("ours", "oracle") and r["cycle"] >= 3:
+            row["floor_percent"] = floor_percent(log, failure_angle)
+        rows.append(row)
+    paired_json = out / "paired" / "plant_paired.json"
+    paired = []
+    if paired_json.is_file():
+        for p in json.loads(paired_json.read_text())["rows"]:
+            if p["strategy"] != "ours":
+                continue
+            seed = int(str(p["seed"]).removeprefix("seed"))
+            folder = cycles / "paired" / p["soil"] / f"seed{seed}" / "fixed_on_ours" / f"cycle{p['cycle']}"
+            log = load_saved_cycle(folder, 1)
+            if log is None:
+                raise SystemExit(f"the fixed path on ours' pile {p['soil']} seed {seed} cycle {p['cycle']}: "
+                                 f"not saved under {folder}")
+            paired.append({"soil": p["soil"], "seed": seed, "cycle": p["cycle"], "fill_m3": p["fixed_fill_m3"],
+                           "energy_J": p["fixed_energy_J"], "z_end": float(log.path.z[-1]),
+                           "lifted_J": lifted(p["fixed_energy_J"], p["fixed_fill_m3"], log, z_ref, p["soil"]),
+                           "capacity_m3": p["capacity_m3"]})
+    return {"z_ref_m": z_ref, "settings": loops["settings"], "machine": loops["machine"], "rows": rows,
+            "fixed_on_ours": paired}
+
+
+def pooled(rows: list[dict[str, Any]]) -> dict[str, float]:
+    """Energy per m³ (plant's, and with the lift), mean kept fill, mean end height over ``rows``."""
+    fill = sum(r["fill_m3"] for r in rows)
+    return {"cycles": len(rows), "energy_per_m3_kJ": sum(r["energy_J"] for r in rows) / fill / 1e3,
+            "lifted_energy_per_m3_kJ": sum(r["lifted_J"] for r in rows) / fill / 1e3,
+            "kept_fill": statistics.fmean(r["fill_m3"] / r["capacity_m3"] for r in rows),
+            "end_height_m": statistics.fmean(r["z_end"] for r in rows)}
+
+
+def summarise(data: dict[str, Any]) -> dict[str, Any]:
+    """The acceptance figures: the loops, the paired comparison (also per soil and seed) and the verdicts."""
+    rows, paired = data["rows"], data["fixed_on_ours"]
+    loops: dict[str, Any] = {}
+    for name in ("fixed", "ours", "oracle"):
+        sel = [r for r in rows if r["strategy"] == name]
+        if not sel:
+            continue
+        s = pooled(sel)
+        from3 = [r["prediction_rmse_percent"] for r in sel if r["cycle"] >= 3]
+        floors = [r["floor_percent"] for r in sel if "floor_percent" in r]
+        s.update(error_from_cycle3_percent=statistics.median(from3) if from3 else math.nan,
+                 floor_percent=statistics.median(floors) if floors else math.nan,
+                 failed_plans=sum(1 for r in sel if not r["plan_ok"]) if name != "fixed" else 0,
+                 stalled=sum(1 for r in sel if r["stalled"]),
+                 between_cycles_s_median=statistics.median(r["calibration_s"] + r["planning_s"] for r in sel
+                                                           if r["cycle"] >= 2) if len(sel) > 1 else math.nan)
+        loops[name] = s
+    out: dict[str, Any] = {"loops": loops}
+    ours = {(r["soil"], r["seed"], r["cycle"]): r for r in rows if r["strategy"] == "ours"}
+    pairs = [(ours[key], p) for p in paired if (key := (p["soil"], p["seed"], p["cycle"])) in ours]
+    if pairs:
+        a, b = pooled([o for o, _ in pairs]), pooled([f for _, f in pairs])
+        per_loop = {}
+        for soil, seed in sorted({(o["soil"], o["seed"]) for o, _ in pairs}):
+            sel = [(o, f) for o, f in pairs if (o["soil"], o["seed"]) == (soil, seed)]
+            x, y = pooled([o for o, _ in sel]), pooled([f for _, f in sel])
+            per_loop[f"{soil} seed {seed}"] = {"ratio": x["lifted_energy_per_m3_kJ"] / y["lifted_energy_per_m3_kJ"],
+                                               "kept_fill": x["kept_fill"], "fixed_kept_fill": y["kept_fill"],
+                                               "cycles": len(sel)}
+        out["paired"] = {"ours": a, "fixed": b, "ratio": a["lifted_energy_per_m3_kJ"] / b["lifted_energy_per_m3_kJ"],
+                         "cycles_kept_ge_fixed": sum(1 for o, f in pairs if o["fill_m3"] >= f["fill_m3"]),
+                         "per_loop": per_loop}
+        out["verdict_paired"] = (out["paired"]["ratio"] <= 1.0 - ENERGY_GAIN_TARGET
+                                 and a["kept_fill"] >= b["kept_fill"])
+    if "ours" in loops and "fixed" in loops:
+        ratio = loops["ours"]["lifted_energy_per_m3_kJ"] / loops["fixed"]["lifted_energy_per_m3_kJ"]
+        out["loop_vs_fixed"] = {"ratio": ratio, "verdict": ratio <= 1.0 - ENERGY_GAIN_TARGET
+                                and loops["ours"]["kept_fill"] >= loops["fixed"]["kept_fill"]}
+    if "ours" in loops and "oracle" in loops:
+        ratio = loops["ours"]["lifted_energy_per_m3_kJ"] / loops["oracle"]["lifted_energy_per_m3_kJ"]
+        out["vs_oracle"] = {"ratio": ratio, "kept_fill_difference_points":
+                            100 * (loops["ours"]["kept_fill"] - loops["oracle"]["kept_fill"]),
+                            "verdict": ratio <= ORACLE_RATIO_TARGET}
+    if "ours" in loops and math.isfinite(loops["ours"]["error_from_cycle3_percent"]):
+        e, f = loops["ours"]["error_from_cycle3_percent"], loops["ours"]["floor_percent"]
+        out["error"] = {"verdict_target": e <= ERROR_TARGET, "verdict_floor": e <= f + FLOOR_MARGIN}
+    return out
+
+
+def markdown(data: dict[str, Any], summary: dict[str, Any]) -> str:
+    """The page's generated tables."""
+    z = data["z_ref_m"]
+    lines = [f"| strategy (MPM loop) | cycles | energy per m³, load lifted to {z:.2f} m | plant's energy per m³ | "
+             "mean end height | mean kept fill | next-cycle F_R error from cycle 3 (median) | its floor (median) "
+             "| failed plans / stalls | between cycles (median) |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for name, s in summary["loops"].items():
+        err = "–" if math.isnan(s["error_from_cycle3_percent"]) else f"{s['error_from_cycle3_percent']:.1f} %"
+        flo = "–" if math.isnan(s["floor_percent"]) else f"{s['floor_percent']:.1f} %"
+        lines.append(f"| {name} | {s['cycles']} | {s['lifted_energy_per_m3_kJ']:.1f} kJ/m³ | "
+                     f"{s['energy_per_m3_kJ']:.1f} kJ/m³ | {s['end_height_m']:.2f} m | {s['kept_fill']:.1%} | {err} | "
+                     f"{flo} | {s['failed_plans']} / {s['stalled']} | {s['between_cycles_s_median']:.1f} s |")
+    if "paired" in summary:
+        p = summary["paired"]
+        lines += ["", f"| paired (same piles, only the path differs) | cycles | energy per m³, lifted to {z:.2f} m | "
+                  "ratio ours / fixed | mean kept fill | cycles ours keeps ≥ fixed |", "|---|---|---|---|---|---|",
+                  f"| ours vs fixed, all | {p['ours']['cycles']} | {p['ours']['lifted_energy_per_m3_kJ']:.1f} / "
+                  f"{p['fixed']['lifted_energy_per_m3_kJ']:.1f} kJ/m³ | {p['ratio']:.3f} | "
+                  f"{p['ours']['kept_fill']:.1%} / {p['fixed']['kept_fill']:.1%} | "
+                  f"{p['cycles_kept_ge_fixed']}/{p['ours']['cycles']} |"]
+        for name, q in p["per_loop"].items():
+            lines.append(f"| {name} | {q['cycles']} | – | {q['ratio']:.3f} | {q['kept_fill']:.1%} / "
+                         f"{q['fixed_kept_fill']:.1%} | – |")
+    lines += ["", "| #33 acceptance (MPM plant) | measured | met |", "|---|---|---|"]
+    yes = {True: "yes", False: "**no**"}
+    if "paired" in summary:
+        p = summary["paired"]
+        lines.append(f"| ours ≥ 15 % less energy per m³ than fixed and kept fill ≥ fixed's, paired | energy "
+                     f"{100 * (p['ratio'] - 1):+.1f} % vs fixed; kept {p['ours']['kept_fill']:.1%} vs "
+                     f"{p['fixed']['kept_fill']:.1%} | {yes[summary['verdict_paired']]} |")
+    if "loop_vs_fixed" in summary:
+        v, lo = summary["loop_vs_fixed"], summary["loops"]
+        lines.append(f"| the same, in the loop (each on its own piles) | energy {100 * (v['ratio'] - 1):+.1f} % vs "
+                     f"fixed; kept {lo['ours']['kept_fill']:.1%} vs {lo['fixed']['kept_fill']:.1%} | "
+                     f"{yes[v['verdict']]} |")
+    if "vs_oracle" in summary:
+        v = summary["vs_oracle"]
+        lines.append(f"| ours ≤ 1.05 × the hindsight oracle's energy per m³ | {v['ratio']:.3f} × (kept fill "
+                     f"{v['kept_fill_difference_points']:+.1f} points vs the oracle) | {yes[v['verdict']]} |")
+    if "error" in summary:
+        s = summary["loops"]["ours"]
+        lines.append(f"| next-cycle F_R error from cycle 3 ≤ 15 % (FEE; the new model is not in the loop) | "
+                     f"{s['error_from_cycle3_percent']:.1f} % | {yes[summary['error']['verdict_target']]} |")
+        lines.append(f"| … ≤ 5 points above the run's floor | floor {s['floor_percent']:.1f} % | "
+                     f"{yes[summary['error']['verdict_floor']]} |")
+    m, st = data["machine"], data["settings"]
+    from wheelloader.provenance import commit_label, load_label
+
+    loops = sorted({(r["soil"], r["seed"], r["strategy"]) for r in data["rows"]})
+    dug = ", ".join(f"{soil} seed {seed} {name}" for soil, seed, name in loops)
+    lines += ["", f"*`bash benchmarks/loop_mpm.sh` then `python benchmarks/loop_mpm_report.py` (MPM dx "
+              f"{st['resolution']} m, {st['threads']} lanes; loops of {st['cycles']} cycles: {dug}; planner "
+              f"objective `{st.get('objective', 'fill_energy')}`) at "
+              f"{commit_label(m)}; load average at the last loop invocation's end {load_label(m)}. Energy per m³: "
+              f"the plant's work plus the lift of the plant's kept load from the path's end to {z:.2f} m (the fixed "
+              "path's end), over the plant's kept fill, pooled over cycles; kept fill in % of the nominal 0.2 m³.*"]
+    return "\n".join(lines) + "\n"
+
+
+def plot(data: dict[str, Any], target: Path) -> None:
+    """Energy per m³ (lifted) and kept fill per cycle: ours, the fixed path on ours' piles, fixed and oracle loops."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax_e, ax_k) = plt.subplots(1, 2, figsize=(11, 4))
+    series = {name: [r for r in data["rows"] if r["strategy"] == name] for name in ("fixed", "ours", "oracle")}
+    series["fixed on ours' piles"] = data["fixed_on_ours"]
+    for name, sel in series.items():
+        ks = sorted({r["cycle"] for r in sel})
+        if not ks:
+            continue
+        e = [sum(r["lifted_J"] for r in sel if r["cycle"] == k) / sum(r["fill_m3"] for r in sel if r["cycle"] == k)
+             / 1e3 for k in ks]
+        f = [100 * statistics.fmean(r["fill_m3"] / r["capacity_m3"] for r in sel if r["cycle"] == k) for k in ks]
+        style = "--" if name.startswith("fixed on") else "-"
+        ax_e.plot(ks, e, "o" + style, label=name)
+        ax_k.plot(ks, f, "o" + style, label=name)
+    ax_e.set(xlabel="cycle", ylabel=f"kJ per m³ kept (lifted to {data['z_ref_m']:.2f} m)",
+             title="energy per m³ (MPM plant, pooled over soils and seeds)")
+    ax_k.set(xlabel="cycle", ylabel="kept fill [% of 0.2 m³]", title="kept fill (plant)")
+    ax_e.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(target, dpi=100)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", default="docs/results/loop_mpm", help="loop_mpm.sh's OUT (read and written)")
+    parser.add_argument("--cycles", default="data/results/loop_mpm/cycles", help="loop_mpm.sh's CYCLES")
+    args = parser.parse_args(argv)
+    out, cycles = Path(args.out), Path(args.cycles)
+    data = collect(out, cycles)
+    summary = summarise(data)
+    (out / "acceptance.json").write_text(json.dumps({**data, "summary": summary}, indent=1, default=str))
+    text = markdown(data, summary)
+    (out / "acceptance.md").write_text(text)
+    plot(data, out / "acceptance.png")
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
