@@ -15,6 +15,8 @@
 #   OUT     results (default docs/results/loop_mpm); CYCLES saved cycles (default data/results/loop_mpm/cycles)
 #   PY      the Python to run (default python)
 #   RES, N  MPM grid spacing [m] and cycles per loop (defaults 0.02 and 5; the smoke test: RES=0.06 N=2)
+#   RL_POLICY  a PPO model.zip (train/ppo.py): after phase 2, its path (rolled out in the FEE env of the
+#           nominal soil on each pile, adaptation.PolicyPath) dug in the plant, seed 0 of both soils (OUT/rl)
 set -euo pipefail
 OUT=${1:-docs/results/loop_mpm}
 CYCLES=${2:-data/results/loop_mpm/cycles}
@@ -32,6 +34,10 @@ adapt --soils gravel sand --seeds 1 --strategies ours --out "$OUT/phase1"
 paired
 echo "phase 2: seed 0: the hindsight oracle fitted to ours' cycles ($(date -u))"
 adapt --soils gravel sand --seeds 1 --strategies ours oracle --out "$OUT/phase2"
+if [ -n "${RL_POLICY:-}" ]; then
+  echo "phase 2b: seed 0: the trained policy's paths ($(date -u))"
+  adapt --soils gravel sand --seeds 1 --strategies rl_path --rl-policy "$RL_POLICY" --out "$OUT/rl"
+fi
 echo "phase 3: seed 1: ours, then the fixed path on its piles ($(date -u))"
 adapt --soils gravel sand --seeds 2 --strategies ours --out "$OUT/phase3"
 paired

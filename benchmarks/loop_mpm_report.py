@@ -35,6 +35,11 @@ ERROR_TARGET = 15.0
 FLOOR_MARGIN = 5.0
 
 
+def _folder(strategy: str) -> str:
+    """The saved loop's folder of a row's strategy: ``rl_path`` (whose records said ``rl`` before 0.2.0)."""
+    return "rl_path" if strategy == "rl" else strategy
+
+
 def lifted(energy_j: float, fill_m3: float, log: Any, z_ref: float, soil: str) -> float:
     """The cycle's energy with its load lifted from the path's end to ``z_ref`` [J] (credited when above); density
     the continuum's where the log has one, else the soil preset's (as ``plant_adaptation.py``)."""
@@ -56,8 +61,8 @@ def floor_percent(log: Any, failure_angle: str) -> float:
     return float(predict(params, smooth, options=options).quality.percent_r)
 
 
-#: The folders of loop_mpm.sh's phases under OUT, in the order they run.
-PHASES = ("phase1", "phase2", "phase3", "phase4", "loops")
+#: The folders of loop_mpm.sh's phases under OUT, in the order they run (``rl``: its RL_POLICY loops).
+PHASES = ("phase1", "phase2", "phase3", "phase4", "loops", "rl")
 
 
 def _latest_loops(out: Path) -> dict[str, Any]:
@@ -84,6 +89,7 @@ def collect(out: Path, cycles: Path) -> dict[str, Any]:
     failure_angle = loops["settings"].get("failure_angle", "min_n_gamma")
     rows = []
     for r in loops["rows"]:
+        r = {**r, "strategy": _folder(r["strategy"])}
         log = load_saved_cycle(cycles / "loops" / r["soil"] / f"seed{r['seed']}" / r["strategy"], r["cycle"])
         if log is None:
             raise SystemExit(f"cycle {r['cycle']} of {r['soil']} seed {r['seed']} {r['strategy']} is not saved")
@@ -128,7 +134,7 @@ def summarise(data: dict[str, Any]) -> dict[str, Any]:
     """The acceptance figures: the loops, the paired comparison (also per soil and seed) and the verdicts."""
     rows, paired = data["rows"], data["fixed_on_ours"]
     loops: dict[str, Any] = {}
-    for name in ("fixed", "ours", "oracle"):
+    for name in ("fixed", "ours", "oracle", "rl_path"):
         sel = [r for r in rows if r["strategy"] == name]
         if not sel:
             continue
@@ -137,7 +143,7 @@ def summarise(data: dict[str, Any]) -> dict[str, Any]:
         floors = [r["floor_percent"] for r in sel if "floor_percent" in r]
         s.update(error_from_cycle3_percent=statistics.median(from3) if from3 else math.nan,
                  floor_percent=statistics.median(floors) if floors else math.nan,
-                 failed_plans=sum(1 for r in sel if not r["plan_ok"]) if name != "fixed" else 0,
+                 failed_plans=sum(1 for r in sel if not r["plan_ok"]) if name in ("ours", "oracle") else 0,
                  stalled=sum(1 for r in sel if r["stalled"]),
                  between_cycles_s_median=statistics.median(r["calibration_s"] + r["planning_s"] for r in sel
                                                            if r["cycle"] >= 2) if len(sel) > 1 else math.nan)
@@ -174,6 +180,48 @@ def summarise(data: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def fee_rows(fee_outs: list[Path], fee_cycles: Path, z_ref: float) -> list[dict[str, Any]]:
+    """The same loops in the FEE env plant (``plant_adaptation.py --plant fee-env``, same settings): per cycle the
+    kept soil by the payload model (``DEFAULT_PAYLOAD``'s kept fill of the env's carved fill: the model world's
+    own kept soil) and the env's work with that load lifted from the path's end to ``z_ref``."""
+    from wheelloader.estimator import preset
+    from wheelloader.estimator.force_model import GRAVITY
+    from wheelloader.estimator.force_models import DEFAULT_PAYLOAD
+    from wheelloader.estimator.payload import kept_volume
+    from wheelloader.saved_loops import load_saved_cycle
+
+    found = [{**r, "strategy": _folder(r["strategy"])} for out in fee_outs
+             for r in json.loads((out / "plant_adaptation.json").read_text())["rows"]]
+    rows = []
+    for r in found:
+        log = load_saved_cycle(fee_cycles / r["soil"] / f"seed{r['seed']}" / r["strategy"], r["cycle"])
+        if log is None:
+            raise SystemExit(f"--fee: cycle {r['cycle']} of {r['soil']} seed {r['seed']} {r['strategy']} is not saved")
+        kept = float(kept_volume(r["fill_m3"], log.bucket.capacity, DEFAULT_PAYLOAD))
+        z_end = float(log.path.z[-1])
+        rows.append({"soil": r["soil"], "seed": r["seed"], "strategy": r["strategy"], "cycle": r["cycle"],
+                     "fill_m3": kept, "carved_m3": r["fill_m3"], "energy_J": r["energy_J"], "z_end": z_end,
+                     "lifted_J": r["energy_J"] + preset(r["soil"]).gamma * GRAVITY * kept * (z_ref - z_end),
+                     "capacity_m3": log.bucket.capacity})
+    return rows
+
+
+def gap_table(mpm: list[dict[str, Any]], fee: list[dict[str, Any]]) -> dict[str, Any]:
+    """Per strategy, over the (soil, seed) loops run in both plants: the FEE env's figure beside the MPM plant's."""
+    out = {}
+    for name in ("fixed", "ours", "oracle", "rl_path"):
+        keys = ({(r["soil"], r["seed"]) for r in mpm if r["strategy"] == name}
+                & {(r["soil"], r["seed"]) for r in fee if r["strategy"] == name})
+        if not keys:
+            continue
+        a = pooled([r for r in fee if r["strategy"] == name and (r["soil"], r["seed"]) in keys])
+        b = pooled([r for r in mpm if r["strategy"] == name and (r["soil"], r["seed"]) in keys])
+        out[name] = {"loops": sorted(f"{soil} seed {seed}" for soil, seed in keys), "fee": a, "mpm": b,
+                     "energy_gap": b["lifted_energy_per_m3_kJ"] / a["lifted_energy_per_m3_kJ"],
+                     "kept_gap_points": 100 * (b["kept_fill"] - a["kept_fill"])}
+    return out
+
+
 def markdown(data: dict[str, Any], summary: dict[str, Any]) -> str:
     """The page's generated tables."""
     z = data["z_ref_m"]
@@ -197,6 +245,14 @@ def markdown(data: dict[str, Any], summary: dict[str, Any]) -> str:
         for name, q in p["per_loop"].items():
             lines.append(f"| {name} | {q['cycles']} | – | {q['ratio']:.3f} | {q['kept_fill']:.1%} / "
                          f"{q['fixed_kept_fill']:.1%} | – |")
+    if summary.get("gap"):
+        lines += ["", "| sim-to-real gap | loops | FEE env: energy per m³ kept (lifted) | FEE env: kept fill | "
+                  "MPM: energy per m³ (lifted) | MPM: kept fill | MPM / FEE energy | kept fill, MPM − FEE |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for name, g in summary["gap"].items():
+            lines.append(f"| {name} | {len(g['loops'])} | {g['fee']['lifted_energy_per_m3_kJ']:.1f} kJ/m³ | "
+                         f"{g['fee']['kept_fill']:.1%} | {g['mpm']['lifted_energy_per_m3_kJ']:.1f} kJ/m³ | "
+                         f"{g['mpm']['kept_fill']:.1%} | {g['energy_gap']:.2f} | {g['kept_gap_points']:+.1f} points |")
     lines += ["", "| #33 acceptance (MPM plant) | measured | met |", "|---|---|---|"]
     yes = {True: "yes", False: "**no**"}
     if "paired" in summary:
@@ -266,10 +322,20 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", default="docs/results/loop_mpm", help="loop_mpm.sh's OUT (read and written)")
     parser.add_argument("--cycles", default="data/results/loop_mpm/cycles", help="loop_mpm.sh's CYCLES")
+    parser.add_argument("--fee", nargs="+", default=None, metavar="OUT",
+                        help="the same loops in the FEE env plant (plant_adaptation.py --plant fee-env --out OUT "
+                             "--cycles-dir FEE_CYCLES; one or more invocations): the sim-to-real gap table")
+    parser.add_argument("--fee-cycles", default=None, metavar="FEE_CYCLES", help="their saved cycles (with --fee)")
     args = parser.parse_args(argv)
     out, cycles = Path(args.out), Path(args.cycles)
     data = collect(out, cycles)
+    if args.fee is not None:
+        if args.fee_cycles is None:
+            parser.error("--fee needs --fee-cycles")
+        data["fee_rows"] = fee_rows([Path(f) for f in args.fee], Path(args.fee_cycles), data["z_ref_m"])
     summary = summarise(data)
+    if args.fee is not None:
+        summary["gap"] = gap_table(data["rows"], data["fee_rows"])
     (out / "acceptance.json").write_text(json.dumps({**data, "summary": summary}, indent=1, default=str))
     text = markdown(data, summary)
     (out / "acceptance.md").write_text(text)

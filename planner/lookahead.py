@@ -98,7 +98,7 @@ def plan_with_lookahead(params: SoilParams | str | dict, pile: Pile, *, options:
                         candidates: Sequence[tuple[str, Mapping[str, Any]]] = CANDIDATES,
                         planner: Callable[..., PlanOutcome] = plan_next_cycle,
                         exit_min_fill: float = LOOP_EXIT_MIN_FILL, control_rate: float = 60.0,
-                        second: str = "plan", candidate_iterations: int | None = None,
+                        second: str = "plan", candidate_iterations: int | None = None, margin: float = 0.0,
                         **planner_kwargs: Any) -> PlanOutcome:
     """The next cycle's plan chosen with the cycle after it in view (module docstring).
 
@@ -121,6 +121,10 @@ def plan_with_lookahead(params: SoilParams | str | dict, pile: Pile, *, options:
     candidate_iterations : int, optional
         When given, every candidate after the first starts from the first one's plan (where it has one) and
         gets at most this many IPOPT iterations, without re-plans; None: each is planned as the first.
+    margin : float
+        A candidate after the first is chosen only when its two-cycle cost is below ``(1 - margin)`` times the
+        first's (the model that predicts it misses the next cycle's force by ~20 %: a smaller predicted gain is
+        noise); 0: the cheapest wins (ties to the earlier).
     **planner_kwargs
         Passed on to ``planner`` (e.g. ``mpc``, ``replan_within_iterations``).
 
@@ -135,6 +139,8 @@ def plan_with_lookahead(params: SoilParams | str | dict, pile: Pile, *, options:
         raise ValueError(f"second must be one of {SECOND_CYCLE}, got {second!r}")
     if candidate_iterations is not None and (not isinstance(candidate_iterations, int) or candidate_iterations < 1):
         raise ValueError(f"candidate_iterations must be a positive integer or None, got {candidate_iterations!r}")
+    if not 0.0 <= margin < 1.0:
+        raise ValueError(f"margin must be in [0, 1), got {margin!r}")
     # the force model the loop calibrated (plan_next_cycle's force_model=, payload=) judges the candidates too
     model = {k: planner_kwargs.pop(k) for k in ("force_model", "payload") if planner_kwargs.get(k) is not None}
     options = replace(options or PlannerOptions(), **model)
@@ -176,7 +182,8 @@ def plan_with_lookahead(params: SoilParams | str | dict, pile: Pile, *, options:
         costs.append(cost)
         cycles.append((terms1, terms2))
         outcomes.append(first)
-        if best is None or better(cost, best_cost):
+        clears = k == 0 or not margin or cost < (1.0 - margin) * costs[0]
+        if best is None or (clears and better(cost, best_cost)):
             best, best_cost = k, cost
     chosen = outcomes[best]
     chosen.lookahead = LookaheadChoice(names, costs, cycles, best, iterations)

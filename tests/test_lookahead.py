@@ -131,3 +131,20 @@ def test_lookahead_settings_are_checked():
         plan_with_lookahead("gravel", Pile.trapezoid(), planner=_stub(), second="tree")
     with pytest.raises(ValueError, match="candidate_iterations"):
         plan_with_lookahead("gravel", Pile.trapezoid(), planner=_stub(), candidate_iterations=0)
+
+
+def test_a_margin_keeps_greedy_unless_a_candidate_is_clearly_cheaper():
+    free = plan_with_lookahead("gravel", Pile.trapezoid(), candidates=CANDS, planner=_stub(shift={0.80: 0.03}))
+    costs = free.lookahead.costs
+    assert free.lookahead.chosen == min(range(len(costs)), key=lambda k: (costs[k], k))
+    strict = plan_with_lookahead("gravel", Pile.trapezoid(), candidates=CANDS, planner=_stub(shift={0.80: 0.03}),
+                                 margin=0.99)
+    assert strict.lookahead.chosen == 0 and strict.lookahead.costs == costs
+    gain = 1.0 - min(costs) / costs[0]
+    if gain > 0.0:  # a margin just below the predicted gain lets the cheaper candidate win, just above does not
+        assert plan_with_lookahead("gravel", Pile.trapezoid(), candidates=CANDS, planner=_stub(shift={0.80: 0.03}),
+                                   margin=0.9 * gain).lookahead.chosen == free.lookahead.chosen
+        assert plan_with_lookahead("gravel", Pile.trapezoid(), candidates=CANDS, planner=_stub(shift={0.80: 0.03}),
+                                   margin=1.1 * gain).lookahead.chosen == 0
+    with pytest.raises(ValueError, match="margin"):
+        plan_with_lookahead("gravel", Pile.trapezoid(), planner=_stub(), margin=1.0)

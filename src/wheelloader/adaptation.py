@@ -297,7 +297,7 @@ class PolicyPath(Strategy):
     policy does not see the plant's forces during the cycle (an open-loop replay of what it would do in the
     model world); no calibration."""
 
-    name = "rl"
+    name = "rl_path"
 
     def __init__(self, policy: Any, nominal: SoilParams | None = None, env_seed: int = 0) -> None:
         super().__init__(nominal or preset(NOMINAL_SOIL))
