@@ -52,8 +52,10 @@ SECOND_CYCLE = ("plan", "bezier")
 #: The fast look-ahead's candidates: greedy and one with a lower fill limit.
 FAST_CANDIDATES: tuple[tuple[str, Mapping[str, Any]], ...] = CANDIDATES[:2]
 #: The fast look-ahead's settings (keywords of :func:`plan_with_lookahead`): each extra candidate warm-started
-#: from the greedy plan within 20 IPOPT iterations, the next cycle scored with the geometric Bezier placement.
-FAST: Mapping[str, Any] = {"candidates": FAST_CANDIDATES, "second": "bezier", "candidate_iterations": 20}
+#: from the greedy plan within 20 IPOPT iterations, the next cycle scored with the geometric Bezier placement,
+#: a candidate chosen over greedy only when it promises at least 5 % less energy per m^3 kept over two cycles.
+FAST: Mapping[str, Any] = {"candidates": FAST_CANDIDATES, "second": "bezier", "candidate_iterations": 20,
+                           "margin": 0.05}
 
 
 @dataclass

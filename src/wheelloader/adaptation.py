@@ -519,7 +519,8 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
     ``lookahead``: choose each plan with the cycle after it in view
     (:func:`~wheelloader.planner.lookahead.plan_with_lookahead`): ``True`` or ``"fast"`` its fast settings
     (:data:`~wheelloader.planner.lookahead.FAST`: greedy and one candidate warm-started from it within 20 IPOPT
-    iterations, the next cycle scored with the geometric Bezier placement), ``"full"`` three candidates each
+    iterations, the next cycle scored with the geometric Bezier placement, chosen only when it promises 5 % less),
+    ``"full"`` three candidates each
     followed by the greedy plan of the next cycle, each plan within the same budgets as greedy's.
     """
     if lookahead not in (False, True, "fast", "full"):
