@@ -23,10 +23,8 @@ import functools
 import time
 import warnings
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from typing import Any
-
-import numpy as np
 
 from wheelloader.estimator import (
     DEFAULT_OPTIONS,
@@ -273,56 +271,6 @@ class Oracle(Calibrating):
         return CalibrationStep(0.0, True, "true soil")
 
 
-class PolicyStrategy(Strategy):
-    """Baseline (e): a trained policy (e.g. stable-baselines3 PPO) digs every cycle; no calibration."""
-
-    name = "rl"
-
-    def __init__(self, policy: Any, nominal: SoilParams | None = None) -> None:
-        super().__init__(nominal or preset(NOMINAL_SOIL))
-        self.policy = policy
-
-    def plan(self, pile: Pile) -> PlanOutcome:
-        def act(obs: np.ndarray) -> np.ndarray:
-            action, _ = self.policy.predict(obs, deterministic=True)
-            return action
-
-        return PlanOutcome(None, True, "policy", 0.0, controller=act)
-
-
-class PolicyPath(Strategy):
-    """A trained policy on a plant that digs paths only (the MPM continuum, the DEM): on each cycle's pile the
-    policy is rolled out, deterministically, in the FEE env of the nominal soil (the loop's env settings, no
-    sensor noise, reset with ``env_seed``), and the path its bucket tip took there is dug in the plant. The
-    policy does not see the plant's forces during the cycle (an open-loop replay of what it would do in the
-    model world); no calibration."""
-
-    name = "rl_path"
-
-    def __init__(self, policy: Any, nominal: SoilParams | None = None, env_seed: int = 0) -> None:
-        super().__init__(nominal or preset(NOMINAL_SOIL))
-        self.policy = policy
-        self.env_seed = env_seed
-
-    def plan(self, pile: Pile) -> PlanOutcome:
-        from wheelloader.envs import BucketLoadingEnv
-
-        start = time.perf_counter()
-        env = BucketLoadingEnv(soil=self.params, pile=pile, sensor_noise=0.0, **LOOP_ENV_KWARGS)
-        try:
-            obs, _ = env.reset(seed=self.env_seed)
-            terminated = truncated = False
-            while not (terminated or truncated):
-                action, _ = self.policy.predict(obs, deterministic=True)
-                obs, _, terminated, truncated, _ = env.step(action)
-            log = env.last_cycle_log() if terminated else finish_cycle(env)
-        finally:
-            env.close()
-        path = replace(log.path, name="policy")
-        return PlanOutcome(path, True, f"policy rolled out in the FEE env of the nominal soil, {len(path.t)} samples",
-                           time.perf_counter() - start)
-
-
 def run_loop(env: Any, strategy: Strategy, cycles: int = 5, seed: int = 0,
              progress: Callable[[str], None] | None = None) -> tuple[list[CycleRecord], list[CycleLog]]:
     """Deprecated: run ``cycles`` cycles of ``strategy`` on ``env`` (a ``BucketLoadingEnv``).
@@ -543,3 +491,7 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
                                  exit_min_fill=LOOP_EXIT_MIN_FILL, **(FAST if lookahead != "full" else {}))
     return functools.partial(plan_next_cycle, mpc=mpc, options=options,
                              replan_within_iterations=BETWEEN_CYCLES_REPLAN_ITER, exit_min_fill=LOOP_EXIT_MIN_FILL)
+
+
+# the policy strategies live in their own module (this one's size); re-exported here, where they were
+from wheelloader.policy_strategies import PolicyPath, PolicyStrategy  # noqa: E402, F401
