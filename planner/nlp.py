@@ -112,8 +112,18 @@ _MARGINS = ("rho_margin", "force_margin")
 def structural_options(options: PlannerOptions) -> PlannerOptions:
     """``options`` with every field that does not shape the NLP's expressions at its default: two settings
     with the same structural options share one NLP (its expressions and derivatives)."""
-    defaults = PlannerOptions()
-    return replace(options, **{name: getattr(defaults, name) for name in _NOT_STRUCTURAL})
+    found = _STRUCTURAL.get(options)
+    if found is None:  # replace() validates a new PlannerOptions (~40 us); a solve looks its NLP up several times
+        defaults = PlannerOptions()
+        found = replace(options, **{name: getattr(defaults, name) for name in _NOT_STRUCTURAL})
+        if len(_STRUCTURAL) >= 64:
+            _STRUCTURAL.clear()
+        _STRUCTURAL[options] = found
+    return found
+
+
+#: :func:`structural_options` of the options seen in this process.
+_STRUCTURAL: dict[PlannerOptions, PlannerOptions] = {}
 
 
 def _margin_family(options: PlannerOptions) -> PlannerOptions:
