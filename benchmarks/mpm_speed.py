@@ -5,20 +5,24 @@ outside: wall time, CPU time of the process (user + system, all its threads, fro
 load average before and after; inside, the CPU time up to the first sample (start-up, Taichi's compile or
 offline-cache load, settling) and after it (the dig). Variants::
 
-    old             MPMSolver(legacy=True): the kernels before the rewrite, one thread (today's plant)
-    new-1t          the new kernels, one thread (the plant's default), settling computed
+    old             MPMSolver(legacy=True): the kernels of the shipped reference set (data/mpm), one thread
+    prev-2t         the package as it was at ``--prev-ref`` (default :data:`PREV_REF`: the separate particle
+                    passes), two threads, its own settle cache entry; run from a ``git archive`` of that commit
+    new-1t          the new kernels, one thread, settling computed
     new-2t          the new kernels, two threads (two lanes), settling computed and stored in the
                     benchmark's own settle cache (emptied first)
     new-2t-cached   the same scene again: settling restored from that cache (run twice if it missed)
 
-Forces: the filtered resultant F_R (Gaussian, sigma 0.1 s) of each variant against the old one of the
-same invocation and against the committed cycle in ``data/mpm`` (made by the old kernels), as the
-project's RMSE percentage (RMS of the difference over the mean magnitude). ``--verification`` adds the
-verification scenes (the McKyes blade at 0.15 m, dx 1.5 cm, and the smooth wall at rest and pushed;
-``benchmarks/mpm_verification.py``) for old and new. Writes ``OUT/mpm_speed.json`` and ``OUT/mpm_speed.png``;
-each run is kept in ``OUT/runs/`` (resumable: a run that exists is not repeated; ``--force`` repeats).
+Forces: the filtered resultant F_R (Gaussian, sigma 0.1 s) of each variant against the old one and the
+``prev-2t`` one of the same invocation and against the committed cycle in ``data/mpm`` (made by the old
+kernels), as the project's RMSE percentage (RMS of the difference over the mean magnitude).
+``--verification`` adds the verification scenes (the McKyes blade at 0.15 m, dx 1.5 cm, and the smooth
+wall at rest and pushed; ``benchmarks/mpm_verification.py``) for the chosen variants but the cached one.
+Writes ``OUT/mpm_speed.json`` and ``OUT/mpm_speed.png``; each run is kept in ``OUT/runs/`` (resumable: a
+run that exists is not repeated; ``--force`` repeats).
 
-    python benchmarks/mpm_speed.py --out docs/results/mpm_speed --cycles gravel_path1 --verification
+    python benchmarks/mpm_speed.py --out docs/results/mpm_speed --cycles gravel_path1 --verification \
+        --variants prev-2t new-2t new-2t-cached
 """
 
 from __future__ import annotations
@@ -41,10 +45,13 @@ from wheelloader.provenance import machine_info
 
 VARIANTS: dict[str, dict[str, Any]] = {
     "old": {"legacy": True, "threads": 1, "settle_cache": False},
+    "prev-2t": {"legacy": False, "threads": 2, "settle_cache": True, "ref": True},
     "new-1t": {"legacy": False, "threads": 1, "settle_cache": False},
     "new-2t": {"legacy": False, "threads": 2, "settle_cache": True},
     "new-2t-cached": {"legacy": False, "threads": 2, "settle_cache": True},
 }
+#: The commit whose kernels ``prev-2t`` runs (the plant's default before the fused particle pass).
+PREV_REF = "1c35970"
 SIGMA_S = 0.1
 BLADE_DEPTH = 0.15
 WALL_HEIGHT, WALL_DX, WALL_PUSH = 0.3, 0.015, 0.06
@@ -63,6 +70,10 @@ def _log(progress: Path | None, message: str) -> None:
 def worker(spec: dict[str, Any]) -> dict[str, Any]:
     """Dig one case (or run one verification scene) with one variant's settings; the result as JSON-able data."""
     options = VARIANTS[spec["variant"]]
+    import wheelloader
+
+    if options.get("ref") and Path(wheelloader.__file__).resolve().is_relative_to(ROOT):
+        raise RuntimeError(f"variant {spec['variant']} must import the package of --prev-ref, got the worktree's")
     if spec["kind"] == "cycle":
         from wheelloader.references.mpm import MPMPlant
         from wheelloader.references.mpm.generate import cases, path_by_key
@@ -121,14 +132,26 @@ def worker(spec: dict[str, Any]) -> dict[str, Any]:
             "particles": res.particles}
 
 
-def run_variant(spec: dict[str, Any], progress: Path | None) -> dict[str, Any]:
-    """Run :func:`worker` in a child process at ``nice 10``; its result with wall, CPU and load."""
+def prev_source(ref: str, into: Path) -> Path:
+    """The package's ``src`` at commit ``ref`` (``git archive``) under ``into``; the path to put on PYTHONPATH."""
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", ref, "src"], check=True, capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
+    return into / "src"
+
+
+def run_variant(spec: dict[str, Any], progress: Path | None, prev_src: Path | None = None) -> dict[str, Any]:
+    """Run :func:`worker` in a child process at ``nice 10``; its result with wall, CPU and load.
+
+    ``prev_src``: the package source the ``prev-*`` variants import (:func:`prev_source`)."""
+    env = dict(os.environ)
+    if VARIANTS[spec["variant"]].get("ref"):
+        env["PYTHONPATH"] = os.pathsep.join([str(prev_src)] + [p for p in [env.get("PYTHONPATH")] if p])
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "result.json"
         cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", json.dumps(spec), "--worker-out", str(out)]
         load0 = list(os.getloadavg())
         t0 = time.perf_counter()
-        proc = subprocess.Popen(cmd, preexec_fn=lambda: os.nice(10))  # noqa: PLW1509 - only sets the niceness
+        proc = subprocess.Popen(cmd, env=env, preexec_fn=lambda: os.nice(10))  # noqa: PLW1509 - only sets niceness
         _, status, usage = os.wait4(proc.pid, 0)
         wall = time.perf_counter() - t0
         proc.returncode = os.waitstatus_to_exitcode(status)
@@ -180,10 +203,15 @@ def compare(runs: dict[str, dict[str, Any]], case: str) -> dict[str, Any]:
         for key in ("cpu_before_first_sample_s", "cpu_after_first_sample_s"):
             if key in r:  # start-up, Taichi compile and settling / the dig itself (CPU of the worker)
                 row[key] = r[key]
-        if "old" in fr:
-            row["filtered_fr_vs_old_percent"] = relative_rmse(fr[name], fr["old"])
-            row["speedup_cpu_vs_old"] = runs["old"]["cpu_s"] / r["cpu_s"]
-            row["speedup_wall_vs_old"] = runs["old"]["wall_s"] / r["wall_s"]
+        for base in ("old", "prev-2t"):
+            if base in fr:
+                key = base.split("-")[0]
+                row[f"filtered_fr_vs_{key}_percent"] = relative_rmse(fr[name], fr[base])
+                row[f"speedup_cpu_vs_{key}"] = runs[base]["cpu_s"] / r["cpu_s"]
+                row[f"speedup_wall_vs_{key}"] = runs[base]["wall_s"] / r["wall_s"]
+                if "cpu_after_first_sample_s" in r and "cpu_after_first_sample_s" in runs[base]:
+                    row[f"speedup_dig_cpu_vs_{key}"] = (runs[base]["cpu_after_first_sample_s"]
+                                                        / r["cpu_after_first_sample_s"])
         if fr_committed is not None and len(fr_committed) == len(fr[name]):
             row["filtered_fr_vs_committed_percent"] = relative_rmse(fr[name], fr_committed)
             row["bit_identical_to_committed"] = bool(
@@ -213,10 +241,12 @@ def report(out: Path) -> dict[str, Any]:
             for name, r in by_variant.items():
                 values = {k: v for k, v in r.items() if isinstance(v, float) and not k.endswith("_s")}
                 row = {"wall_s": r["wall_s"], "cpu_s": r["cpu_s"], "threads": r["threads"], **values}
-                if "old" in by_variant:
-                    old = by_variant["old"]
-                    row["percent_vs_old"] = {k: 100.0 * (v / old[k] - 1.0) for k, v in values.items()
-                                             if "closed_form" not in k and k != "mckyes_flat"}
+                for base in ("old", "prev-2t"):
+                    if base in by_variant:
+                        ref = by_variant[base]
+                        row[f"percent_vs_{base.split('-')[0]}"] = {
+                            k: 100.0 * (v / ref[k] - 1.0) for k, v in values.items()
+                            if "closed_form" not in k and k != "mckyes_flat"}
                 rows[name] = row
             results["verification"][key] = rows
     command = "python benchmarks/mpm_speed.py " + " ".join(sys.argv[1:])
@@ -234,7 +264,7 @@ def report(out: Path) -> dict[str, Any]:
 def table(results: dict[str, Any]) -> str:
     """The Markdown tables of a report (the result page includes them; ``benchmarks/readme_tables.py``)."""
     lines = ["| cycle | variant | threads | wall [s] | CPU [s] | CPU to first sample / after [s] | settling | "
-             "filtered F_R vs old | vs data/mpm | load at start |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "filtered F_R vs prev | vs old | vs data/mpm | load at start |", "|---" * 11 + "|"]
     for case, rows in results["cycles"].items():
         for name, r in rows.items():
             if not isinstance(r, dict):
@@ -243,19 +273,26 @@ def table(results: dict[str, Any]) -> str:
                      if "cpu_before_first_sample_s" in r else "–")
             committed = r.get("filtered_fr_vs_committed_percent")
             lines.append(f"| {case} | {name} | {r['threads']} | {r['wall_s']:.0f} | {r['cpu_s']:.1f} | {split} | "
-                         f"{r['settle_cache']} | {r.get('filtered_fr_vs_old_percent', math.nan):.2f} % | "
+                         f"{r['settle_cache']} | {_percent(r.get('filtered_fr_vs_prev_percent'))} | "
+                         f"{_percent(r.get('filtered_fr_vs_old_percent'))} | "
                          f"{'–' if committed is None else f'{committed:.2f} %'} | {r['loadavg_start'][0]:.1f} |")
         if "cache_hit_bit_identical" in rows:
             lines.append(f"\nSettle-cache hit bit-identical to the miss ({case}): {rows['cache_hit_bit_identical']}.")
     for scene, rows in results["verification"].items():
-        lines += ["", f"| {scene} | threads | wall [s] | CPU [s] | values [N/m] | vs old |",
-                  "|---|---|---|---|---|---|"]
+        lines += ["", f"| {scene} | threads | wall [s] | CPU [s] | values [N/m] | vs prev | vs old |",
+                  "|---|---|---|---|---|---|---|"]
         for name, r in rows.items():
             values = ", ".join(f"{k} {v:.1f}" for k, v in r.items()
-                               if k not in ("wall_s", "cpu_s", "threads", "percent_vs_old") and isinstance(v, float))
-            diff = ", ".join(f"{k} {v:+.2f} %" for k, v in r.get("percent_vs_old", {}).items())
-            lines.append(f"| {name} | {r['threads']} | {r['wall_s']:.0f} | {r['cpu_s']:.1f} | {values} | {diff} |")
+                               if k not in ("wall_s", "cpu_s", "threads") and isinstance(v, float))
+            diffs = [", ".join(f"{k} {v:+.2f} %" for k, v in r[key].items()) if key in r else "–"
+                     for key in ("percent_vs_prev", "percent_vs_old")]
+            lines.append(f"| {name} | {r['threads']} | {r['wall_s']:.0f} | {r['cpu_s']:.1f} | {values} | "
+                         f"{' | '.join(diffs)} |")
     return "\n".join(lines) + "\n"
+
+
+def _percent(value: float | None) -> str:
+    return "–" if value is None else f"{value:.2f} %"
 
 
 def _figure(out: Path, runs: dict[str, dict[str, dict[str, Any]]], results: dict[str, Any]) -> None:
@@ -283,8 +320,10 @@ def _figure(out: Path, runs: dict[str, dict[str, dict[str, Any]]], results: dict
         for n in names:
             r = runs[key][n]
             fr = filtered_resultant(np.array(r["t"]), np.array(r["tangential"]), np.array(r["normal"]))
-            label = n if n == "old" else f"{n} ({cmp[n].get('filtered_fr_vs_old_percent', math.nan):.2f} % vs old)"
-            row[1].plot(r["t"], fr, lw=1.0, label=label, ls="-" if n == "old" else "--")
+            base = "prev" if "prev-2t" in names else "old"
+            label = (n if n in ("old", "prev-2t") else
+                     f"{n} ({cmp[n].get(f'filtered_fr_vs_{base}_percent', math.nan):.2f} % vs {base})")
+            row[1].plot(r["t"], fr, lw=1.0, label=label, ls="-" if n in ("old", "prev-2t") else "--")
         row[1].set(xlabel="t [s]", ylabel="F_R filtered (sigma 0.1 s) [N]", title="forces")
         row[1].legend(fontsize=8)
     fig.tight_layout()
@@ -299,6 +338,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="reference cases of data/mpm ('tiny': the tests' tiny scene, a smoke run)")
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
     parser.add_argument("--verification", action="store_true", help="also the blade and wall scenes (old, new)")
+    parser.add_argument("--prev-ref", default=PREV_REF, help="commit whose package the prev-2t variant runs")
     parser.add_argument("--force", action="store_true", help="repeat runs that exist")
     parser.add_argument("--report", action="store_true", help="only assemble the JSON and PNG")
     parser.add_argument("--progress", default=None, help="append progress lines to this file")
@@ -317,8 +357,10 @@ def main(argv: list[str] | None = None) -> int:
     if not args.report:
         jobs = [("cycle", case, v) for case in args.cycles for v in args.variants]
         if args.verification:
-            jobs += [(kind, "", v) for kind in ("blade", "wall") for v in ("old", "new-1t", "new-2t")
-                     if v in args.variants]
+            jobs += [(kind, "", v) for kind in ("blade", "wall") for v in args.variants if v != "new-2t-cached"]
+        tmp_prev = tempfile.TemporaryDirectory()
+        prev_src = (prev_source(args.prev_ref, Path(tmp_prev.name))
+                    if any(VARIANTS[v].get("ref") for v in args.variants) else None)
         for kind, case, variant in jobs:
             stem = f"{kind}-{case}__{variant}" if case else f"{kind}__{variant}"
             target = out / "runs" / f"{stem}.json"
@@ -327,12 +369,13 @@ def main(argv: list[str] | None = None) -> int:
             spec = {"kind": kind, "case": case, "variant": variant, "cache_dir": str(cache_dir)}
             if kind == "cycle" and variant == "new-2t":
                 shutil.rmtree(cache_dir, ignore_errors=True)  # a cold start: settling computed, then stored
-            result = run_variant(spec, progress)
+            result = run_variant(spec, progress, prev_src)
             if kind == "cycle" and variant == "new-2t-cached" and result["settle_cache"] != "hit":
                 _log(progress, "the settle cache was empty: running the cached variant again")
-                result = run_variant(spec, progress)
+                result = run_variant(spec, progress, prev_src)
             target.write_text(json.dumps(result))
         shutil.rmtree(cache_dir, ignore_errors=True)
+        tmp_prev.cleanup()
     summary = report(out)
     print(json.dumps(summary["results"], indent=1)[:3000])
     return 0
