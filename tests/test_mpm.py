@@ -274,6 +274,22 @@ def test_settle_cache_refuses_a_foreign_state(tmp_path):
     assert "wheelloader" in str(default_cache_dir()) or "WHEELLOADER_MPM_CACHE" in os.environ
 
 
+def test_every_particle_moves_once_in_pairs_and_alone(digs):
+    """The CPU kernels take a lane's particles two at a time and the last of an odd count alone: three particles,
+    alike (the same place within their cells) and far apart, fall alike, each once per step, as free fall says."""
+    from wheelloader.references.mpm.solver import Domain, MPMSolver
+
+    dx = 0.03
+    start = np.array([[0.3 + 10 * dx * k + 0.25 * dx, 1.0 + 0.25 * dx] for k in range(3)])
+    with MPMSolver(ContinuumSoil(1600.0, math.radians(30.0)), Domain(0.0, 0.0, 1.5, 1.5), dx, start) as solver:
+        assert solver.lanes == 1  # one lane of three: a pair, then one alone
+        solver.advance(0.1)
+        end = solver.positions()
+    np.testing.assert_allclose(end[:, 1], end[0, 1], rtol=0.0, atol=1e-6)
+    np.testing.assert_allclose(end[:, 0], start[:, 0], rtol=0.0, atol=1e-6)
+    assert start[0, 1] - end[0, 1] == pytest.approx(0.5 * 9.81 * 0.1**2, rel=0.02)
+
+
 def test_atomic_kernels_agree_with_the_lanes_at_the_start_of_a_dig():
     """The GPU kernels (atomic scatter, here on the CPU) and the CPU lanes give the same first 0.2 s of the tiny
     dig up to rounding: the same settled soil and tool impulse within 1e-3."""
