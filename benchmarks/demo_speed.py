@@ -12,7 +12,8 @@ load. Every run's ``table.md`` must be byte-identical to the committed ``docs/re
 ``--stages`` also runs the current demo once more, in-process with a progress hook, and records the CPU time and
 resident memory at each of its progress lines (where the time and the memory go).
 
-Run: ``python benchmarks/demo_speed.py --baseline REV [--rounds 2] [--out docs/results/demo_speed]``.
+Run: ``python benchmarks/demo_speed.py --baseline REV [--rounds 2] [--stages] [--out docs/results/demo_speed]``;
+``--from-json`` rewrites the table and the figure from ``--out``'s ``speed.json``.
 """
 
 from __future__ import annotations
@@ -217,10 +218,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rounds", type=int, default=2, help="rounds of both versions (default: %(default)s)")
     parser.add_argument("--out", default="results/demo_speed", help="output folder (default: %(default)s)")
     parser.add_argument("--stages", action="store_true", help="also the current demo's CPU and memory per stage")
+    parser.add_argument("--from-json", action="store_true", help="rewrite table.md and speed.png from --out's "
+                        "speed.json (no runs)")
     parser.add_argument("--stages-worker", metavar="DIR", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.stages_worker:
         return stages_worker(Path(args.stages_worker))
+    if args.from_json:
+        out = Path(args.out)
+        results = json.loads((out / "speed.json").read_text(encoding="utf-8"))
+        (out / "table.md").write_text(markdown(results) + "\n", encoding="utf-8")
+        plot(results, out / "speed.png")
+        return 0
     if not args.baseline:
         parser.error("--baseline REV is required (the revision to run beside the current code)")
     if args.rounds < 1:

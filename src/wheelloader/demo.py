@@ -61,7 +61,7 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     start = time.perf_counter()
     hidden = hidden_default_soil()
     if use_planner:
-        say("building the planner's CasADi NLPs (once, ~10 s) ...")
+        say("building the planner's CasADi NLP (once, a few seconds) ...")
     planner = default_planner(mpc=mpc) if use_planner else None
     if planner is not None and not mpc:
         from wheelloader.planner.memo import RememberedPlanner
