@@ -50,6 +50,8 @@ passes new parameters, bounds and the initial guess.
 from __future__ import annotations
 
 import math
+import weakref
+from collections.abc import Callable
 from dataclasses import replace
 
 import casadi as ca
@@ -66,7 +68,7 @@ from .interrupt import guarded
 from .kept import KEPT_OBJECTIVE_SCALE, kept_terms, smooth_lift
 from .options import PlannerOptions
 
-__all__ = ["VALIDITY_RELAX", "build", "origin", "problem_function", "release", "structural_options"]
+__all__ = ["VALIDITY_RELAX", "build", "handle", "origin", "problem_function", "release", "structural_options"]
 
 #: The NLPs of this process by (bucket, loader, structural options): expressions, layout, derivatives, solvers.
 _CACHE: dict[tuple, dict] = {}
@@ -161,8 +163,8 @@ def build(bucket: Bucket, loader: Loader, options: PlannerOptions):
         # iteration callback (a Python object, not serialisable) is made on top of them in each process
         # CasADi may swallow a Ctrl-C while it builds or loads (as inside IPOPT): guarded re-raises it
         problem, functions, layout = guarded(nlp_cache.load_or_build, bucket, loader, structural, _build_nlp)
-        entry = _CACHE[(bucket, loader, structural)] = {"problem": problem, "functions": functions,
-                                                         "layout": layout, "derivatives": {}, "solvers": {}}
+        entry = _CACHE[(bucket, loader, structural)] = _Entry(problem=problem, functions=functions, layout=layout,
+                                                              derivatives={}, solvers={})
     settings = _solver_settings(options)
     if settings not in entry["solvers"]:
         plugin = dict(settings)["plugin"]
@@ -187,6 +189,30 @@ def problem_function(bucket: Bucket, loader: Loader, options: PlannerOptions) ->
     """The NLP of these settings as a CasADi Function ``(x, p) -> (f, g)`` (memoised as :func:`build`'s)."""
     build(bucket, loader, options)
     return _CACHE[(bucket, loader, structural_options(options))]["problem"]
+
+
+class _Entry(dict):
+    """One NLP of :data:`_CACHE` (a dict; a weak reference to it finds it again without keeping it in memory)."""
+
+
+def handle(bucket: Bucket, loader: Loader, options: PlannerOptions) -> Callable[[], tuple]:
+    """A function returning :func:`build`'s ``(solver, functions, layout)`` of these settings without holding
+    them: it keeps a weak reference to the NLP's cache entry (a few dictionary look-ups per call) and builds
+    it again when the entry was released (:func:`release`) or replaced by a margin variant (:func:`build`)."""
+    settings = _solver_settings(options)
+    key = (bucket, loader, structural_options(options))
+    ref: list = [lambda: None]
+
+    def get() -> tuple:
+        entry = ref[0]()
+        if entry is None or settings not in entry["solvers"]:
+            result = build(bucket, loader, options)
+            ref[0] = weakref.ref(_CACHE[key])
+            return result
+        solver, functions = entry["solvers"][settings]
+        return solver, functions, entry["layout"]
+
+    return get
 
 
 def release() -> int:

@@ -30,7 +30,7 @@ from wheelloader.estimator.checks import check_range
 from .casadi_model import soil_vector
 from .guess import face_position, first_rise, straight_dig, surface_dig
 from .interrupt import guarded
-from .nlp import build
+from .nlp import handle
 from .options import PlannerOptions, StartState
 from .plan import Plan
 
@@ -65,22 +65,23 @@ class TrajectoryOptimizer:
                                  ("options", self.options, PlannerOptions)):
             if not isinstance(value, cls):
                 raise PlanningError(f"{name} must be a {cls.__name__}, got {type(value).__name__}")
-        build(self.bucket, self.loader, self.options)  # the NLP now, not at the first solve
+        # the NLP and its solver stay in planner.nlp's cache, not here: a wider-margin variant of the NLP may take
+        # its place in memory (nlp.build), and the next solve then builds it again
+        self._nlp = handle(self.bucket, self.loader, self.options)
+        self._nlp()  # the NLP now, not at the first solve
         self._last: dict[str, np.ndarray] | None = None
 
-    # the NLP and its solver stay in planner.nlp's cache, not here: a wider-margin variant of the NLP may take
-    # its place in memory (nlp.build), and the next solve then builds it again
     @property
     def _solver(self) -> Any:
-        return build(self.bucket, self.loader, self.options)[0]
+        return self._nlp()[0]
 
     @property
     def _functions(self) -> dict[str, Any]:
-        return build(self.bucket, self.loader, self.options)[1]
+        return self._nlp()[1]
 
     @property
     def _layout(self) -> dict[str, Any]:
-        return build(self.bucket, self.loader, self.options)[2]
+        return self._nlp()[2]
 
     # ------------------------------------------------------------------ API
     @property

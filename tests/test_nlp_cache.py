@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import gc
 import os
+import weakref
 
 import numpy as np
 import pytest
@@ -172,9 +174,12 @@ def test_a_margin_variant_takes_the_nlps_place_in_memory_with_the_same_plans(cac
     pile = Pile.trapezoid()
     start = default_start(pile)
     first = opt.solve("gravel", pile, start, cycle_duration(pile, start))
+    held = weakref.ref(nlp._CACHE[(Bucket(), Loader(), OPTIONS)])
     wider = cautious_options(OPTIONS)
     TrajectoryOptimizer(options=wider)
     assert list(nlp._CACHE) == [(Bucket(), Loader(), nlp.structural_options(wider))]
+    gc.collect()
+    assert held() is None  # freed: the optimiser holds no reference to its NLP
     again = opt.solve("gravel", pile, start, cycle_duration(pile, start))  # the same optimiser object
     assert list(nlp._CACHE) == [(Bucket(), Loader(), OPTIONS)]
     _same(first, again)
@@ -191,5 +196,6 @@ def test_release_drops_the_nlps_and_the_next_solve_builds_them_again(cache):
     (solver, _), = entry["solvers"].values()
     assert not solver.has_function("nlp_grad")  # never evaluated (no lam_p, lam_x, f or g asked after a solve)
     assert nlp.release() == 1 and not nlp._CACHE
+    del entry, solver  # nothing holds the NLP now: its memory is freed, and the optimiser builds it again
     _same(first, opt.solve("gravel", pile, start, cycle_duration(pile, start)))
     assert len(nlp._CACHE) == 1
