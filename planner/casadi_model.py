@@ -181,3 +181,16 @@ def casadi_learned(soil, depth, rho, alpha, blade_angle, carved, kept, vx, vz, b
                    ca.tan(phi), ca.tan(delta), cohesion / weight, adhesion / weight)
     r = casadi_correction(default_learned_model(), x) * (gamma * GRAVITY * bucket.width * length * length)
     return r[0], r[1]
+
+
+def learned_trust(bucket: Bucket) -> tuple[float, float]:
+    """The deepest cut [m] and the fastest tip speed [m/s] inside the learned correction's training range (the
+    top of its ``depth_over_length`` and ``froude`` inputs): the planner keeps ``"fee-learned"`` plans within
+    them. Beyond them the correction is held at the range's edge, and at that kink IPOPT stopped converging
+    (``benchmarks/force_model_costs.py``: every cold plan ran to ``max_iter`` without the limits)."""
+    from wheelloader.estimator.learned import INPUT_NAMES, default_learned_model
+
+    high = default_learned_model().high
+    length = bucket.floor_length
+    return (float(high[INPUT_NAMES.index("depth_over_length")]) * length,
+            float(high[INPUT_NAMES.index("froude")]) * math.sqrt(GRAVITY * length))

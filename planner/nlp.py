@@ -22,7 +22,9 @@ acceleration ramps).
   the fill is the payload's kept soil ``kept_volume(V)`` (in the objective, the ``min_fill`` bound and the payload's
   lifting work) and its weight is carried as the tip leaves the soil (``casadi_forces(carried_weight=)``);
   ``"fee-learned"`` adds the learned correction's CasADi twin at every node, at the interval's velocity
-  (:func:`~wheelloader.planner.casadi_model.casadi_learned`; the start node at the start velocity).
+  (:func:`~wheelloader.planner.casadi_model.casadi_learned`; the start node at the start velocity), and keeps
+  the plan inside the correction's trusted depth and speed (:func:`~.casadi_model.learned_trust`: beyond its
+  training range the clipped correction has a kink at which IPOPT stopped converging).
 * Objective: ``- V_N / capacity + lambda * E / 1 kJ + mu * sum |du|^2``
   (fill against energy; ``mu`` a small smoothing weight), optionally with a
   lower bound on the final fill ("least energy for a fill target"); or the opt-in energy per m^3 of kept
@@ -63,7 +65,7 @@ from wheelloader.estimator.payload import kept_volume
 from wheelloader.estimator.validity import alpha_lower_limit
 
 from . import codegen, nlp_cache
-from .casadi_model import casadi_forces, casadi_learned, smooth_max, smooth_min, smooth_pos
+from .casadi_model import casadi_forces, casadi_learned, learned_trust, smooth_max, smooth_min, smooth_pos
 from .interrupt import guarded
 from .kept import KEPT_OBJECTIVE_SCALE, kept_terms, smooth_lift
 from .options import PlannerOptions
@@ -331,6 +333,7 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     acc = loader.max_acceleration
     tilt_acc = options.max_tilt_acceleration
     prev_u = p_vel0
+    trust_depth, trust_speed = learned_trust(bucket) if velocity else (0.0, 0.0)
     for k in range(n):
         xk, zk, tk, vk = X[0, k], X[1, k], X[2, k], X[3, k]
         xn, zn, tn, vn = X[0, k + 1], X[1, k + 1], X[2, k + 1], X[3, k + 1]
@@ -377,6 +380,8 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
             g_ineq.append(options.stay_clearance + vertical + 10.0 * (before_face + unloaded))
         g_ineq += [1.0 - f_t / f_push, 1.0 - f_n / f_lift, rho_n - rho_lo + slack, rho_hi - rho_n + slack,
                    alpha_hi - alpha_n + slack, alpha_n - alpha_lo + slack]
+        if velocity:  # "fee-learned": inside the correction's trusted depth and speed (its training range)
+            g_ineq += [trust_depth - vertical * ca.cos(alpha_n), trust_speed ** 2 - (u[0] * u[0] + u[1] * u[1])]
         if options.heel_clearance is not None:
             # opt-in: the bucket's heel (floor_length behind the tip along the blade) above the surface
             heel_x, heel_z = xn - bucket.floor_length * ca.cos(tn), zn - bucket.floor_length * ca.sin(tn)

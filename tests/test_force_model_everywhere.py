@@ -265,6 +265,38 @@ def test_planner_plans_and_checks_with_the_model(name):
         model_end = float(kept_volume(out.plan.fill[-1], cap, payload))
     assert out.check.fill == pytest.approx(model_end, rel=0.1)  # the NLP's smooth surface against the pile's
     assert f"predicted fill {out.check.fill / cap:.0%}" in out.message
+    if name == "fee-learned":  # inside the correction's trusted depth and speed (the NLP's smooth surface: 1 cm)
+        from wheelloader.estimator import Bucket
+        from wheelloader.planner.casadi_model import learned_trust
+
+        deepest, fastest = learned_trust(Bucket())
+        depth = contact_state(out.path.x, out.path.z, out.path.blade_angle, pile, Bucket()).depth
+        assert 0.5 * deepest < depth.max() <= deepest + 0.01
+        assert out.check.max_speed <= fastest * 1.01
+
+
+def test_learned_correction_folded_is_the_network_and_flags_its_range():
+    """estimator.learned_plant (the env's form) against LearnedModel.correction on the same inputs."""
+    from wheelloader.estimator import Bucket, preset
+    from wheelloader.estimator.learned_plant import learned_correction
+
+    bucket, model = Bucket(), default_learned_model()
+    for soil in (preset("gravel"), preset("dirt")):
+        corr = learned_correction(soil, bucket)
+        rng = np.random.default_rng(0)
+        cols = [rng.uniform(-0.02, 0.35, 50), rng.uniform(-0.7, 1.4, 50), rng.uniform(-0.1, 0.8, 50),
+                rng.uniform(-0.7, 1.0, 50), rng.uniform(0.0, 0.2, 50), rng.uniform(0.0, 0.12, 50),
+                rng.uniform(0.0, 1.2, 50)]
+        weight = soil.gamma * 9.81 * bucket.floor_length
+        soil_inputs = [np.tan(soil.phi), np.tan(soil.delta), soil.cohesion / weight, soil.adhesion / weight]
+        x = np.column_stack([*corr.inputs(*cols).T, np.tile(soil_inputs, (50, 1))])
+        ref = model.correction(x) * soil.gamma * 9.81 * bucket.width * bucket.floor_length ** 2
+        f_t, f_n = corr.rows(*cols)
+        np.testing.assert_allclose(f_t, ref[:, 0], rtol=1e-9, atol=1e-6)
+        np.testing.assert_allclose(f_n, ref[:, 1], rtol=1e-9, atol=1e-6)
+        single = np.array([corr.single(*(c[i] for c in cols)) for i in range(50)])
+        np.testing.assert_allclose(single, ref, rtol=1e-9, atol=1e-6)
+        np.testing.assert_array_equal(corr.outside(*cols), model.outside(x))
 
 
 def test_removed_volume_inverts_kept_volume():
@@ -315,9 +347,10 @@ def test_fit_payload_recovers_the_env_retention_from_a_logged_fill_or_load():
         fit_payload(logs, free=("retension",))
 
 
-def test_adaptation_loop_calibrates_predicts_and_plans_with_one_model():
-    """A loop on a fee-payload plant, calibrating fee-payload: the calibration carries the model, the loop's
-    prediction uses it, the planner is asked for it, and the record's fill is the kept soil."""
+@pytest.mark.parametrize("name", PAYLOAD_MODELS)
+def test_adaptation_loop_calibrates_predicts_and_plans_with_one_model(name):
+    """A loop on a plant of the model, calibrating it: the calibration carries the model, the loop's prediction
+    uses it, the planner is asked for it, and the record's fill is the kept soil."""
     from wheelloader.adaptation import Calibrating, PlanOutcome, bezier_on_face, hidden_default_soil
     from wheelloader.estimator import Pile, preset
     from wheelloader.loop import run_loop
@@ -329,17 +362,19 @@ def test_adaptation_loop_calibrates_predicts_and_plans_with_one_model():
         asked.append(model)
         return PlanOutcome(bezier_on_face(pile), True, "Bezier", 0.0)
 
-    strategy = Calibrating(preset("sand"), planner=planner, force_model="fee-payload")
-    records, logs = run_loop(FEEEnvPlant(keep_env=True, force_model="fee-payload"), strategy, Pile.trapezoid(),
+    payload = check_force_model(name, None)
+    strategy = Calibrating(preset("sand"), planner=planner, force_model=name)
+    records, logs = run_loop(FEEEnvPlant(keep_env=True, force_model=name), strategy, Pile.trapezoid(),
                              hidden_default_soil(), 3, seed=1)
-    assert strategy.previous.force_model == "fee-payload" and strategy.previous.payload == DEFAULT_PAYLOAD
-    assert asked == [{"force_model": "fee-payload", "payload": DEFAULT_PAYLOAD}] * 3
+    assert strategy.previous.force_model == name and strategy.previous.payload == payload
+    assert asked == [{"force_model": name, "payload": payload}] * 3
     assert records[2].prediction_rmse_percent < 8.0
     assert records[2].fill_fraction == pytest.approx(logs[2].fill_volume[-1] / 0.2)
-    assert records[2].fill_fraction <= DEFAULT_PAYLOAD.heap_factor
+    assert records[2].fill_fraction <= payload.heap_factor
 
 
-def test_cli_calibrate_predict_and_plan_follow_the_calibrations_model(tmp_path, capsys):
+@pytest.mark.parametrize("name", PAYLOAD_MODELS)
+def test_cli_calibrate_predict_and_plan_follow_the_calibrations_model(name, tmp_path, capsys):
     """``wheelloader calibrate --force-model`` records the model in params.json; ``predict`` and ``plan`` use it."""
     import json
 
@@ -347,34 +382,35 @@ def test_cli_calibrate_predict_and_plan_follow_the_calibrations_model(tmp_path, 
     from wheelloader.estimator import CycleLog, calibrate, predict
     from wheelloader.estimator.calibration import CalibrationOptions
 
-    logs = [_dig("fee-payload", seed=s)[0].last_cycle_log() for s in (0, 1)]
+    logs = [_dig(name, seed=s)[0].last_cycle_log() for s in (0, 1)]
     for k, log in enumerate(logs):
         log.save(tmp_path / f"log{k}.csv")
     params = tmp_path / "params.json"
-    assert main(["calibrate", str(tmp_path / "log0.csv"), "--force-model", "fee-payload", "-o", str(params)]) == 0
+    assert main(["calibrate", str(tmp_path / "log0.csv"), "--force-model", name, "-o", str(params)]) == 0
     settings = json.loads(params.read_text())["calibration"]["settings"]
-    assert settings["force_model"] == "fee-payload" and settings["payload"] == DEFAULT_PAYLOAD.to_dict()
+    assert settings["force_model"] == name and settings["payload"] == check_force_model(name, None).to_dict()
     assert main(["predict", str(params), str(tmp_path / "log1.csv"), "-o", str(tmp_path / "forces.csv")]) == 0
-    cal = calibrate(CycleLog.load(tmp_path / "log0.csv"), options=CalibrationOptions(force_model="fee-payload"))
+    cal = calibrate(CycleLog.load(tmp_path / "log0.csv"), options=CalibrationOptions(force_model=name))
     expected = predict(cal, CycleLog.load(tmp_path / "log1.csv"))
     got = np.genfromtxt(tmp_path / "forces.csv", delimiter=",", names=True)
     np.testing.assert_allclose(got["F_T"], expected.tangential, rtol=1e-6, atol=1e-3)
     assert main(["plan", str(params), "-o", str(tmp_path / "plan.csv")]) == 0
-    assert "force model fee-payload" in capsys.readouterr().out
+    assert f"force model {name}" in capsys.readouterr().out
     summary = json.loads((tmp_path / "plan.summary.json").read_text())
-    assert summary["force_model"] == "fee-payload"
+    assert summary["force_model"] == name
     assert summary["plan"]["fill_m3"] < 0.8 * summary["plan"]["carved_m3"]
     assert main(["calibrate", str(tmp_path / "log0.csv"), "--force-model", "fea", "-o",
                  str(tmp_path / "p2.json")]) == 2
     assert "force_model" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("name", PAYLOAD_MODELS)
 @pytest.mark.parametrize("backend", ["batched", "serial"])
-def test_sb3_adapter_takes_the_model(backend):
+def test_sb3_adapter_takes_the_model(backend, name):
     pytest.importorskip("stable_baselines3")
     from wheelloader.envs.sb3 import make_sb3_vec_env
 
-    env = make_sb3_vec_env(MAIN_ID, n_envs=2, seed=0, backend=backend, force_model="fee-payload")
+    env = make_sb3_vec_env(MAIN_ID, n_envs=2, seed=0, backend=backend, force_model=name)
     env.reset()
     for _ in range(60):
         _, _, _, infos = env.step(np.tile(np.array([[0.6, -0.05, 0.0]], dtype=np.float32), (2, 1)))
