@@ -410,10 +410,15 @@ class SurfaceCarver:
         if i1 < i0:
             return 0.0
         heights = self.nodes
-        if (za if za <= zb else zb) > max(heights[i0:i1 + 1]) + 1e-9:  # clearly above: nothing to cut (the margin
-            return 0.0  # covers the rounding of the interpolated heights below, so the result is the same)
-        removed_area = 0.0
         dx = xb - xa
+        # Clearly above: nothing to cut. The margin covers the rounding of the interpolated heights below, and the
+        # node-index tolerance (1e-12 spacings) lets a node sit just outside the segment, where the interpolation
+        # extrapolates by |dz| * that offset / |dx|: the shortcut is taken only where that stays inside the margin
+        # (a near-vertical segment, dx -> 0 but not 0, goes through the loop), so the result is always the same.
+        if (abs(zb - za) * (1e-12 * sp + 1e-14) <= 5e-10 * abs(dx)
+                and (za if za <= zb else zb) > max(heights[i0:i1 + 1]) + 1e-9):
+            return 0.0
+        removed_area = 0.0
         for i in range(i0, i1 + 1):
             zc = min(za, zb) if dx == 0.0 else za + (zb - za) * ((x0 + i * sp) - xa) / dx
             old = heights[i]

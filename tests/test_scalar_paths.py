@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -136,3 +137,20 @@ def test_carving_on_a_list_equals_the_array_form(start, moves):
 def test_failure_angle_scalar_loop_equals_the_generic_newton(alpha, rho, phi, delta, guess):
     assert optimal_beta_scalar(alpha, rho, phi, delta, DEFAULT_OPTIONS, guess) == _beta_reference(
         alpha, rho, phi, delta, DEFAULT_OPTIONS, guess)
+
+
+@pytest.mark.parametrize("dx", [5e-324, 1e-300, 1e-15])
+@pytest.mark.parametrize("dz", [-0.05, 0.05])
+def test_near_vertical_segment_just_past_a_node_carves_like_the_reference(dx, dz):
+    # the node-index tolerance lets the node sit 0.6e-12 spacings outside the segment; with dx -> 0 (not 0) the
+    # interpolation extrapolates far, and the "clearly above" shortcut must not skip what the loop would cut
+    i = PILE.heights.size // 2
+    xa = PILE.x0 + i * PILE.spacing + 0.6e-12 * PILE.spacing
+    z = float(PILE.heights[i]) + 1e-8
+    segment = (xa, z, xa + dx, z + dz)
+    carver = SurfaceCarver(PILE, 1.5, 0.6, 0.0)
+    carver.cut_segment(*segment)
+    heights, fill, spilled, removed = _carve_reference(PILE.heights.copy(), PILE.x0, PILE.spacing, 1.5, 0.6, 0.0,
+                                                       [segment])
+    assert carver.nodes == heights.tolist()
+    assert (carver.fill, carver.spilled, carver.removed) == (fill, spilled, removed)
