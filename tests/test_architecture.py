@@ -202,10 +202,6 @@ LONG_FUNCTIONS = {
         "over its fields as in build_kernels",
 }
 LONG_MODULES = {
-    "src/wheelloader/references/mpm/_kernels.py":
-        "one builder of Taichi closures over the solver's fields (build_kernels, allow-listed above); the fused "
-        "particle pass with its pair path adds the ~70 lines over 500, and ~60 lines are the module docstring that "
-        "says why each part is laid out as it is",
     "src/wheelloader/references/dem/yade_scenario.py":
         "runs as one file under Yade's own Python (yade -x), which can import only yade, numpy and the "
         "standard library, not the package",

@@ -274,15 +274,14 @@ def test_settle_cache_refuses_a_foreign_state(tmp_path):
     assert "wheelloader" in str(default_cache_dir()) or "WHEELLOADER_MPM_CACHE" in os.environ
 
 
-def test_every_particle_moves_once_in_pairs_and_alone(digs):
-    """The CPU kernels take a lane's particles two at a time and the last of an odd count alone: three particles,
-    alike (the same place within their cells) and far apart, fall alike, each once per step, as free fall says."""
+def test_alike_particles_fall_alike_and_as_free_fall_says(digs):
+    """One particle pass per step (grid -> particle, then the next step's particle -> grid): three particles, alike
+    (the same place within their cells) and far apart, fall alike, each moved once per step, as free fall says."""
     from wheelloader.references.mpm.solver import Domain, MPMSolver
 
     dx = 0.03
     start = np.array([[0.3 + 10 * dx * k + 0.25 * dx, 1.0 + 0.25 * dx] for k in range(3)])
     with MPMSolver(ContinuumSoil(1600.0, math.radians(30.0)), Domain(0.0, 0.0, 1.5, 1.5), dx, start) as solver:
-        assert solver.lanes == 1  # one lane of three: a pair, then one alone
         solver.advance(0.1)
         end = solver.positions()
     np.testing.assert_allclose(end[:, 1], end[0, 1], rtol=0.0, atol=1e-6)

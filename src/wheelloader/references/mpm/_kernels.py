@@ -21,13 +21,6 @@ The mathematics is the module docstring of :mod:`.solver`; this is how it is lai
   leaves the same state as before). The plates are placed twice per step: this step's (``world_a``,
   ``world_b``, ``box[0]``) and the next one's (``next_a``, ``next_b``, ``box[1]``). The lane scatter keeps
   its order, so fusing alone changes no bit.
-* **Particles in pairs (CPU).** A particle's grid -> particle is one long chain of dependent operations
-  (the nine-node gather, the eigen-decomposition with two square roots and a division, two logarithms,
-  the return mapping, two exponentials): the CPU waits on it rather than computes. Each lane takes its
-  particles two at a time and interleaves the two chains statement by statement (the return mapping
-  branch-free, each scalar a pair), so one fills the other's waits; measured 7-10 % less CPU per step
-  on the gravel cycle. The arithmetic per particle is the same, but the compiler contracts it into fused
-  multiply-adds differently, so results differ from the one-at-a-time kernels by rounding.
 * **Near plates as bits.** Whether a particle is near the tool is decided once per step (particle ->
   grid) as the set of plates within ``TRANSFER_REACH`` cells, reused in grid -> particle (the particle has
   not moved in between): the transfer check and the particle guard look at those plates only (a plate
@@ -258,18 +251,16 @@ def build_kernels(fields: Any, lanes: int, atomic: bool) -> tuple[Any, Any, Any,
 
     # ------------------------------------------------------------ grid -> particle
     @ti.func
-    def weights(xw, origin, inv_dx: f32):
-        xp = (xw - origin) * inv_dx
+    def g2p_one(p: ti.i32, lane: ti.i32, origin, inv_dx: f32, dt: f32, p_mass: f32, mu: f32, lam: f32,
+                sin_phi: f32, cos_phi: f32, cohesion: f32, tool_on: ti.i32, n_plates: ti.i32, tip0, tip1, vtip,
+                omega: f32, c0: f32, s0: f32, c1: f32, s1: f32, guard: f32, x_lo: f32, x_hi: f32, z_lo: f32,
+                z_hi: f32):
+        dx = 1.0 / inv_dx
+        near = near_flag[p]
+        xp = (x[p] - origin) * inv_dx
         base = ti.cast(xp - 0.5, ti.i32)
         fx = xp - ti.cast(base, f32)
-        return base, fx, [0.5 * (1.5 - fx) ** 2, 0.75 - (fx - 1.0) ** 2, 0.5 * (fx - 0.5) ** 2]
-
-    @ti.func
-    def gather(p: ti.i32, near: ti.i32, origin, inv_dx: f32, n_plates: ti.i32, tip0, vtip, omega: f32):
-        """Velocity and APIC matrix of particle ``p`` from the grid; nodes across one of the ``near`` plates (bits)
-        replaced by the particle's own velocity, less any motion into the plate."""
-        dx = 1.0 / inv_dx
-        base, fx, w = weights(x[p], origin, inv_dx)
+        w = [0.5 * (1.5 - fx) ** 2, 0.75 - (fx - 1.0) ** 2, 0.5 * (fx - 0.5) ** 2]
         new_v = vec2(0.0, 0.0)
         new_c = mat2([[0.0, 0.0], [0.0, 0.0]])
         for i, j in ti.static(ti.ndrange(3, 3)):
@@ -294,124 +285,49 @@ def build_kernels(fields: Any, lanes: int, atomic: bool) -> tuple[Any, Any, Any,
             weight = w[i][0] * w[j][1]
             new_v += weight * g
             new_c += 4.0 * inv_dx * weight * g.outer_product(dpos)
-        return new_v, new_c
-
-    @ti.func
-    def gather_pair(pa: ti.i32, pb: ti.i32, origin, inv_dx: f32):
-        """:func:`gather` of two particles far from the tool, their statements interleaved (the CPU overlaps the
-        two chains of dependent additions)."""
-        base_a, fx_a, w_a = weights(x[pa], origin, inv_dx)
-        base_b, fx_b, w_b = weights(x[pb], origin, inv_dx)
-        v_a = vec2(0.0, 0.0)
-        v_b = vec2(0.0, 0.0)
-        c_a = mat2([[0.0, 0.0], [0.0, 0.0]])
-        c_b = mat2([[0.0, 0.0], [0.0, 0.0]])
-        for i, j in ti.static(ti.ndrange(3, 3)):
-            offset = ti.Vector([i, j])
-            g_a = grid_v[base_a + offset]
-            g_b = grid_v[base_b + offset]
-            weight_a = w_a[i][0] * w_a[j][1]
-            weight_b = w_b[i][0] * w_b[j][1]
-            v_a += weight_a * g_a
-            v_b += weight_b * g_b
-            c_a += 4.0 * inv_dx * weight_a * g_a.outer_product(ti.cast(offset, f32) - fx_a)
-            c_b += 4.0 * inv_dx * weight_b * g_b.outer_product(ti.cast(offset, f32) - fx_b)
-        return v_a, c_a, v_b, c_b
-
-    @ti.func
-    def deform_pair(f_a, c_a, f_b, c_b, dt: f32, mu: f32, lam: f32, sin_phi: f32, cos_phi: f32, cohesion: f32):
-        """Elastic predictor ``(I + dt C) F`` and Mohr-Coulomb return mapping in log-strain space for two particles
-        at once (each scalar a pair; branch-free), their new ``F`` and Kirchhoff stress.
-
-        The principal stretches and directions come from the eigen-decomposition of ``b = F F^T`` (the ``U``
-        and ``sigma^2`` of ``F``'s SVD)."""
-        fn_a = (ti.Matrix.identity(f32, 2) + dt * c_a) @ f_a
-        fn_b = (ti.Matrix.identity(f32, 2) + dt * c_b) @ f_b
-        b_a = fn_a @ fn_a.transpose()
-        b_b = fn_b @ fn_b.transpose()
-        b00 = vec2(b_a[0, 0], b_b[0, 0])
-        b01 = vec2(b_a[0, 1], b_b[0, 1])
-        b11 = vec2(b_a[1, 1], b_b[1, 1])
-        h = 0.5 * (b00 - b11)
-        disc = ti.sqrt(h * h + b01 * b01)
-        mid = 0.5 * (b00 + b11)
+        # elastic predictor and Mohr-Coulomb return mapping in log-strain space; the principal stretches
+        # and directions from the eigen-decomposition of b = F F^T (the U and sigma^2 of F's SVD)
+        f_new = (ti.Matrix.identity(f32, 2) + dt * new_c) @ F[p]
+        b = f_new @ f_new.transpose()
+        h = 0.5 * (b[0, 0] - b[1, 1])
+        disc = ti.sqrt(h * h + b[0, 1] * b[0, 1])
+        mid = 0.5 * (b[0, 0] + b[1, 1])
         l0 = mid + disc
         l1 = mid - disc
-        ux = ti.select(h > 0.0, l0 - b11, b01)
-        uz = ti.select(h > 0.0, b01, l0 - b00)
-        inv = 1.0 / ti.sqrt(ti.max(ux * ux + uz * uz, 1e-30))
-        turn = disc > 1e-7 * mid
-        c = ti.select(turn, ux * inv, 1.0)
-        s = ti.select(turn, uz * inv, 0.0)
-        r0 = 0.5 * ti.log(ti.max(l0, 1e-8))
-        r1 = 0.5 * ti.log(ti.max(l1, 1e-8))
-        tr = r0 + r1
+        c, s = 1.0, 0.0
+        if disc > 1e-7 * mid:
+            ux, uz = b[0, 1], l0 - b[0, 0]
+            if h > 0.0:
+                ux, uz = l0 - b[1, 1], b[0, 1]
+            inv = 1.0 / ti.sqrt(ux * ux + uz * uz)
+            c, s = ux * inv, uz * inv
+        U = mat2([[c, -s], [s, c]])
+        e0 = 0.5 * ti.log(ti.max(l0, 1e-8))
+        e1 = 0.5 * ti.log(ti.max(l1, 1e-8))
+        r0, r1 = e0, e1
+        tr = e0 + e1
         p_mean = (lam + mu) * tr
-        q_dev = mu * ti.abs(r0 - r1)
-        apex = (p_mean * sin_phi >= cohesion * cos_phi) & (sin_phi > 1e-6)
-        e_apex = cohesion * cos_phi / ti.max(sin_phi, 1e-6) / (2.0 * (lam + mu))
-        limit = cohesion * cos_phi - p_mean * sin_phi
-        cone = (q_dev > limit) & (apex == 0)
-        half = 0.5 * (r0 - r1) * limit / ti.max(q_dev, 1e-30)
-        e0 = ti.select(apex, e_apex, ti.select(cone, 0.5 * tr + half, r0))
-        e1 = ti.select(apex, e_apex, ti.select(cone, 0.5 * tr - half, r1))
-        plastic = apex | cone
-        # plastic: F = U diag(exp(e)) V^T with V^T = diag(exp(-r)) U^T f_new (r: the predictor's log stretches)
-        x0 = ti.exp(e0 - r0)
-        x1 = ti.exp(e1 - r1)
-        u_a = mat2([[c[0], -s[0]], [s[0], c[0]]])
-        u_b = mat2([[c[1], -s[1]], [s[1], c[1]]])
-        if plastic[0]:
-            fn_a = u_a @ mat2([[x0[0], 0.0], [0.0, x1[0]]]) @ u_a.transpose() @ fn_a
-        if plastic[1]:
-            fn_b = u_b @ mat2([[x0[1], 0.0], [0.0, x1[1]]]) @ u_b.transpose() @ fn_b
-        return fn_a, kirchhoff(u_a, e0[0], e1[0], mu, lam), fn_b, kirchhoff(u_b, e0[1], e1[1], mu, lam)
-
-    @ti.func
-    def g2p_one(p: ti.i32, lane: ti.i32, origin, inv_dx: f32, dt: f32, p_mass: f32, mu: f32, lam: f32,
-                sin_phi: f32, cos_phi: f32, cohesion: f32, tool_on: ti.i32, n_plates: ti.i32, tip0, tip1, vtip,
-                omega: f32, c0: f32, s0: f32, c1: f32, s1: f32, guard: f32, x_lo: f32, x_hi: f32, z_lo: f32,
-                z_hi: f32):
-        new_v, new_c = gather(p, near_flag[p], origin, inv_dx, n_plates, tip0, vtip, omega)
-        f_new, stress, _f, _s = deform_pair(F[p], new_c, F[p], new_c, dt, mu, lam, sin_phi, cos_phi, cohesion)
-        F[p] = f_new
-        tau[p] = stress
+        q_dev = mu * ti.abs(e0 - e1)
+        plastic = 0
+        if sin_phi > 1e-6 and p_mean * sin_phi >= cohesion * cos_phi:
+            e_apex = cohesion * cos_phi / sin_phi / (2.0 * (lam + mu))
+            e0 = e_apex
+            e1 = e_apex
+            plastic = 1
+        else:
+            limit = cohesion * cos_phi - p_mean * sin_phi
+            if q_dev > limit:
+                half = 0.5 * (e0 - e1) * limit / q_dev
+                e0 = 0.5 * tr + half
+                e1 = 0.5 * tr - half
+                plastic = 1
+        if plastic:
+            # F = U diag(exp(e)) V^T with V^T = diag(exp(-r)) U^T f_new (r: the predictor's log stretches)
+            F[p] = U @ mat2([[ti.exp(e0 - r0), 0.0], [0.0, ti.exp(e1 - r1)]]) @ U.transpose() @ f_new
+        else:
+            F[p] = f_new
+        tau[p] = kirchhoff(U, e0, e1, mu, lam)
         C[p] = new_c
-        move(p, lane, new_v, 1.0 / inv_dx, dt, p_mass, tool_on, n_plates, tip0, tip1, vtip, omega, c0, s0, c1, s1,
-             guard, x_lo, x_hi, z_lo, z_hi)
-
-    @ti.func
-    def g2p_pair(pa: ti.i32, pb: ti.i32, pair: ti.i32, lane: ti.i32, origin, inv_dx: f32, dt: f32, p_mass: f32, mu: f32,
-                 lam: f32, sin_phi: f32, cos_phi: f32, cohesion: f32, tool_on: ti.i32, n_plates: ti.i32, tip0, tip1,
-                 vtip, omega: f32, c0: f32, s0: f32, c1: f32, s1: f32, guard: f32, x_lo: f32, x_hi: f32, z_lo: f32,
-                 z_hi: f32):
-        """:func:`g2p_one` of particles ``pa`` and ``pb`` (in this order), their independent work interleaved; only
-        ``pa`` if not ``pair`` (then ``pb`` is ``pa``, computed twice and stored once)."""
-        near_a, near_b = near_flag[pa], near_flag[pb]
-        v_a, c_a, v_b, c_b = gather_pair(pa, pb, origin, inv_dx)
-        if near_a:
-            v_a, c_a = gather(pa, near_a, origin, inv_dx, n_plates, tip0, vtip, omega)
-        if near_b:
-            v_b, c_b = gather(pb, near_b, origin, inv_dx, n_plates, tip0, vtip, omega)
-        f_a, t_a, f_b, t_b = deform_pair(F[pa], c_a, F[pb], c_b, dt, mu, lam, sin_phi, cos_phi, cohesion)
-        F[pa] = f_a
-        tau[pa] = t_a
-        C[pa] = c_a
-        move(pa, lane, v_a, 1.0 / inv_dx, dt, p_mass, tool_on, n_plates, tip0, tip1, vtip, omega, c0, s0, c1, s1,
-             guard, x_lo, x_hi, z_lo, z_hi)
-        if pair:
-            F[pb] = f_b
-            tau[pb] = t_b
-            C[pb] = c_b
-            move(pb, lane, v_b, 1.0 / inv_dx, dt, p_mass, tool_on, n_plates, tip0, tip1, vtip, omega, c0, s0, c1,
-                 s1, guard, x_lo, x_hi, z_lo, z_hi)
-
-    @ti.func
-    def move(p: ti.i32, lane: ti.i32, new_v, dx: f32, dt: f32, p_mass: f32, tool_on: ti.i32, n_plates: ti.i32, tip0,
-             tip1, vtip, omega: f32, c0: f32, s0: f32, c1: f32, s1: f32, guard: f32, x_lo: f32, x_hi: f32,
-             z_lo: f32, z_hi: f32):
-        """Move particle ``p`` with ``new_v``: the plates' guard, the domain's bounds; store ``x`` and ``v``."""
-        near = near_flag[p]
         x_old = x[p]
         x_new = x_old + dt * new_v
         if tool_on:
@@ -476,17 +392,12 @@ def build_kernels(fields: Any, lanes: int, atomic: bool) -> tuple[Any, Any, Any,
                     p2g_one(p, 0, x[p], v[p], C[p], tau[p], origin, inv_dx, dt, p_vol, p_mass, tool_on, n_plates)
         else:
             for lane in range(lanes):
-                first, end = lane * n // lanes, (lane + 1) * n // lanes
-                for q in range((end - first + 1) // 2):
-                    p = first + 2 * q
-                    pair = p + 1 < end  # else p alone (an odd count: its twin is itself, not stored)
-                    g2p_pair(p, p + 1 if pair else p, pair, lane, origin, inv_dx, dt, p_mass, mu, lam, sin_phi,
-                             cos_phi, cohesion, tool_on, n_plates, tip0, tip1, vtip, omega, c0, s0, c1, s1, guard,
-                             x_lo, x_hi, z_lo, z_hi)
+                for p in range(lane * n // lanes, (lane + 1) * n // lanes):
+                    g2p_one(p, lane, origin, inv_dx, dt, p_mass, mu, lam, sin_phi, cos_phi, cohesion, tool_on,
+                            n_plates, tip0, tip1, vtip, omega, c0, s0, c1, s1, guard, x_lo, x_hi, z_lo, z_hi)
                     if more:
-                        for r in range(1 + pair):
-                            p2g_one(p + r, lane, x[p + r], v[p + r], C[p + r], tau[p + r], origin, inv_dx, dt, p_vol,
-                                    p_mass, tool_on, n_plates)
+                        p2g_one(p, lane, x[p], v[p], C[p], tau[p], origin, inv_dx, dt, p_vol, p_mass, tool_on,
+                                n_plates)
 
     @ti.func
     def scatter(n: ti.i32, x0: f32, z0: f32, inv_dx: f32, dt: f32, p_vol: f32, p_mass: f32, tool_on: ti.i32,
