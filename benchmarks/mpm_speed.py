@@ -218,6 +218,10 @@ def compare(runs: dict[str, dict[str, Any]], case: str) -> dict[str, Any]:
                 np.array_equal(np.array(r["tangential"]), committed["tangential"])
                 and np.array_equal(np.array(r["normal"]), committed["normal"]))
         out[name] = row
+    if "prev-2t" in runs:
+        for name, r in runs.items():
+            out[name]["bit_identical_to_prev"] = bool(r["tangential"] == runs["prev-2t"]["tangential"]
+                                                      and r["normal"] == runs["prev-2t"]["normal"])
     if "new-2t" in runs and "new-2t-cached" in runs:
         out["cache_hit_bit_identical"] = bool(runs["new-2t"]["tangential"] == runs["new-2t-cached"]["tangential"]
                                               and runs["new-2t"]["normal"] == runs["new-2t-cached"]["normal"])
@@ -276,6 +280,9 @@ def table(results: dict[str, Any]) -> str:
                          f"{r['settle_cache']} | {_percent(r.get('filtered_fr_vs_prev_percent'))} | "
                          f"{_percent(r.get('filtered_fr_vs_old_percent'))} | "
                          f"{'–' if committed is None else f'{committed:.2f} %'} | {r['loadavg_start'][0]:.1f} |")
+        same = [name for name, r in rows.items() if isinstance(r, dict) and r.get("bit_identical_to_prev")]
+        if "prev-2t" in rows:
+            lines.append(f"\nBit-identical forces to prev-2t ({case}): {', '.join(same)}.")
         if "cache_hit_bit_identical" in rows:
             lines.append(f"\nSettle-cache hit bit-identical to the miss ({case}): {rows['cache_hit_bit_identical']}.")
     for scene, rows in results["verification"].items():
