@@ -18,19 +18,27 @@ table gives the F_R RMSE against the filtered reference and against the unfilter
 * Table 4 / Fig. 10: per soil (gravel, modified sand, dirt, sand when present): parameters from
   path 1 next to the DEM material's values, and the RMSE.
 
+The paper's tables compare the calibration methods on the FEE. Beside them, every force model of
+``--force-models`` (default: all of :data:`~wheelloader.estimator.FORCE_MODELS`) calibrates with our method on
+the same training cycles and predicts the same cases (``force_models`` in the JSON, the second table of
+``summary.md``, ``fig_models.png``), the FEE first; the JSON records the learned weights ``"fee-learned"``
+used (version, SHA-256 of the artifact).
+
 Run: ``python benchmarks/paper_experiments.py [--data data/reference] [--out results/paper_experiments]``.
 Writes ``results.json`` (with machine info), ``report.md`` and ``fig8.png``, ``fig9.png``,
-``fig10.png``.
+``fig10.png``, ``fig_models.png``.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import sys
 from dataclasses import replace
 from pathlib import Path
 
+from wheelloader.estimator import FORCE_MODELS
 from wheelloader.provenance import commit_label, machine_info
 from wheelloader.ray_mode import add_ray_arguments
 
@@ -160,6 +168,9 @@ def run(args) -> dict:
     if spread:
         results["seed_spread"] = spread
     results["acceptance"] = acceptance(results)
+    results["force_models"], results["_model_cals"] = force_model_tables(load, names, train_logs, args)
+    if "fee-learned" in args.force_models:
+        results["learned_artifact"] = learned_artifact()
     if not args.no_estimator_study:  # issue #20 section (estimator_study below)
         results["estimator_study"] = estimator_study(load, names, args)
     results["_cals"] = cals
@@ -185,19 +196,69 @@ def seed_averaged(load, seeds: list[int]) -> dict:
     return avg
 
 
-def calibrate_all(train_logs: dict, methods, ray: str, ray_cpus: int | None) -> tuple[dict, dict]:
-    """Every (training log, method) calibration as one unit of :func:`wheelloader.sweep.run_sweep`:
-    ``{(key, method): Calibration}`` and ``{(key, method): wall time [s]}``; a calibration that fails twice
-    stops the run with the failures named. The soils' keys reuse gravel's calibrations."""
+def calibrate_all(train_logs: dict, methods, ray: str, ray_cpus: int | None,
+                  force_model: str = "fee") -> tuple[dict, dict]:
+    """Every (training log, method) calibration of ``force_model`` as one unit of
+    :func:`wheelloader.sweep.run_sweep`: ``{(key, method): Calibration}`` and ``{(key, method): wall time [s]}``;
+    a calibration that fails twice stops the run with the failures named. The soils' keys reuse gravel's
+    calibrations."""
     from wheelloader.estimator.calibration import CalibrationOptions, calibrate
     from wheelloader.sweep import Unit, run_sweep
 
     keys = [(key, method) for key in train_logs for method in methods]
-    units = [Unit(calibrate, {"cycles": train_logs[key], "options": CalibrationOptions(method=method)},
-                  label=f"{key} {method}") for key, method in keys]
+    units = [Unit(calibrate, {"cycles": train_logs[key],
+                              "options": CalibrationOptions(method=method, force_model=force_model)},
+                  label=f"{key} {method}" + ("" if force_model == "fee" else f" {force_model}"))
+             for key, method in keys]
     sweep = run_sweep(units, ray, ray_cpus=ray_cpus, progress=lambda line: print(line, flush=True))
     values = sweep.values_or_raise()
     return dict(zip(keys, values, strict=True)), dict(zip(keys, sweep.unit_seconds, strict=True))
+
+
+def learned_artifact() -> dict:
+    """Which learned weights ``"fee-learned"`` used: path, version, SHA-256 of the file, the split's rule."""
+    from wheelloader.estimator.learned import DEFAULT_ARTIFACT, default_learned_model
+
+    model = default_learned_model()
+    split = (model.manifest or {}).get("split")
+    return {"path": "/".join(Path(DEFAULT_ARTIFACT).parts[-3:]), "version": model.version,
+            "sha256": hashlib.sha256(Path(DEFAULT_ARTIFACT).read_bytes()).hexdigest(),
+            "split_rule": split.get("rule") if isinstance(split, dict) else None}
+
+
+def force_model_tables(load, names: set, train_logs: dict, args) -> tuple[dict, dict]:
+    """Every force model of ``args.force_models`` (our method) on the paper's cases: ``{model: {case: rmse_pair
+    + calibration time}}`` (cases as in :func:`model_cases`) and the calibrations ``{(model, key): Calibration}``."""
+    out, cals = {}, {}
+    train_keys = {k: v for k, v in train_logs.items() if k != "gravel_seed_avg"}
+    for model in args.force_models:
+        by_key, _ = calibrate_all(train_keys, ("default",), args.ray, args.ray_cpus, force_model=model)
+        cals.update({(model, key): cal for (key, _m), cal in by_key.items()})
+        cases = {}
+        for case, (key, test, pile_of) in model_cases(names).items():
+            cal = by_key[(key, "default")]
+            raw, filt = load(test)
+            entry = rmse_pair(cal, raw, filt, pile=load(pile_of)[1].pile if pile_of else None)
+            entry["time_s"] = cal.time_s
+            cases[case] = entry
+        out[model] = cases
+        print(f"{model:12s} " + ", ".join(f"{c} {e['filtered'][1]:.1f} %" for c, e in cases.items()), flush=True)
+    return out, cals
+
+
+def model_cases(names: set) -> dict[str, tuple[str, str, str | None]]:
+    """The paper's cases present in the data: ``{label: (training key, predicted cycle, initial-surface cycle)}``
+    (the last: the depth is measured to that cycle's pile instead of the carved one; None: the log's own)."""
+    cases: dict = {"Table 3: gravel path 1 (training)": ("gravel", "gravel_path1", None)}
+    cases.update({f"Fig. 8: gravel path{k} (unseen)": ("gravel", f"gravel_path{k}", None) for k in (2, 3, 4)
+                  if f"gravel_path{k}" in names})
+    if {"gravel_dual_cycle1", "gravel_dual_cycle2"} <= names:
+        cases["Fig. 9: dual cycle 2, depth to the carved surface"] = ("dual", "gravel_dual_cycle2", None)
+        cases["Fig. 9: dual cycle 2, depth to the initial surface"] = ("dual", "gravel_dual_cycle2",
+                                                                        "gravel_dual_cycle1")
+    cases.update({f"Table 4: {soil} path 1": (soil, f"{soil}_path1", None) for soil in SOILS[1:]
+                  if f"{soil}_path1" in names})
+    return cases
 
 
 def plant_name(log) -> str:
@@ -337,6 +398,45 @@ def plots(results: dict, args, out: Path) -> None:
         plt.close(fig)
 
 
+def plot_models(results: dict, args, out: Path) -> None:
+    """fig_models.png: per case, the filtered reference F_R and each force model's prediction (our method)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from wheelloader.estimator.calibration import predict
+    from wheelloader.references import dem
+
+    models = list(results.get("force_models") or {})
+    if not models:
+        return
+    data = Path(args.data)
+    names = {e["name"] for e in json.loads((data / "manifest.json").read_text())["cycles"]}
+    cases = {c: v for c, v in model_cases(names).items() if "initial surface" not in c}
+    ncol = 3
+    nrow = -(-len(cases) // ncol)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(5.0 * ncol, 3.3 * nrow), squeeze=False)
+    colours = {"fee": "C3", "fee-payload": "C0", "fee-learned": "C2"}
+    for ax, (case, (key, test, _)) in zip(axes.ravel(), cases.items(), strict=False):
+        filt = dem.filtered(dem.load_reference(test, data), args.sigma)
+        ax.plot(filt.path.t, filt.resultant, "k", lw=1.4, label="reference (filtered)")
+        for m in models:
+            pred = predict(results["_model_cals"][(m, key)], filt)
+            ax.plot(filt.path.t, pred.resultant, color=colours.get(m, "C5"), lw=1.1,
+                    label=f"{m}")
+        ax.set_title(f"{case}: " + ", ".join(f"{results['force_models'][m][case]['filtered'][1]:.1f}"
+                                             for m in models) + " %", fontsize=8)
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel("F_R [N]")
+    for ax in axes.ravel()[len(cases):]:
+        ax.axis("off")
+    axes[0, 0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "fig_models.png", dpi=90)
+    plt.close(fig)
+
+
 def report(results: dict, args) -> str:
     f = results["filter"]
     plant = {"mpm": "plane-strain MPM continuum", "yade": "Yade DEM"}.get(results.get("plant"), results.get("plant"))
@@ -426,6 +526,8 @@ def report(results: dict, args) -> str:
         lines += ["", f"{len(results['acceptance']) - len(bad)} of {len(results['acceptance'])} comparisons hold; "
                   + ("all hold." if not bad else "failing: " + "; ".join(f"{r['case']} ({r['reference']})"
                                                                            for r in bad) + ".")]
+    if results.get("force_models"):
+        lines += ["", "## Force models side by side", "", *force_model_table(results)]
     lines += ["", f"Machine: {results['machine']['platform']}, {results['machine']['cpu_count']} CPUs, "
               f"python {results['machine']['python']}.", ""]
     return "\n".join(lines)
@@ -479,7 +581,34 @@ def summary_table(results: dict, args) -> str:
               f"{commit_label(results['machine'])}; filtered = against the reference filtered with a Gaussian "
               f"of σ = {results['filter']['sigma_s']} s, unfiltered = against its raw 60 Hz record; % of the mean "
               "observed |F_R| over the in-soil samples.*"]
+    if results.get("force_models"):
+        lines += ["", *force_model_table(results)]
     return "\n".join(lines)
+
+
+def force_model_table(results: dict) -> list[str]:
+    """Markdown lines: every force model (our method) per case, F_R RMSE filtered / unfiltered, the FEE first."""
+    models = results["force_models"]
+    on_mpm = results.get("plant") == "mpm"
+    goals = {"Table 3": "training", "Fig. 8": "unseen", "Table 4": "soil"}
+    lines = ["Force models side by side (our method, each calibrated on the same training cycle; F_R RMSE "
+             "filtered / unfiltered, in soil, as above):", "",
+             "| case | target (filtered) | " + " | ".join(models) + " |", "|---|---|" + "---|" * len(models)]
+    first = next(iter(models.values()))
+    for case in first:
+        key = next((v for k, v in goals.items() if case.startswith(k)), None)
+        if case.startswith("Fig. 9") and "carved" in case:
+            key = "dual"
+        goal = f"≤ {TARGETS[key]:g} %" if on_mpm and key else "–"
+        lines.append(f"| {case} | {goal} | " + " | ".join(
+            f"{models[m][case]['filtered'][1]:.1f} / {models[m][case]['unfiltered'][1]:.1f} %" for m in models) + " |")
+    lines.append("| calibration time, gravel path 1 | – | " + " | ".join(
+        f"{models[m]['Table 3: gravel path 1 (training)']['time_s']:.2f} s" for m in models) + " |")
+    art = results.get("learned_artifact")
+    if art:
+        lines += ["", f"*`fee-learned`: weights `{art['path']}` version {art['version']}, SHA-256 "
+                  f"`{art['sha256'][:16]}…`; split: {art['split_rule']}.*"]
+    return lines
 
 
 # ==================================================================================================================
@@ -684,10 +813,19 @@ def main(argv=None) -> int:
     parser.add_argument("--sigma", type=float, default=0.1, help="Gaussian filter sigma of the reference [s]")
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
     parser.add_argument("--seed", type=int, default=0, help="numpy seed (the methods are deterministic)")
+    parser.add_argument("--force-models", nargs="+", default=list(FORCE_MODELS), metavar="NAME",
+                        help="force models calibrated (our method) and compared side by side with the FEE "
+                             f"(default: all, {', '.join(FORCE_MODELS)}); the paper's method tables stay the FEE's")
     add_ray_arguments(parser)
     parser.add_argument("--no-estimator-study", action="store_true",
                         help="skip the issue-20 estimator study (several cycles, opt-in terms, bands; estimator.md)")
     args = parser.parse_args(argv)
+    bad = [m for m in args.force_models if m not in FORCE_MODELS]
+    if bad:
+        print(f"wheelloader: error: unknown force model {bad[0]!r} (choose from {', '.join(FORCE_MODELS)})",
+              file=sys.stderr)
+        return 2
+    args.force_models = list(dict.fromkeys(args.force_models))
     if not (Path(args.data) / "manifest.json").exists():
         print(f"no reference data in {args.data}: run wheelloader dem reference (DEM) or python -m "
               "wheelloader.references.mpm.generate (MPM)", file=sys.stderr)
@@ -696,7 +834,9 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     results = run(args)
     plots(results, args, out)
+    plot_models(results, args, out)
     results.pop("_cals")
+    results.pop("_model_cals")
     (out / "results.json").write_text(json.dumps(results, indent=1, default=lambda o: o.tolist()
                                                  if hasattr(o, "tolist") else str(o)))
     (out / "report.md").write_text(report(results, args))
