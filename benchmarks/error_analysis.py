@@ -289,6 +289,11 @@ def markdown(result: dict) -> str:
             after.append(f"{a['filtered'][0]:.0f} N ({a['filtered'][1]:.0f} %) / {a['unfiltered'][1]:.0f} %"
                          if a.get("samples") else "-")
         lines.append(f"| {case['label']} | " + " | ".join(soil + after) + " |")
+    if "fee-learned" in models:
+        lines += ["", "`fee-learned`: share of the in-soil samples whose inputs leave the correction's trusted range "
+                  "(flagged by the prediction; the correction is held at the range's edge there): "
+                  + "; ".join(f"{c['label']} {100 * c['models']['fee-learned']['outside_learned_range_in_soil']:.0f} %"
+                              for c in result["cases"]) + "."]
     for m in models:
         terms = model_terms(m)
         lines += ["", f"## {m}: error by phase", "",
