@@ -28,7 +28,8 @@ unfiltered record. The JSON records the learned weights used (version, SHA-256 o
 plotted series subsampled (every ``SERIES_STRIDE``-th sample, rounded) so that it stays small.
 
 Run: ``python benchmarks/error_analysis.py --data data/mpm --out docs/results/error_mpm``.
-Writes ``error_analysis.json``, ``error_analysis.md``, ``phases.png`` and ``terms.png``.
+Writes ``error_analysis.json``, ``error_analysis.md``, ``models.md`` (the models side by side),
+``phases.png`` and ``terms.png``.
 """
 
 from __future__ import annotations
@@ -262,24 +263,16 @@ def _reference_density(log) -> float:
     return float(ContinuumSoil.from_soil(str(meta.get("soil"))).density)
 
 
-def markdown(result: dict) -> str:
+def models_table(result: dict) -> list[str]:
+    """Markdown lines: every force model per case, in soil and after exit, filtered / unfiltered (models.md)."""
     models = result["force_models"]
-    art = result.get("learned_artifact")
-    lines = [f"# Error of the force models by phase and term ({result['data']}, method {result['method']})", "",
-             f"`python benchmarks/error_analysis.py --data {result['data']} --force-models {' '.join(models)}` at "
-             f"{commit_label(result['machine'])}; filter sigma {result['sigma_s']} s; "
-             f"curl: rho < {result['curl_rho_deg']:g} deg.", ""]
-    if art:
-        lines += [f"`fee-learned` weights: `{art['path']}` version {art['version']}, SHA-256 `{art['sha256'][:16]}…`; "
-                  f"its split: {art['split_rule']}.", ""]
-    lines += ["## The models side by side", "",
-              "Each model calibrated (our method) on the training cycle and predicting the case. In soil: F_R RMSE "
-              "in % of the mean observed |F_R| over the in-soil samples, against the filtered / unfiltered record. "
-              "After exit: the samples with the tip above the surface and soil in the bucket (the reference's fill), "
-              "RMSE in N and in % of the same in-soil mean, filtered / unfiltered.", "",
-              "| case | " + " | ".join(f"{m} in soil" for m in models) + " | "
-              + " | ".join(f"{m} after exit" for m in models) + " |",
-              "|---|" + "---|" * (2 * len(models))]
+    lines = ["Each model calibrated (our method) on the training cycle and predicting the case. In soil: F_R RMSE "
+             "in % of the mean observed |F_R| over the in-soil samples, against the filtered / unfiltered record. "
+             "After exit: the samples with the tip above the surface and soil in the bucket (the reference's fill), "
+             "RMSE in N and in % of the same in-soil mean, filtered / unfiltered.", "",
+             "| case | " + " | ".join(f"{m} in soil" for m in models) + " | "
+             + " | ".join(f"{m} after exit" for m in models) + " |",
+             "|---|" + "---|" * (2 * len(models))]
     for case in result["cases"]:
         ms = case["models"]
         soil = [f"{ms[m]['rmse_percent']:.1f} / {ms[m]['rmse_percent_unfiltered']:.1f} %" for m in models]
@@ -294,6 +287,20 @@ def markdown(result: dict) -> str:
                   "(flagged by the prediction; the correction is held at the range's edge there): "
                   + "; ".join(f"{c['label']} {100 * c['models']['fee-learned']['outside_learned_range_in_soil']:.0f} %"
                               for c in result["cases"]) + "."]
+    return lines
+
+
+def markdown(result: dict) -> str:
+    models = result["force_models"]
+    art = result.get("learned_artifact")
+    lines = [f"# Error of the force models by phase and term ({result['data']}, method {result['method']})", "",
+             f"`python benchmarks/error_analysis.py --data {result['data']} --force-models {' '.join(models)}` at "
+             f"{commit_label(result['machine'])}; filter sigma {result['sigma_s']} s; "
+             f"curl: rho < {result['curl_rho_deg']:g} deg.", ""]
+    if art:
+        lines += [f"`fee-learned` weights: `{art['path']}` version {art['version']}, SHA-256 `{art['sha256'][:16]}…`; "
+                  f"its split: {art['split_rule']}.", ""]
+    lines += ["## The models side by side", "", *models_table(result)]
     for m in models:
         terms = model_terms(m)
         lines += ["", f"## {m}: error by phase", "",
@@ -449,6 +456,8 @@ def main(argv: list[str] | None = None) -> int:
               "machine": machine_info(), "cases": cases}
     (out / "error_analysis.json").write_text(json.dumps(result, indent=1))
     (out / "error_analysis.md").write_text(markdown(result))
+    (out / "models.md").write_text("\n".join(models_table(result)) + "\n\n*`python benchmarks/error_analysis.py "
+                                   f"--data {result['data']}` at {commit_label(result['machine'])}.*\n")
     figures(result, out)
     print(markdown(result))
     return 0
