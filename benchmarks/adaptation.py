@@ -121,6 +121,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--keep-untrustworthy", action="store_true", dest="keep_untrustworthy",
                         help="ours: adopt every converged fit, trustworthy or not (the default)")
     parser.add_argument("--strategies", nargs="+", help="run only these strategies (default: all)")
+    parser.add_argument("--prior", choices=("none", "nominal"), default=None,
+                        help="ours: the calibration's prior; 'nominal' holds gamma, K and n softly at the loop's "
+                             "soil preset (the plant's soil is its 10 %% perturbation) and fits cohesion, adhesion, "
+                             "phi and delta (default: wheelloader.adaptation.DEFAULT_PRIOR)")
+    parser.add_argument("--compare-prior", action="store_true",
+                        help="also run ours with the other --prior, as strategy 'ours-PRIOR' (side by side)")
     add_ray_arguments(parser)
     parser.add_argument("--fill", choices=("log", "model"), default="log",
                         help="ours: bucket-load source of calibration and prediction (default: %(default)s)")
@@ -140,7 +146,8 @@ def main(argv: list[str] | None = None) -> int:
         return subprocess.call([sys.executable, str(Path(__file__).with_name("plant_adaptation.py")), *argv])
     args = parser.parse_args(argv)
 
-    from wheelloader.adaptation import strategy_loop
+    from wheelloader.adaptation import DEFAULT_PRIOR, strategy_loop
+    from wheelloader.estimator import preset
     from wheelloader.sweep import Unit, run_sweep
 
     if args.seeds is not None and args.seeds < 1:
@@ -149,6 +156,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         soils, piles, seeds, cycles = SOILS[:1], dict(list(PILES.items())[:1]), range(args.seeds or 1), 3
     planner = None if args.no_planner else "mpc" if args.mpc else "plan"
+    prior = args.prior or DEFAULT_PRIOR
+    other = "none" if prior == "nominal" else "nominal"
+    names = _strategy_names(args)
+    if args.compare_prior and "ours" in names:
+        names.insert(names.index("ours") + 1, f"ours-{other}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     # one unit of work = one soil x pile x seed x strategy loop; the table is built in this (submission) order
@@ -157,12 +169,17 @@ def main(argv: list[str] | None = None) -> int:
         for pile_name, pile_kwargs in piles.items():
             for seed in seeds:
                 hidden = perturbed_preset(soil_name, seed)
-                for name in _strategy_names(args):
+                for name in names:
+                    # the prior is centred on the preset the loop names; the plant digs its perturbation
+                    mine = {**_ours_options(args), "prior": prior, "prior_soil": preset(soil_name)}
+                    if name.startswith("ours-"):
+                        mine.update(prior=other, name=name)
                     keys.append({"soil": soil_name, "pile": pile_name, "seed": seed})
                     units.append(Unit(strategy_loop, {"soil": hidden, "pile": pile_kwargs, "truth": TRUTH,
-                                                      "strategy": name, "cycles": cycles, "seed": seed,
+                                                      "strategy": "ours" if name.startswith("ours") else name,
+                                                      "cycles": cycles, "seed": seed,
                                                       "planner": planner, "rl_policy": args.rl_policy,
-                                                      "ours_options": _ours_options(args),
+                                                      "ours_options": mine,
                                                       **planner_physics(args)},
                                       label=f"{soil_name:>13} | {pile_name} | seed {seed} | {name:>6}"))
     start = time.perf_counter()
@@ -180,7 +197,8 @@ def main(argv: list[str] | None = None) -> int:
                   "ours": {"window": window_used(args), "forgetting": args.forgetting,
                            "keep_untrustworthy": args.keep_untrustworthy, "fill": args.fill,
                            "carried_load": args.carried_load, "slip_friction": args.slip_friction,
-                           "failure_angle": args.failure_angle},
+                           "failure_angle": args.failure_angle, "prior": prior,
+                           "prior_soil": "the loop's soil preset"},
                   "planner_cut_angle_deg": args.cut_angle, "planner_heel_clearance_m": args.heel_clearance,
                   "planner_end_blade_angle_deg": args.end_blade_angle,
                   "planner_curl_out_intervals": args.curl_out_intervals,

@@ -39,7 +39,10 @@ from wheelloader.estimator import (
     calibrate,
     preset,
 )
+from wheelloader.estimator.calibration import HeldPrior
+from wheelloader.estimator.checks import check_range
 from wheelloader.estimator.force_models import DEFAULT_FORCE_MODEL, check_force_model, model_options_for
+from wheelloader.estimator.soil_vector import SOIL_VECTOR_NAMES, soil_vector
 from wheelloader.planner import (
     LOOP_EXIT_MIN_FILL,
     PlannerOptions,
@@ -60,6 +63,55 @@ NOMINAL_SOIL = "sand"
 #: Keyword arguments of the loop's env besides soil, pile and truth: slump the pile between cycles, the
 #: loop's end-of-cycle rule.
 LOOP_ENV_KWARGS = {"relax": True, "exit_min_fill": LOOP_EXIT_MIN_FILL}
+#: Priors of the ``ours`` strategy's calibration (:class:`LoopPrior`): ``"none"`` fits all seven fit-vector
+#: parameters freely; ``"nominal"`` holds gamma, K and n near the nominal soil (:class:`LoopPrior`).
+PRIOR_NAMES: tuple[str, ...] = ("none", "nominal")
+#: The ``ours`` strategy's default prior (``wheelloader demo --prior``, ``benchmarks/adaptation.py --prior``).
+DEFAULT_PRIOR = "none"
+
+
+@dataclass(frozen=True)
+class LoopPrior:
+    """The soft prior of the loop's calibration at the nominal soil (issue #32 item 4).
+
+    One cycle cannot identify gamma, K and n (their Sobol total indices are <= 0.08 over the training
+    families, ``docs/results/identify.md``): on one path they trade off against phi, and the best-cost fit
+    lands at bounds and is wrong at another depth. With ``mode="nominal"`` they are held by a Gaussian prior
+    (MAP, varpro method) at the nominal soil's values, and only ``free`` is fitted freely.
+
+    Parameters
+    ----------
+    mode : str
+        A name of :data:`PRIOR_NAMES`.
+    gamma_rel, k_rel : float
+        Prior standard deviation of gamma and of K = k_c / b + k_phi, relative to the nominal value (> 0).
+    n_std : float
+        Prior standard deviation of the sinkage exponent n (> 0).
+    free : tuple of str
+        Fit-vector parameters fitted freely (the Sobol rule's identifiable set).
+    """
+
+    mode: str = "none"
+    gamma_rel: float = 0.10
+    k_rel: float = 0.30
+    n_std: float = 0.15
+    free: tuple[str, ...] = ("cohesion", "adhesion", "phi", "delta")
+
+    def __post_init__(self) -> None:
+        if self.mode not in PRIOR_NAMES:
+            raise WheelloaderError(f"prior must be one of {PRIOR_NAMES}, got {self.mode!r}")
+        for name in ("gamma_rel", "k_rel", "n_std"):
+            check_range(name, getattr(self, name), 0.0, None, low_open=True, error=WheelloaderError)
+        object.__setattr__(self, "free", tuple(self.free))
+
+    def held(self, nominal: SoilParams, edge_thickness: float) -> HeldPrior | None:
+        """The calibration's :class:`~wheelloader.estimator.calibration.HeldPrior` at ``nominal`` (None: no
+        prior)."""
+        if self.mode == "none":
+            return None
+        mean = dict(zip(SOIL_VECTOR_NAMES, soil_vector(nominal, edge_thickness).tolist(), strict=True))
+        std = {"gamma": self.gamma_rel * mean["gamma"], "K": self.k_rel * mean["K"], "n": self.n_std}
+        return HeldPrior(mean, std=std, free_one=self.free)
 
 
 @dataclass
@@ -187,14 +239,24 @@ class Calibrating(Strategy):
     force_model, payload : str, PayloadOptions
         The model calibrated (:data:`~wheelloader.estimator.FORCE_MODELS`); predictions and plans use the
         calibration's (the planner gets ``force_model=``, ``payload=`` when it is not ``"fee"``).
+    prior : str or LoopPrior
+        The calibration's prior (:data:`PRIOR_NAMES` or a :class:`LoopPrior`): ``"nominal"`` holds gamma, K
+        and n softly at ``prior_soil`` and fits cohesion, adhesion, phi and delta; ``"none"`` (default) fits
+        all freely (default :data:`DEFAULT_PRIOR`).
+    prior_soil : SoilParams, optional
+        The soil the prior is centred on (default ``nominal``): the soil preset the user names, of which the
+        hidden soil is a perturbation.
     """
 
     def __init__(self, nominal: SoilParams, method: str = "default", planner: Any = None, rate: float = 60.0,
                  name: str | None = None, *, window: int | None = None, forgetting: float | None = None,
                  keep_untrustworthy: bool = True, options: ModelOptions | None = None,
                  fill: str = "log", force_model: str = DEFAULT_FORCE_MODEL,
-                 payload: PayloadOptions | None = None) -> None:
+                 payload: PayloadOptions | None = None, prior: str | LoopPrior = DEFAULT_PRIOR,
+                 prior_soil: SoilParams | None = None) -> None:
         super().__init__(nominal, rate)
+        self.prior = prior if isinstance(prior, LoopPrior) else LoopPrior(prior)
+        self.prior_soil = nominal if prior_soil is None else prior_soil
         self.method = method
         self.planner = planner
         self.previous = None
@@ -222,7 +284,7 @@ class Calibrating(Strategy):
             result = calibrate(cycles, options=CalibrationOptions(
                 method=self.method, initial=self.previous, forgetting=self.forgetting if len(self.recent) > 1 else None,
                 model_options=self.model_options, fill=self.fill, force_model=self.force_model,
-                payload=self.payload))
+                payload=self.payload, held=self.prior.held(self.prior_soil, log.bucket.edge_thickness)))
         except WheelloaderError as exc:
             return CalibrationStep(time.perf_counter() - start, False,
                                    f"calibration failed, previous parameters kept: {exc}")
@@ -302,7 +364,7 @@ def make_strategy(name: str, planner: Any = None, rl_policy: str | None = None,
     """A fresh strategy by name: ``fixed``, ``ours``, ``oracle``, ``paper`` or ``rl`` (a stable-baselines3
     PPO ``.zip`` at ``rl_policy``); ``planner`` plans between cycles (None: Bezier paths);
     ``ours_options``: keyword arguments of ``ours``' :class:`Calibrating` (``window``, ``forgetting``,
-    ``keep_untrustworthy``)."""
+    ``keep_untrustworthy``, ``prior``, ``prior_soil``, ...)."""
     if name == "fixed":
         return FixedBezier(preset(NOMINAL_SOIL))
     if name == "ours":

@@ -35,7 +35,8 @@ DEMO_PLANTS = ("fee-env", "mpm")
 
 def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner: bool = True,
              progress: Any = None, mpc: bool = False, plant: str = "fee-env",
-             resolution: float = 0.02, window: int | None = None, seeds: int = 1) -> dict[str, Any]:
+             resolution: float = 0.02, window: int | None = None, seeds: int = 1,
+             prior: str | None = None) -> dict[str, Any]:
     """Run the loop (ours and the fixed baseline), write figures and ``summary.json`` into ``out``.
 
     ``seeds`` runs of both strategies, with plant seeds ``seed, seed + 1, ...``: ``table.md`` gives each
@@ -45,7 +46,8 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     ``out/cycles/seedS/`` with several seeds; a second run into the same folder resumes). Both plants run
     :func:`wheelloader.loop.run_loop` on the plant :func:`wheelloader.references.make_plant` makes.
     ``window``: ours calibrates on the last ``window`` cycles together (default
-    :data:`wheelloader.adaptation.DEFAULT_WINDOW`).
+    :data:`wheelloader.adaptation.DEFAULT_WINDOW`). ``prior``: ours' calibration prior at the nominal soil
+    (:data:`wheelloader.adaptation.PRIOR_NAMES`; default :data:`wheelloader.adaptation.DEFAULT_PRIOR`).
     """
     from wheelloader.estimator import ParameterError
     from wheelloader.estimator.checks import check_int
@@ -55,7 +57,18 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     if plant != "fee-env" and mpc:
         raise ParameterError("--mpc needs the env's feedback and runs only with the fee-env plant")
     seeds = check_int("seeds", seeds, minimum=1, maximum=MAX_SEEDS)
-    from wheelloader.adaptation import DEFAULT_WINDOW, NOMINAL_SOIL, default_planner, hidden_default_soil
+    from wheelloader.adaptation import (
+        DEFAULT_PRIOR,
+        DEFAULT_WINDOW,
+        NOMINAL_SOIL,
+        PRIOR_NAMES,
+        default_planner,
+        hidden_default_soil,
+    )
+
+    prior = DEFAULT_PRIOR if prior is None else prior
+    if prior not in PRIOR_NAMES:
+        raise ParameterError(f"prior must be one of {PRIOR_NAMES}, got {prior!r}")
 
     say = progress or (lambda line: None)
     start = time.perf_counter()
@@ -73,7 +86,7 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
         if seeds > 1:
             say(f"seed {s} ({s - seed + 1} of {seeds}):")
         cache = out / "cycles" if seeds == 1 else out / "cycles" / f"seed{s}"
-        runs[s] = _run_seed(cache, cycles, s, planner, plant, hidden, resolution, window, say)
+        runs[s] = _run_seed(cache, cycles, s, planner, plant, hidden, resolution, window, say, prior)
     if planner is not None:
         from wheelloader.planner.nlp import release
 
@@ -90,6 +103,7 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
                    "pile": "trapezoid 30 deg, 1 m high", "metrics": "energy and fill measured by the plant"}),
         "nominal_soil": NOMINAL_SOIL,
         "calibration_window": results_window,
+        "calibration_prior": prior,
         "planner": ("none (Bezier path every cycle)" if planner is None
                     else "CasADi plan + MPC" if mpc else "CasADi plan, tracked"),
         "seeds": list(runs),
@@ -109,7 +123,7 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
 
 
 def _run_seed(cache: Path, cycles: int, seed: int, planner: Any, plant: str, hidden: Any, resolution: float,
-              window: int | None, say: Any) -> dict[str, Any]:
+              window: int | None, say: Any, prior: str) -> dict[str, Any]:
     """Both strategies' loops with one plant seed: ``{name: (records, logs)}`` (MPM cycles saved under
     ``cache / name``)."""
     from wheelloader.adaptation import NOMINAL_SOIL, Calibrating, FixedBezier
@@ -120,7 +134,7 @@ def _run_seed(cache: Path, cycles: int, seed: int, planner: Any, plant: str, hid
     # the FEE env digs every cycle in one env (its sensor noise seen raw); the MPM continuum saves each cycle
     settings = {"keep_env": True} if plant == "fee-env" else {"resolution": resolution}
     results = {}
-    for strategy in (Calibrating(preset(NOMINAL_SOIL), planner=planner, window=window),
+    for strategy in (Calibrating(preset(NOMINAL_SOIL), planner=planner, window=window, prior=prior),
                      FixedBezier(preset(NOMINAL_SOIL))):
         say(f"running {cycles} cycles, strategy '{strategy.name}', plant {plant} ...")
         digger = make_plant(plant, **settings)

@@ -31,6 +31,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--window", type=int, default=None,
                    help="calibrate on the last WINDOW cycles together (default: "
                         "wheelloader.adaptation.DEFAULT_WINDOW)")
+    p.add_argument("--prior", choices=("none", "nominal"), default=None,  # wheelloader.adaptation.PRIOR_NAMES
+                   help="the calibration's prior: 'nominal' holds gamma, K and n softly at the nominal soil (the "
+                        "'sand' preset; one cycle cannot identify them) and fits cohesion, adhesion, phi and delta; "
+                        "'none' fits all freely (default: wheelloader.adaptation.DEFAULT_PRIOR)")
     p.add_argument("--mpc", action="store_true",
                    help="execute each plan with the receding-horizon MPC instead of tracking it (slower)")
     p.add_argument("--plant", choices=DEMO_PLANTS, default="fee-env",
@@ -78,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
             shutil.copytree(out / "cycles", staged / "cycles", dirs_exist_ok=True)
         summary = run_demo(staged, cycles=args.cycles, seed=args.seed, use_planner=not args.no_planner,
                            progress=lambda line: print(line, flush=True), mpc=args.mpc, plant=args.plant,
-                           resolution=resolution, window=args.window, seeds=seeds)
+                           prior=args.prior, resolution=resolution, window=args.window, seeds=seeds)
     print()
     print(summary["table"])
     print()

@@ -1,0 +1,65 @@
+"""The loop's calibration prior at the nominal soil (``wheelloader.adaptation.LoopPrior``, issue #32 item 4)."""
+
+import argparse
+
+import pytest
+
+import wheelloader.adaptation as adaptation
+from wheelloader.adaptation import DEFAULT_PRIOR, PRIOR_NAMES, Calibrating, LoopPrior, hidden_default_soil
+from wheelloader.estimator import Pile, WheelloaderError, preset
+from wheelloader.estimator.calibration import HeldPrior
+from wheelloader.loop import run_loop
+from wheelloader.references.fee_env import FEEEnvPlant
+
+
+def test_no_prior_holds_nothing_and_nominal_holds_gamma_k_n_softly_at_the_soil():
+    sand = preset("sand")
+    assert LoopPrior("none").held(sand, 0.02) is None
+    held = LoopPrior("nominal").held(sand, 0.02)
+    assert isinstance(held, HeldPrior)
+    assert held.free_one == ("cohesion", "adhesion", "phi", "delta")
+    assert held.mean["gamma"] == pytest.approx(sand.gamma)
+    assert held.mean["K"] == pytest.approx(sand.sinkage_modulus(0.02))
+    assert held.std == pytest.approx({"gamma": 0.1 * sand.gamma, "K": 0.3 * sand.sinkage_modulus(0.02), "n": 0.15})
+    gravel = LoopPrior("nominal").held(preset("gravel"), 0.02)
+    assert gravel.mean["n"] == pytest.approx(preset("gravel").n) != pytest.approx(sand.n)
+
+
+@pytest.mark.parametrize("bad", [{"mode": "sand"}, {"mode": "nominal", "gamma_rel": 0.0},
+                                 {"mode": "nominal", "n_std": float("nan")}, {"mode": "nominal", "k_rel": -1.0}])
+def test_bad_prior_settings_are_refused(bad):
+    with pytest.raises(WheelloaderError):
+        LoopPrior(**bad)
+
+
+def test_calibrating_passes_the_prior_at_its_prior_soil(monkeypatch):
+    seen = []
+    real = adaptation.calibrate
+
+    def spy(cycles, options):
+        seen.append(options.held)
+        return real(cycles, options=options)
+
+    monkeypatch.setattr(adaptation, "calibrate", spy)
+    gravel = preset("gravel")
+    for prior, soil in (("none", None), ("nominal", None), ("nominal", gravel)):
+        seen.clear()
+        strategy = Calibrating(preset("sand"), prior=prior, prior_soil=soil)
+        records, _ = run_loop(FEEEnvPlant(keep_env=True), strategy, Pile.trapezoid(), hidden_default_soil(), 2,
+                              seed=0)
+        assert len(seen) == 1 and all(r.calibration_ok for r in records)  # after cycle 1, before cycle 2
+        want = LoopPrior(prior).held(soil or preset("sand"), 0.02)
+        assert all(h == want for h in seen)
+
+
+def test_the_demo_cli_offers_the_prior_names():
+    from wheelloader.cli import demo
+
+    parser = argparse.ArgumentParser()
+    demo.register(parser.add_subparsers())
+    args = parser.parse_args(["demo", "--prior", "nominal"])
+    assert args.prior == "nominal"
+    action = next(a for a in parser._subparsers._group_actions[0].choices["demo"]._actions if a.dest == "prior")
+    assert tuple(action.choices) == PRIOR_NAMES and DEFAULT_PRIOR in PRIOR_NAMES
+    with pytest.raises(SystemExit):
+        parser.parse_args(["demo", "--prior", "sand"])
