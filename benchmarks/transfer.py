@@ -83,7 +83,7 @@ from wheelloader.provenance import machine_info
 from wheelloader.references.filtering import filtered
 
 VARIANTS = ("fee", "fee-payload", "fee-payload + prior", "fee-payload + fixed phi, n", "fee-payload + input prior",
-            "fee-payload + residual", "fee + held", "fee-payload + held", "fee-payload + held, soft")
+            "fee-payload + residual", "fee + held", "fee-payload + held", "fee-payload + held, soft", "fee-learned")
 #: Widths of the soft held prior (``fee-payload + held, soft``): gamma 10 %, K 50 % of the held mean, n 0.15.
 HELD_SOFT_STD = {"gamma": 0.1, "K": 0.5, "n": 0.15}
 #: Candidate (K [N/m^(n+2)], n) of the held prior; the one predicting the training loops best is kept.
@@ -222,6 +222,8 @@ def held_prior(train: list[Pair], payload: PayloadOptions, free: dict) -> dict:
 
 
 def options_for(variant: str, payload: PayloadOptions, prior: dict) -> CalibrationOptions:
+    if variant == "fee-learned":  # the shipped artifact, with the payload fitted with it
+        return CalibrationOptions(force_model="fee-learned")
     if variant.endswith("held, soft"):
         held = HeldPrior.from_dict(prior["held"]["held"])
         mean = held.mean
@@ -371,7 +373,9 @@ def evaluate(variant: str, options: CalibrationOptions, test: dict[str, list[Pai
         e = errors(pred, pair, residual, cal.band_model.scale)
         e.pop("band_ratios", None)
         records.append({"row": row, "mode": mode, "train": trained, "test": pair.name, **e,
-                        "kept_fill_error": kept_fill_error(variant, pred, pair, payload)})
+                        "kept_fill_error": kept_fill_error(variant, pred, pair, options.payload or payload),
+                        "outside_training": None if pred.outside_training is None else
+                        100.0 * float(np.mean(pred.outside_training[pred.state.depth > 0.0]))})
 
     rows = {"gravel": "gravel", "sand": "sand", "modified_sand": "modified_sand (unseen soil)",
             "dirt": "dirt (held-out soil)"}
@@ -397,6 +401,17 @@ def evaluate(variant: str, options: CalibrationOptions, test: dict[str, list[Pai
     slope = test["gravel_slope25"][0]
     predicted(cal_of([slope]), slope, ROWS[4], "floor", slope.name)
     return {"records": records, "calibration_s_median": float(np.median(seconds)), "calibrations": len(seconds)}
+
+
+def check_learned_split(manifest: dict) -> None:
+    """Refuse to judge the shipped learned model on a cycle it was trained on."""
+    from wheelloader.estimator.learned import default_learned_model
+
+    learned = default_learned_model().manifest["split"]
+    trained = {Path(f).resolve() for files in learned["train"].values() for f in files}
+    tested = {Path(f).resolve() for files in manifest["test"].values() for f in files}
+    if trained & tested:
+        raise SystemExit(f"wheelloader: error: the learned model was trained on test cycles {sorted(trained & tested)}")
 
 
 def summarise(result: dict) -> dict:
@@ -485,10 +500,13 @@ def main() -> None:
     parser.add_argument("--data", type=Path, default=Path("data/mpm"), help="folder of data/mpm's cycles (test)")
     parser.add_argument("--results", type=Path, default=Path("data/results"), help="folder of the saved loops (train)")
     parser.add_argument("--out", type=Path, required=True, help="output folder")
+    parser.add_argument("--variants", nargs="+", choices=VARIANTS, default=list(VARIANTS),
+                        help="variants to run (default all; the priors, held sets and residual are fitted only if run)")
     args = parser.parse_args()
     manifest = split(args.data, args.results)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "manifest.json").write_text(json.dumps(manifest, indent=1) + "\n")
+    check_learned_split(manifest)
     train = [Pair(p) for p in manifest["train"]]
     validation = loops([Pair(p) for p in manifest["validation"]])
     test = {k: [Pair(p) for p in v] for k, v in manifest["test"].items()}
@@ -497,17 +515,20 @@ def main() -> None:
     payload = fit_payload([p.raw for p in train])
     print(f"payload {payload}", flush=True)
     samples: list = []
-    prior = data_prior(train, payload, samples)
-    print(f"prior {prior}", flush=True)
-    residual = fit_residual(samples)
-    free = free_sets(train, payload)
-    print(f"free {free['free_one']} (one cycle), {free['free_several']} (several)", flush=True)
-    prior["held"] = held_prior(train, payload, free)
-    prior["held"]["sobol"] = free
-    print(f"held {prior['held']['held']}", flush=True)
+    prior, residual = None, None
+    if any("+" in v for v in args.variants):
+        prior = data_prior(train, payload, samples)
+        print(f"prior {prior}", flush=True)
+        residual = fit_residual(samples)
+    if any("held" in v for v in args.variants):
+        free = free_sets(train, payload)
+        print(f"free {free['free_one']} (one cycle), {free['free_several']} (several)", flush=True)
+        prior["held"] = held_prior(train, payload, free)
+        prior["held"]["sobol"] = free
+        print(f"held {prior['held']['held']}", flush=True)
     result = {"benchmark": "transfer", "sigma_s": SIGMA, "band": BAND, "payload": payload.to_dict(), "prior": prior,
-              "residual": residual.to_dict(), "variants": {}, "machine": machine_info()}
-    for variant in VARIANTS:
+              "residual": None if residual is None else residual.to_dict(), "variants": {}, "machine": machine_info()}
+    for variant in args.variants:
         options = options_for(variant, payload, prior)
         res = residual if variant.endswith("residual") else None
         checks = validate(options, validation, payload, res)

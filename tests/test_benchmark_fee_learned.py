@@ -1,0 +1,67 @@
+"""``benchmarks/fee_learned.py``: the network it trains (seeded, exact gradient) and the split it ships."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wheelloader.estimator.learned import INPUT_NAMES, default_learned_model
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _load():
+    spec = importlib.util.spec_from_file_location("wheelloader_benchmark_fee_learned", ROOT / "benchmarks" /
+                                                  "fee_learned.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_training_is_seeded_and_learns_a_known_function():
+    fl = _load()
+    rng = np.random.default_rng(1)
+    x = rng.uniform(-1.0, 1.0, (400, len(INPUT_NAMES)))
+    r = np.column_stack([np.tanh(x[:, 0] - 0.5 * x[:, 8]), 0.3 * x[:, 2]])
+    w = np.full(len(x), 1.0 / len(x))
+    a = fl.train_mlp(x, r, w, hidden=6, l2=1e-6, max_iter=400)
+    b = fl.train_mlp(x, r, w, hidden=6, l2=1e-6, max_iter=400)
+    np.testing.assert_array_equal(a.w1, b.w1)
+    assert min(fl.r2(a.correction(x), r)) > 0.95
+
+
+def test_a_form_without_the_soil_inputs_ignores_them():
+    fl = _load()
+    rng = np.random.default_rng(2)
+    x = rng.uniform(-1.0, 1.0, (200, len(INPUT_NAMES)))
+    r = np.column_stack([x[:, 0], x[:, 9]])
+    mask = np.ones(len(INPUT_NAMES))
+    mask[8:] = 0.0
+    m = fl.train_mlp(x, r, np.full(len(x), 1 / len(x)), hidden=4, max_iter=200, mask=mask)
+    moved = x.copy()
+    moved[:, 8:] += 0.3
+    np.testing.assert_allclose(m.correction(moved), m.correction(x), atol=1e-12)
+
+
+def test_the_shipped_weights_name_their_build_and_split():
+    manifest = default_learned_model().manifest
+    fl = _load()
+    assert manifest["command"] == fl.COMMAND
+    split = manifest["split"]
+    assert set(split["test"]) == {"gravel", "sand", "modified_sand", "dirt", "gravel_slope25"}
+    trained = {f for files in split["train"].values() for f in files}
+    assert not trained & {f for files in split["validation"].values() for f in files}
+
+
+def test_a_missing_folder_is_one_line_exit_2(tmp_path, capsys):
+    assert _load().main(["--out", str(tmp_path), "--data", str(tmp_path / "none")]) == 2
+    assert capsys.readouterr().err.startswith("wheelloader: error:")
+
+
+@pytest.mark.parametrize("count", [1, 3])
+def test_r2_of_a_perfect_prediction_is_one(count):
+    r = np.arange(2.0 * 5 * count).reshape(-1, 2) ** 1.5
+    assert _load().r2(r, r) == [1.0, 1.0]
