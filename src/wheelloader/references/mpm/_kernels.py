@@ -15,23 +15,14 @@ The mathematics is the module docstring of :mod:`.solver`; this is how it is lai
 * **One SVD per particle and step.** The Kirchhoff stress is computed where the return mapping already
   has the singular values (grid -> particle) and kept per particle (``tau``) for the next
   particle -> grid, instead of a second SVD of ``F`` there.
-* **One particle pass per step.** A step is ``grid update; grid -> particle`` of this step followed, for
-  each particle while it is at hand, by its particle -> grid of the next step (``begin`` does the first
-  particle -> grid of an :meth:`~.solver.MPMSolver.advance`, and its last step does none, so an advance
-  leaves the same state as before). The plates are placed twice per step: this step's (``world_a``,
-  ``world_b``, ``box[0]``) and the next one's (``next_a``, ``next_b``, ``box[1]``). The lane scatter keeps
-  its order, so fusing alone changes no bit.
-* **Near plates as bits.** Whether a particle is near the tool is decided once per step (particle ->
-  grid) as the set of plates within ``TRANSFER_REACH`` cells, reused in grid -> particle (the particle has
-  not moved in between): the transfer check and the particle guard look at those plates only (a plate
-  farther away cannot be crossed by a transfer, whose nodes lie within 2.13 cells, nor reached within one
-  step unless particle and tool move ``FREE_MOTION`` cells in it, when all plates are checked).
 * **The tool's box.** Particles and nodes outside the axis-aligned box of the plates (widened by the
   largest reach the contact, the transfer check or the guard can have) skip the per-plate loops: they
   would find no plate within reach.
 * **Few kernel arguments.** A call with 33 arguments costs Taichi about 0.1 ms; the step's settings go to
   small fields once per :meth:`~.solver.MPMSolver.advance` and its tool poses in chunks, so a step is
-  called with its index (and whether a next step follows) only.
+  called with its index only.
+* **Near-tool flags.** Whether a particle is near the tool is decided once per step (particle -> grid)
+  and reused in grid -> particle (the particle has not moved in between).
 """
 
 # No ``from __future__ import annotations`` here: Taichi reads the kernels' annotations at definition.
@@ -39,9 +30,6 @@ from typing import Any
 
 #: Reach [cells] within which a particle checks its transfers against the plates (CPIC).
 TRANSFER_REACH = 2.5
-#: Motion [cells] of a particle plus the tool in one step below which a plate beyond ``TRANSFER_REACH`` at the
-#: step's start cannot come within the guard's distance (``GUARD_CELLS``) by its end.
-FREE_MOTION = 2.0
 #: The integer settings of a step, in the order of the ``iparam`` field.
 INT_PARAMS = ("n", "nx", "nz", "sticky_floor", "tool_on", "n_plates")
 #: The float settings of a step, in the order of the ``fparam`` field.
@@ -51,8 +39,8 @@ FLOAT_PARAMS = ("x0", "z0", "dx", "dt", "p_vol", "p_mass", "mu", "lam", "sin_phi
 POSE_CHUNK = 1024
 
 
-def build_kernels(fields: Any, lanes: int, atomic: bool) -> tuple[Any, Any, Any, Any]:  # noqa: C901 - one place
-    """Kernels ``(begin, step, reset_counters, init_stress)`` on ``fields`` for ``lanes`` lanes.
+def build_kernels(fields: Any, lanes: int, atomic: bool) -> tuple[Any, Any, Any]:  # noqa: C901 - one place
+    """Kernels ``(substep, reset_counters, init_stress)`` on ``fields`` for ``lanes`` lanes.
 
     ``atomic``: parallel loops with atomic scatter (GPU backends; ``lanes`` must be 1).
     """
@@ -63,7 +51,6 @@ def build_kernels(fields: Any, lanes: int, atomic: bool) -> tuple[Any, Any, Any,
     grid_v, lane_v, lane_m = fields.grid_v, fields.lane_v, fields.lane_m
     plate_a, plate_b = fields.plate_a, fields.plate_b
     world_a, world_b, box = fields.world_a, fields.world_b, fields.box
-    next_a, next_b, plate_il2, tool_move = fields.next_a, fields.next_b, fields.plate_il2, fields.tool_move
     impulse, guard_impulse, guarded = fields.lane_impulse, fields.lane_guard_impulse, fields.lane_guarded
     iparam, fparam, pose = fields.iparam, fields.fparam, fields.pose
 
@@ -85,36 +72,30 @@ def build_kernels(fields: Any, lanes: int, atomic: bool) -> tuple[Any, Any, Any,
 
     @ti.func
     def near_tool(xw, n_plates: ti.i32, reach: f32):
-        """The next step's plates within ``reach`` of the world point, as bits (plate k: bit k); transfers
-        are checked against these only."""
+        """Whether the world point is within ``reach`` of any plate (then transfers are checked)."""
         near = 0
         for k in range(n_plates):
-            a = next_a[k]
-            ab = next_b[k] - a
-            t = ti.min(ti.max((xw - a).dot(ab) * plate_il2[k], 0.0), 1.0)
-            d = xw - a - t * ab
-            if d.dot(d) < reach * reach:
-                near |= 1 << k
+            a = world_a[k]
+            ab = world_b[k] - a
+            t = ti.min(ti.max((xw - a).dot(ab) / ab.dot(ab), 0.0), 1.0)
+            if (xw - a - t * ab).norm() < reach:
+                near = 1
         return near
 
     @ti.func
-    def blocked(xw, node, n_plates: ti.i32, near: ti.i32, which: ti.template()):
-        """Index of a plate among ``near`` (bits; ``which``: 0 this step's plates, 1 the next step's) that the
-        segment particle -> node crosses (CPIC), or -1 (the highest index if several)."""
+    def blocked(xw, node, n_plates: ti.i32):
+        """Index of a plate that the segment particle -> node crosses (CPIC), or -1."""
         hit = -1
         for k in range(n_plates):
-            if (near >> k) & 1:
-                a, b = world_a[k], world_b[k]
-                if ti.static(which == 1):
-                    a, b = next_a[k], next_b[k]
-                ab = b - a
-                d1 = cross2(ab, xw - a)
-                d2 = cross2(ab, node - a)
-                pq = node - xw
-                d3 = cross2(pq, a - xw)
-                d4 = cross2(pq, b - xw)
-                if d1 * d2 < 0.0 and d3 * d4 <= 0.0:
-                    hit = k
+            a = world_a[k]
+            ab = world_b[k] - a
+            d1 = cross2(ab, xw - a)
+            d2 = cross2(ab, node - a)
+            pq = node - xw
+            d3 = cross2(pq, a - xw)
+            d4 = cross2(pq, world_b[k] - xw)
+            if d1 * d2 < 0.0 and d3 * d4 <= 0.0:
+                hit = k
         return hit
 
     @ti.func
@@ -132,36 +113,47 @@ def build_kernels(fields: Any, lanes: int, atomic: bool) -> tuple[Any, Any, Any,
 
     # ------------------------------------------------------------ particle -> grid
     @ti.func
-    def p2g_one(p: ti.i32, lane: ti.i32, xp_world, vp, cp, taup, origin, inv_dx: f32, dt: f32, p_vol: f32,
-                p_mass: f32, tool_on: ti.i32, n_plates: ti.i32):
-        """Scatter particle ``p`` (position, velocity, APIC matrix and stress given) with the next step's plates."""
+    def p2g_one(p: ti.i32, lane: ti.i32, origin, inv_dx: f32, dt: f32, p_vol: f32, p_mass: f32, tool_on: ti.i32,
+                n_plates: ti.i32):
         dx = 1.0 / inv_dx
         reach = TRANSFER_REACH * dx
         near = 0
         if tool_on:
-            if in_box(xp_world, 1, reach):
-                near = near_tool(xp_world, n_plates, reach)
+            if in_box(x[p], 0, reach):
+                near = near_tool(x[p], n_plates, reach)
         near_flag[p] = near
-        xp = (xp_world - origin) * inv_dx
+        xp = (x[p] - origin) * inv_dx
         base = ti.cast(xp - 0.5, ti.i32)
         fx = xp - ti.cast(base, f32)
         w = [0.5 * (1.5 - fx) ** 2, 0.75 - (fx - 1.0) ** 2, 0.5 * (fx - 0.5) ** 2]
-        affine = (-dt * p_vol * 4.0 * inv_dx * inv_dx) * taup + p_mass * cp
+        affine = (-dt * p_vol * 4.0 * inv_dx * inv_dx) * tau[p] + p_mass * C[p]
         for i, j in ti.static(ti.ndrange(3, 3)):
             offset = ti.Vector([i, j])
             dpos = (ti.cast(offset, f32) - fx) / inv_dx
             weight = w[i][0] * w[j][1]
             ok = 1
             if near:
-                if blocked(xp_world, origin + ti.cast(base + offset, f32) * dx, n_plates, near, 1) >= 0:
+                if blocked(x[p], origin + ti.cast(base + offset, f32) * dx, n_plates) >= 0:
                     ok = 0
             if ok:
-                add_to(lane_v, (lane, base[0] + i, base[1] + j), weight * (p_mass * vp + affine @ dpos))
+                add_to(lane_v, (lane, base[0] + i, base[1] + j), weight * (p_mass * v[p] + affine @ dpos))
                 add_to(lane_m, (lane, base[0] + i, base[1] + j), weight * p_mass)
             else:
                 # the stress (and APIC) impulse this node would have received sums to zero over all
                 # nine nodes; the plate between takes it instead (momentum is conserved)
                 add_to(impulse, lane, ti.cast(weight * (affine @ dpos), ti.f64))
+
+    @ti.func
+    def p2g(n: ti.i32, x0: f32, z0: f32, inv_dx: f32, dt: f32, p_vol: f32, p_mass: f32, tool_on: ti.i32,
+            n_plates: ti.i32):
+        origin = vec2(x0, z0)
+        if ti.static(atomic):
+            for p in range(n):
+                p2g_one(p, 0, origin, inv_dx, dt, p_vol, p_mass, tool_on, n_plates)
+        else:
+            for lane in range(lanes):
+                for p in range(lane * n // lanes, (lane + 1) * n // lanes):
+                    p2g_one(p, lane, origin, inv_dx, dt, p_vol, p_mass, tool_on, n_plates)
 
     # ------------------------------------------------------------ grid
     @ti.func
@@ -268,7 +260,7 @@ def build_kernels(fields: Any, lanes: int, atomic: bool) -> tuple[Any, Any, Any,
             dpos = ti.cast(offset, f32) - fx
             g = grid_v[base + offset]
             if near:
-                k = blocked(x[p], origin + ti.cast(base + offset, f32) * dx, n_plates, near, 0)
+                k = blocked(x[p], origin + ti.cast(base + offset, f32) * dx, n_plates)
                 if k >= 0:
                     # a node across a plate: the particle's own velocity, not moving into the plate
                     a = world_a[k]
@@ -331,16 +323,8 @@ def build_kernels(fields: Any, lanes: int, atomic: bool) -> tuple[Any, Any, Any,
         x_old = x[p]
         x_new = x_old + dt * new_v
         if tool_on:
-            # the guard acts on the plates near the particle at the step's start (``near``), unless the particle
-            # and the tool together moved so far in this step that another one could have come within reach
-            check = near
-            free = FREE_MOTION * dx - tool_move[None]
-            step_move = x_new - x_old
-            if free <= 0.0 or step_move.dot(step_move) >= free * free:
-                if in_box(x_old, 0, TRANSFER_REACH * dx) or in_box(x_new, 1, TRANSFER_REACH * dx):
-                    check = (1 << n_plates) - 1
-            for k in range(n_plates):
-                if (check >> k) & 1:
+            if in_box(x_old, 0, TRANSFER_REACH * dx) or in_box(x_new, 1, TRANSFER_REACH * dx):
+                for k in range(n_plates):
                     a = plate_a[k]
                     ab = plate_b[k] - a
                     length = ab.norm()
@@ -372,11 +356,10 @@ def build_kernels(fields: Any, lanes: int, atomic: bool) -> tuple[Any, Any, Any,
         x[p] = x_new
 
     @ti.func
-    def particles(n: ti.i32, more: ti.i32, x0: f32, z0: f32, inv_dx: f32, dt: f32, p_vol: f32, p_mass: f32, mu: f32,
-                  lam: f32, sin_phi: f32, cos_phi: f32, cohesion: f32, tool_on: ti.i32, n_plates: ti.i32,
-                  tx0: f32, tz0: f32, a0: f32, tx1: f32, tz1: f32, a1: f32, guard: f32,
-                  x_lo: f32, x_hi: f32, z_lo: f32, z_hi: f32):
-        """Grid -> particle of this step and, if ``more``, particle -> grid of the next, in one pass."""
+    def g2p(n: ti.i32, x0: f32, z0: f32, inv_dx: f32, dt: f32, p_mass: f32, mu: f32, lam: f32, sin_phi: f32,
+            cos_phi: f32, cohesion: f32, tool_on: ti.i32, n_plates: ti.i32,
+            tx0: f32, tz0: f32, a0: f32, tx1: f32, tz1: f32, a1: f32, guard: f32,
+            x_lo: f32, x_hi: f32, z_lo: f32, z_hi: f32):
         origin = vec2(x0, z0)
         c0, s0 = ti.cos(a0), ti.sin(a0)
         c1, s1 = ti.cos(a1), ti.sin(a1)
@@ -388,48 +371,33 @@ def build_kernels(fields: Any, lanes: int, atomic: bool) -> tuple[Any, Any, Any,
             for p in range(n):
                 g2p_one(p, 0, origin, inv_dx, dt, p_mass, mu, lam, sin_phi, cos_phi, cohesion, tool_on, n_plates,
                         tip0, tip1, vtip, omega, c0, s0, c1, s1, guard, x_lo, x_hi, z_lo, z_hi)
-                if more:
-                    p2g_one(p, 0, x[p], v[p], C[p], tau[p], origin, inv_dx, dt, p_vol, p_mass, tool_on, n_plates)
         else:
             for lane in range(lanes):
                 for p in range(lane * n // lanes, (lane + 1) * n // lanes):
                     g2p_one(p, lane, origin, inv_dx, dt, p_mass, mu, lam, sin_phi, cos_phi, cohesion, tool_on,
                             n_plates, tip0, tip1, vtip, omega, c0, s0, c1, s1, guard, x_lo, x_hi, z_lo, z_hi)
-                    if more:
-                        p2g_one(p, lane, x[p], v[p], C[p], tau[p], origin, inv_dx, dt, p_vol, p_mass, tool_on,
-                                n_plates)
-
-    @ti.func
-    def scatter(n: ti.i32, x0: f32, z0: f32, inv_dx: f32, dt: f32, p_vol: f32, p_mass: f32, tool_on: ti.i32,
-                n_plates: ti.i32):
-        """Particle -> grid alone (the first step of an advance)."""
-        origin = vec2(x0, z0)
-        if ti.static(atomic):
-            for p in range(n):
-                p2g_one(p, 0, x[p], v[p], C[p], tau[p], origin, inv_dx, dt, p_vol, p_mass, tool_on, n_plates)
-        else:
-            for lane in range(lanes):
-                for p in range(lane * n // lanes, (lane + 1) * n // lanes):
-                    p2g_one(p, lane, x[p], v[p], C[p], tau[p], origin, inv_dx, dt, p_vol, p_mass, tool_on, n_plates)
 
     # ------------------------------------------------------------ kernels
     @ti.func
-    def place_plates(n_plates: ti.i32, tx: f32, tz: f32, angle: f32):
-        """The plates at a pose into ``next_a``, ``next_b`` and their box into ``box[1]``."""
-        c, s = ti.cos(angle), ti.sin(angle)
-        b = ti.Vector([1e30, 1e30, -1e30, -1e30], f32)
-        move = 0.0
-        for k in range(n_plates):
-            next_a[k] = vec2(tx, tz) + body_to_world(plate_a[k], c, s)
-            next_b[k] = vec2(tx, tz) + body_to_world(plate_b[k], c, s)
-            ab = plate_b[k] - plate_a[k]
-            plate_il2[k] = 1.0 / ab.dot(ab)
-            move = ti.max(move, ti.max((next_a[k] - world_a[k]).norm(), (next_b[k] - world_b[k]).norm()))
-            for q in ti.static(range(2)):
-                b[q] = ti.min(b[q], ti.min(next_a[k][q], next_b[k][q]))
-                b[q + 2] = ti.max(b[q + 2], ti.max(next_a[k][q], next_b[k][q]))
-        box[1] = b
-        tool_move[None] = move
+    def place_tool(n_plates: ti.i32, tx0: f32, tz0: f32, a0: f32, tx1: f32, tz1: f32, a1: f32):
+        """World plates at the step's start pose; the plates' boxes at its start (0) and end (1) pose."""
+        for _ in range(1):  # one serial task
+            c0, s0 = ti.cos(a0), ti.sin(a0)
+            c1, s1 = ti.cos(a1), ti.sin(a1)
+            b0 = ti.Vector([1e30, 1e30, -1e30, -1e30], f32)
+            b1 = ti.Vector([1e30, 1e30, -1e30, -1e30], f32)
+            for k in range(n_plates):
+                world_a[k] = vec2(tx0, tz0) + body_to_world(plate_a[k], c0, s0)
+                world_b[k] = vec2(tx0, tz0) + body_to_world(plate_b[k], c0, s0)
+                e_a = vec2(tx1, tz1) + body_to_world(plate_a[k], c1, s1)
+                e_b = vec2(tx1, tz1) + body_to_world(plate_b[k], c1, s1)
+                for q in ti.static(range(2)):
+                    b0[q] = ti.min(b0[q], ti.min(world_a[k][q], world_b[k][q]))
+                    b0[q + 2] = ti.max(b0[q + 2], ti.max(world_a[k][q], world_b[k][q]))
+                    b1[q] = ti.min(b1[q], ti.min(e_a[q], e_b[q]))
+                    b1[q + 2] = ti.max(b1[q + 2], ti.max(e_a[q], e_b[q]))
+            box[0] = b0
+            box[1] = b1
 
     @ti.kernel
     def reset_counters():
@@ -445,18 +413,8 @@ def build_kernels(fields: Any, lanes: int, atomic: bool) -> tuple[Any, Any, Any,
             tau[p] = kirchhoff(U, ti.log(ti.max(sig[0, 0], 1e-4)), ti.log(ti.max(sig[1, 1], 1e-4)), mu, lam)
 
     @ti.kernel
-    def begin(k: ti.i32):
-        """Particle -> grid of step ``k`` of the poses in ``pose`` (the first step of an advance)."""
-        n, tool_on, n_plates = iparam[0], iparam[4], iparam[5]
-        x0, z0, dx, dt, p_vol, p_mass = fparam[0], fparam[1], fparam[2], fparam[3], fparam[4], fparam[5]
-        for _ in range(1):  # one serial task
-            place_plates(n_plates, pose[k, 0], pose[k, 1], pose[k, 2])
-        scatter(n, x0, z0, 1.0 / dx, dt, p_vol, p_mass, tool_on, n_plates)
-
-    @ti.kernel
-    def step(k: ti.i32, more: ti.i32):
-        """Step ``k`` of the poses in ``pose`` from its grid update on (its particle -> grid is done), and the
-        next step's particle -> grid if ``more``; settings in ``iparam`` and ``fparam`` (:data:`INT_PARAMS`,
+    def substep(k: ti.i32):
+        """Step ``k`` of the poses in ``pose`` with the settings in ``iparam`` and ``fparam`` (:data:`INT_PARAMS`,
         :data:`FLOAT_PARAMS`)."""
         n, nx, nz = iparam[0], iparam[1], iparam[2]
         sticky_floor, tool_on, n_plates = iparam[3], iparam[4], iparam[5]
@@ -466,15 +424,12 @@ def build_kernels(fields: Any, lanes: int, atomic: bool) -> tuple[Any, Any, Any,
         guard, x_lo, x_hi, z_lo, z_hi = fparam[16], fparam[17], fparam[18], fparam[19], fparam[20]
         tx0, tz0, a0 = pose[k, 0], pose[k, 1], pose[k, 2]
         tx1, tz1, a1 = pose[k + 1, 0], pose[k + 1, 1], pose[k + 1, 2]
-        for _ in range(1):  # one serial task: this step's plates and box are the last ones placed
-            box[0] = box[1]
-            for q in range(n_plates):
-                world_a[q] = next_a[q]
-                world_b[q] = next_b[q]
-            place_plates(n_plates, tx1, tz1, a1)
+        inv_dx = 1.0 / dx
+        place_tool(n_plates, tx0, tz0, a0, tx1, tz1, a1)
+        p2g(n, x0, z0, inv_dx, dt, p_vol, p_mass, tool_on, n_plates)
         grid_update(nx, nz, x0, z0, dx, dt, gravity, damp, sticky_floor, tool_on, n_plates, tx0, tz0, a0, tx1, tz1,
                     a1, band, tan_delta, adhesion_impulse)
-        particles(n, more, x0, z0, 1.0 / dx, dt, p_vol, p_mass, mu, lam, sin_phi, cos_phi, cohesion, tool_on,
-                  n_plates, tx0, tz0, a0, tx1, tz1, a1, guard, x_lo, x_hi, z_lo, z_hi)
+        g2p(n, x0, z0, inv_dx, dt, p_mass, mu, lam, sin_phi, cos_phi, cohesion, tool_on, n_plates, tx0, tz0, a0,
+            tx1, tz1, a1, guard, x_lo, x_hi, z_lo, z_hi)
 
-    return begin, step, reset_counters, init_stress
+    return substep, reset_counters, init_stress

@@ -115,13 +115,7 @@ class _Fields:
         self.plate_b = ti.Vector.field(2, ti.f32)
         self.world_a = ti.Vector.field(2, ti.f32)
         self.world_b = ti.Vector.field(2, ti.f32)
-        self.next_a = ti.Vector.field(2, ti.f32)
-        self.next_b = ti.Vector.field(2, ti.f32)
-        self.plate_il2 = ti.field(ti.f32)
-        fb.dense(ti.i, MAX_PLATES).place(self.plate_a, self.plate_b, self.world_a, self.world_b, self.next_a,
-                                         self.next_b, self.plate_il2)
-        self.tool_move = ti.field(ti.f32)
-        fb.place(self.tool_move)
+        fb.dense(ti.i, MAX_PLATES).place(self.plate_a, self.plate_b, self.world_a, self.world_b)
         self.box = ti.Vector.field(4, ti.f32)
         fb.dense(ti.i, 2).place(self.box)
         self.iparam = ti.field(ti.i32)
@@ -143,8 +137,7 @@ class _Fields:
             self.substep, self.reset_counters = build_legacy_kernels(self)
             self.init_stress = None
         else:
-            self.begin, self.step, self.reset_counters, self.init_stress = build_kernels(self, lanes,
-                                                                                      mode == "atomic")
+            self.substep, self.reset_counters, self.init_stress = build_kernels(self, lanes, mode == "atomic")
 
     def destroy(self) -> None:
         self.tree.destroy()
@@ -370,10 +363,8 @@ class MPMSolver:
                 count = min(POSE_CHUNK, steps - first)
                 poses[: count + 1] = np.column_stack([px, pz, pa])[first: first + count + 1]
                 f.pose.from_numpy(poses)
-                if first == 0:
-                    f.begin(0)  # the first particle -> grid; each step then does the next one's
                 for k in range(count):
-                    f.step(k, int(first + k + 1 < steps))
+                    f.substep(k)
         self.time = float(t_end)
         self.steps += steps
         return self.total_impulse - before
