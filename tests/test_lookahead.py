@@ -79,6 +79,7 @@ def test_the_loop_selects_it():
     assert default_planner(lookahead="fast").keywords["second"] == "bezier"
     full = default_planner(lookahead="full")
     assert "second" not in full.keywords and "candidates" not in full.keywords
+    assert "second" not in planner.keywords  # True: the full look-ahead (the fast one lost to greedy)
     with pytest.raises(WheelloaderError, match="lookahead"):
         default_planner(lookahead="deep")
 

@@ -527,11 +527,11 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
     have a 20 ms budget) (:class:`~wheelloader.planner.PlannerOptions`); ``objective``: the planner's objective
     (``"kept_per_energy"``: the opt-in energy per m^3 of kept soil, :mod:`wheelloader.planner.kept`);
     ``lookahead``: choose each plan with the cycle after it in view
-    (:func:`~wheelloader.planner.lookahead.plan_with_lookahead`): ``True`` or ``"fast"`` its fast settings
-    (:data:`~wheelloader.planner.lookahead.FAST`: greedy and one candidate warm-started from it within 20 IPOPT
-    iterations, the next cycle scored with the geometric Bezier placement, chosen only when it promises 5 % less),
-    ``"full"`` three candidates each
-    followed by the greedy plan of the next cycle, each plan within the same budgets as greedy's.
+    (:func:`~wheelloader.planner.lookahead.plan_with_lookahead`): ``True`` or ``"full"`` three candidates each
+    followed by the greedy plan of the next cycle, each plan within the same budgets as greedy's; ``"fast"``
+    :data:`~wheelloader.planner.lookahead.FAST` (greedy and one candidate warm-started from it within 20 IPOPT
+    iterations, the next cycle scored with the geometric Bezier placement; cheaper, and worse than greedy in the
+    FEE env, ``docs/results/lookahead.md``).
     """
     if lookahead not in (False, True, "fast", "full"):
         raise WheelloaderError(f"lookahead must be False, True, 'fast' or 'full', got {lookahead!r}")
@@ -550,7 +550,7 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
 
         return functools.partial(plan_with_lookahead, mpc=mpc, options=options,
                                  replan_within_iterations=BETWEEN_CYCLES_REPLAN_ITER,
-                                 exit_min_fill=LOOP_EXIT_MIN_FILL, **(FAST if lookahead != "full" else {}))
+                                 exit_min_fill=LOOP_EXIT_MIN_FILL, **(FAST if lookahead == "fast" else {}))
     return functools.partial(plan_next_cycle, mpc=mpc, options=options,
                              replan_within_iterations=BETWEEN_CYCLES_REPLAN_ITER, exit_min_fill=LOOP_EXIT_MIN_FILL)
 
