@@ -214,3 +214,14 @@ def test_the_loops_planner_checks_midpoints_and_replans_within_its_budget():
     assert plan.keywords["replan_within_iterations"] == BETWEEN_CYCLES_REPLAN_ITER == 2 * BETWEEN_CYCLES_MAX_ITER
     assert default_planner(mpc=True).keywords["options"].midpoints is False
     assert default_planner(midpoints=False).keywords["options"].midpoints is False
+
+
+def test_a_policy_that_never_ends_its_cycle_is_cut_where_the_training_env_cuts():
+    from wheelloader.envs.config import STEPS_PER_CYCLE
+
+    class Hover:  # stays in the air: the cycle never ends by itself
+        def predict(self, obs, deterministic=True):
+            return np.array([0.0, 0.5, 0.0], dtype=np.float32), None
+
+    out = PolicyPath(Hover()).plan(Pile.trapezoid())
+    assert out.success and len(out.path.t) <= STEPS_PER_CYCLE + 1

@@ -54,9 +54,13 @@ class PolicyPath(Strategy):
 
     def plan(self, pile: Pile) -> PlanOutcome:
         from wheelloader.envs import BucketLoadingEnv
+        from wheelloader.envs.config import STEPS_PER_CYCLE
 
         start = time.perf_counter()
-        env = BucketLoadingEnv(soil=self.params, pile=pile, sensor_noise=0.0, **LOOP_ENV_KWARGS)
+        # truncated where the registered env (the policy's training env) truncates: a policy that never ends
+        # its cycle on a carved pile would otherwise roll out for ever
+        env = BucketLoadingEnv(soil=self.params, pile=pile, sensor_noise=0.0, max_episode_steps=STEPS_PER_CYCLE,
+                               **LOOP_ENV_KWARGS)
         try:
             obs, _ = env.reset(seed=self.env_seed)
             terminated = truncated = False
