@@ -12,7 +12,8 @@ Reads the loops' JSON (``OUT/loops/plant_adaptation.json``, else the latest phas
 * next-cycle F_R error: the F_R RMSE of the parameters planned with against the plant's filtered force, median
   over cycles >= 3; the floor: the same cycles, each fitted to itself (``calibrate`` with the strategy's model,
   its error on that cycle), the best the FEE can do there;
-* failures: plans that failed the NumPy check (the loop then digs the Bezier fallback) and stalled cycles.
+* failures: plans that failed the NumPy check (the loop then digs the Bezier fallback), cycles that kept less
+  than 1 % of the bucket, and stalled cycles.
 
 Usage::
 
@@ -145,6 +146,7 @@ def summarise(data: dict[str, Any]) -> dict[str, Any]:
                  floor_percent=statistics.median(floors) if floors else math.nan,
                  failed_plans=sum(1 for r in sel if not r["plan_ok"]) if name in ("ours", "oracle") else 0,
                  stalled=sum(1 for r in sel if r["stalled"]),
+                 empty=sum(1 for r in sel if r["fill_m3"] < 0.01 * r["capacity_m3"]),
                  between_cycles_s_median=statistics.median(r["calibration_s"] + r["planning_s"] for r in sel
                                                            if r["cycle"] >= 2) if len(sel) > 1 else math.nan)
         loops[name] = s
@@ -227,13 +229,15 @@ def markdown(data: dict[str, Any], summary: dict[str, Any]) -> str:
     z = data["z_ref_m"]
     lines = [f"| strategy (MPM loop) | cycles | energy per m³, load lifted to {z:.2f} m | plant's energy per m³ | "
              "mean end height | mean kept fill | next-cycle F_R error from cycle 3 (median) | its floor (median) "
-             "| failed plans / stalls | between cycles (median) |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "| failed plans / empty cycles / stalls | between cycles (median) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for name, s in summary["loops"].items():
         err = "–" if math.isnan(s["error_from_cycle3_percent"]) else f"{s['error_from_cycle3_percent']:.1f} %"
         flo = "–" if math.isnan(s["floor_percent"]) else f"{s['floor_percent']:.1f} %"
         lines.append(f"| {name} | {s['cycles']} | {s['lifted_energy_per_m3_kJ']:.1f} kJ/m³ | "
                      f"{s['energy_per_m3_kJ']:.1f} kJ/m³ | {s['end_height_m']:.2f} m | {s['kept_fill']:.1%} | {err} | "
-                     f"{flo} | {s['failed_plans']} / {s['stalled']} | {s['between_cycles_s_median']:.1f} s |")
+                     f"{flo} | {s['failed_plans']} / {s['empty']} / {s['stalled']} | "
+                     f"{s['between_cycles_s_median']:.1f} s |")
     if "paired" in summary:
         p = summary["paired"]
         lines += ["", f"| paired (same piles, only the path differs) | cycles | energy per m³, lifted to {z:.2f} m | "
