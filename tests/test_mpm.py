@@ -275,8 +275,8 @@ def test_settle_cache_refuses_a_foreign_state(tmp_path):
 
 
 def test_alike_particles_fall_alike_and_as_free_fall_says(digs):
-    """One particle pass per step (grid -> particle, then the next step's particle -> grid): three particles, alike
-    (the same place within their cells) and far apart, fall alike, each moved once per step, as free fall says."""
+    """Three particles alike (the same place within their cells) and far apart in one lane fall alike, each moved
+    once per step, as free fall says (a kernel that skipped or repeated a particle of a lane would fail here)."""
     from wheelloader.references.mpm.solver import Domain, MPMSolver
 
     dx = 0.03
