@@ -6,6 +6,7 @@ import pytest
 
 import wheelloader.adaptation as adaptation
 from wheelloader.adaptation import DEFAULT_PRIOR, PRIOR_NAMES, Calibrating, LoopPrior, hidden_default_soil
+from wheelloader.demo import DEMO_PRIOR, run_demo
 from wheelloader.estimator import Pile, WheelloaderError, preset
 from wheelloader.estimator.calibration import HeldPrior
 from wheelloader.loop import run_loop
@@ -60,6 +61,24 @@ def test_the_demo_cli_offers_the_prior_names():
     args = parser.parse_args(["demo", "--prior", "nominal"])
     assert args.prior == "nominal"
     action = next(a for a in parser._subparsers._group_actions[0].choices["demo"]._actions if a.dest == "prior")
-    assert tuple(action.choices) == PRIOR_NAMES and DEFAULT_PRIOR in PRIOR_NAMES
+    assert tuple(action.choices) == PRIOR_NAMES and DEFAULT_PRIOR in PRIOR_NAMES and DEMO_PRIOR in PRIOR_NAMES
+    assert parser.parse_args(["demo"]).prior is None  # run_demo's default: DEMO_PRIOR
     with pytest.raises(SystemExit):
         parser.parse_args(["demo", "--prior", "sand"])
+
+
+def test_the_demo_holds_its_prior_and_records_it(tmp_path, monkeypatch):
+    seen = []
+    real = adaptation.calibrate
+
+    def spy(cycles, options):
+        seen.append(options.held)
+        return real(cycles, options=options)
+
+    monkeypatch.setattr(adaptation, "calibrate", spy)
+    (tmp_path / "demo").mkdir()
+    summary = run_demo(tmp_path / "demo", cycles=2, use_planner=False)
+    assert DEMO_PRIOR == "nominal" and summary["calibration_prior"] == DEMO_PRIOR
+    assert seen == [LoopPrior("nominal").held(preset(adaptation.NOMINAL_SOIL), 0.02)]
+    with pytest.raises(WheelloaderError, match="prior"):
+        run_demo(tmp_path / "bad", cycles=1, use_planner=False, prior="sand")

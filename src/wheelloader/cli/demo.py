@@ -13,7 +13,7 @@ from .staging import OutputRun
 
 def register(subparsers: Any) -> None:
     """Add the ``demo`` subcommand."""
-    from wheelloader.demo import DEFAULT_CYCLES, DEFAULT_SEEDS, DEMO_PLANTS
+    from wheelloader.demo import DEFAULT_CYCLES, DEFAULT_SEEDS, DEMO_PLANTS, DEMO_PRIOR
 
     p = subparsers.add_parser("demo", help="run the cycle-to-cycle adaptation demo on the built-in default",
                               description="Run the cycle-to-cycle adaptation loop (calibrate, predict, plan, dig) "
@@ -34,7 +34,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--prior", choices=("none", "nominal"), default=None,  # wheelloader.adaptation.PRIOR_NAMES
                    help="the calibration's prior: 'nominal' holds gamma, K and n softly at the nominal soil (the "
                         "'sand' preset; one cycle cannot identify them) and fits cohesion, adhesion, phi and delta; "
-                        "'none' fits all freely (default: wheelloader.adaptation.DEFAULT_PRIOR)")
+                        f"'none' fits all freely (default: {DEMO_PRIOR})")
     p.add_argument("--mpc", action="store_true",
                    help="execute each plan with the receding-horizon MPC instead of tracking it (slower)")
     p.add_argument("--plant", choices=DEMO_PLANTS, default="fee-env",
