@@ -39,18 +39,19 @@ from wheelloader.estimator import (
     calibrate,
     preset,
 )
-from wheelloader.estimator.calibration import HeldPrior
-from wheelloader.estimator.checks import check_range
 from wheelloader.estimator.force_models import DEFAULT_FORCE_MODEL, check_force_model, model_options_for
-from wheelloader.estimator.soil_vector import SOIL_VECTOR_NAMES, soil_vector
+from wheelloader.loop_planner import (  # noqa: F401 (re-exported: the loop's planner lived here)
+    BETWEEN_CYCLES_MAX_ITER,
+    BETWEEN_CYCLES_REPLAN_ITER,
+    LOOP_PLANNER_MIDPOINTS,
+    default_planner,
+)
+from wheelloader.loop_prior import DEFAULT_PRIOR, PRIOR_NAMES, LoopPrior  # noqa: F401 (re-exported)
 from wheelloader.planner import (
     LOOP_EXIT_MIN_FILL,
-    PlannerOptions,
     PlanOutcome,
     bezier_on_face,
     model_bezier_on_face,
-    optimizer_for,
-    plan_next_cycle,
 )
 
 #: Cycles the ``ours`` strategy calibrates on together (the last ``DEFAULT_WINDOW`` cycles), chosen by measurement
@@ -63,57 +64,6 @@ NOMINAL_SOIL = "sand"
 #: Keyword arguments of the loop's env besides soil, pile and truth: slump the pile between cycles, the
 #: loop's end-of-cycle rule.
 LOOP_ENV_KWARGS = {"relax": True, "exit_min_fill": LOOP_EXIT_MIN_FILL}
-#: Priors of the ``ours`` strategy's calibration (:class:`LoopPrior`): ``"none"`` fits all seven fit-vector
-#: parameters freely; ``"nominal"`` holds gamma, K and n near the nominal soil (:class:`LoopPrior`).
-PRIOR_NAMES: tuple[str, ...] = ("none", "nominal")
-#: The ``ours`` strategy's default prior (``wheelloader demo --prior``, ``benchmarks/adaptation.py --prior``).
-DEFAULT_PRIOR = "none"
-
-
-@dataclass(frozen=True)
-class LoopPrior:
-    """The soft prior of the loop's calibration at the nominal soil (issue #32 item 4).
-
-    One cycle cannot identify gamma, K and n (their Sobol total indices are <= 0.08 over the training
-    families, ``docs/results/identify.md``): on one path they trade off against phi, and the best-cost fit
-    lands at bounds and is wrong at another depth. With ``mode="nominal"`` they are held by a Gaussian prior
-    (MAP, varpro method) at the nominal soil's values, and only ``free`` is fitted freely.
-
-    Parameters
-    ----------
-    mode : str
-        A name of :data:`PRIOR_NAMES`.
-    gamma_rel, k_rel : float
-        Prior standard deviation of gamma and of K = k_c / b + k_phi, relative to the nominal value (> 0).
-    n_std : float
-        Prior standard deviation of the sinkage exponent n (> 0).
-    free : tuple of str
-        Fit-vector parameters fitted freely (the Sobol rule's identifiable set).
-    """
-
-    mode: str = "none"
-    gamma_rel: float = 0.10
-    k_rel: float = 0.30
-    n_std: float = 0.15
-    free: tuple[str, ...] = ("cohesion", "adhesion", "phi", "delta")
-
-    def __post_init__(self) -> None:
-        if self.mode not in PRIOR_NAMES:
-            raise WheelloaderError(f"prior must be one of {PRIOR_NAMES}, got {self.mode!r}")
-        for name in ("gamma_rel", "k_rel", "n_std"):
-            check_range(name, getattr(self, name), 0.0, None, low_open=True, error=WheelloaderError)
-        object.__setattr__(self, "free", tuple(self.free))
-
-    def held(self, nominal: SoilParams, edge_thickness: float) -> HeldPrior | None:
-        """The calibration's :class:`~wheelloader.estimator.calibration.HeldPrior` at ``nominal`` (None: no
-        prior)."""
-        if self.mode == "none":
-            return None
-        mean = dict(zip(SOIL_VECTOR_NAMES, soil_vector(nominal, edge_thickness).tolist(), strict=True))
-        std = {"gamma": self.gamma_rel * mean["gamma"], "K": self.k_rel * mean["K"], "n": self.n_std}
-        return HeldPrior(mean, std=std, free_one=self.free)
-
-
 @dataclass
 class CycleRecord:
     """Metrics of one digging cycle of one strategy (one row of the demo table)."""
@@ -484,75 +434,6 @@ def hidden_default_soil() -> SoilParams:
     g = preset("gravel")
     return g.replace(gamma=g.gamma * 1.06, phi=g.phi - 0.04, delta=g.delta + 0.03, k_c=g.k_c * 1.3)
 
-
-#: Work budget of the plan between cycles: IPOPT iterations per solve. A plan stopped at this limit is used
-#: only when it passes the NumPy check (feasible, not proven optimal); otherwise it is re-planned with wider
-#: margins while at most the budget is spent, and then the loop falls back to
-#: :func:`~wheelloader.planner.model_bezier_on_face`. An iteration count, not a wall time, so that the same
-#: seed gives the same cycles on a quiet and on a busy machine.
-BETWEEN_CYCLES_MAX_ITER = 130
-#: Work budget of the plan and its re-plans with wider margins together [IPOPT iterations]: a re-plan starts
-#: only while fewer have been spent. Twice :data:`BETWEEN_CYCLES_MAX_ITER`, so that a plan the NLP finds
-#: infeasible on a carved pile can be re-planned twice (measured on the 3 plans of ours that failed in
-#: ``benchmarks/adaptation.py``, cycles 4-5: with 130 each was re-planned once and none passed; with 260 one
-#: passed, with 400 no more). Plans that pass at once spend no more.
-BETWEEN_CYCLES_REPLAN_ITER = 2 * BETWEEN_CYCLES_MAX_ITER
-#: The loop's planner constrains forces and the validity domain at every interval's midpoint too
-#: (``PlannerOptions.midpoints``). On the piles the loop carves, plans that the NLP solved at its nodes failed
-#: the NumPy check at 1-5 samples between them (blade too flat to a carved step, slope clamped). Measured on
-#: the loops of ``benchmarks/adaptation.py`` (18 x 5 cycles; load about 4): plans passing the check ours 81 ->
-#: 87 of 90, the oracle 80 -> 90; energy per m^3 ours / oracle 1.08 -> 1.04; median time between cycles
-#: 0.41 -> 0.66 s. (With a wider rho margin as well, 8 or 10 deg, fewer passed.)
-LOOP_PLANNER_MIDPOINTS = True
-
-
-def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_angle: float | None = None,
-                    fill_limit: float | None = None, heel_clearance: float | None = None,
-                    end_blade_angle: float | None = None, curl_out_intervals: int = 0,
-                    midpoints: bool | None = None, objective: str = "fill_energy",
-                    lookahead: bool | str = False) -> Callable[[SoilParams, Pile], PlanOutcome]:
-    """The planner used between cycles.
-
-    A full-cycle CasADi plan within :data:`BETWEEN_CYCLES_MAX_ITER` IPOPT
-    iterations (with its re-plans at wider margins, :data:`BETWEEN_CYCLES_REPLAN_ITER` in all),
-    checked with the NumPy model, tracked in the env; with
-    ``mpc`` an MPC controller re-plans the rest of the cycle every 0.1 s
-    (slower, see the planner benchmark). ``failure_angle``: the planner's
-    force-model rule for beta*; ``cut_angle``: its opt-in cutting cone [rad]; ``fill_limit``: the largest
-    planned fill as a share of the bucket's nominal capacity (None: the planner's default);
-    ``heel_clearance``: the opt-in height of the bucket's heel above the surface [m];
-    ``end_blade_angle``: the opt-in smallest blade angle at the end [rad], ``curl_out_intervals`` the last
-    intervals in which the bucket then curls out of the pile; ``midpoints``: forces and validity also at the
-    intervals' midpoints (default :data:`LOOP_PLANNER_MIDPOINTS` for the plan, off with ``mpc``, whose re-plans
-    have a 20 ms budget) (:class:`~wheelloader.planner.PlannerOptions`); ``objective``: the planner's objective
-    (``"kept_per_energy"``: the opt-in energy per m^3 of kept soil, :mod:`wheelloader.planner.kept`);
-    ``lookahead``: choose each plan with the cycle after it in view
-    (:func:`~wheelloader.planner.lookahead.plan_with_lookahead`): ``True`` or ``"full"`` three candidates each
-    followed by the greedy plan of the next cycle, each plan within the same budgets as greedy's; ``"fast"``
-    :data:`~wheelloader.planner.lookahead.FAST` (greedy and one candidate warm-started from it within 20 IPOPT
-    iterations, the next cycle scored with the geometric Bezier placement; cheaper, and worse than greedy in the
-    FEE env, ``docs/results/lookahead.md``).
-    """
-    if lookahead not in (False, True, "fast", "full"):
-        raise WheelloaderError(f"lookahead must be False, True, 'fast' or 'full', got {lookahead!r}")
-    extra = {} if fill_limit is None else {"fill_limit": fill_limit}
-    if midpoints is None:
-        midpoints = LOOP_PLANNER_MIDPOINTS and not mpc
-    options = PlannerOptions(max_iter=BETWEEN_CYCLES_MAX_ITER, failure_angle=failure_angle, cut_angle=cut_angle,
-                             heel_clearance=heel_clearance, end_blade_angle=end_blade_angle,
-                             curl_out_intervals=curl_out_intervals, midpoints=midpoints, objective=objective,
-                             **extra)
-    # build the plan's NLP before the loop's timings start; those of the two wider-margin re-plans are built
-    # when a plan first fails its check (once per process: planner.optimizer_for)
-    optimizer_for(options=options)
-    if lookahead:
-        from wheelloader.planner.lookahead import FAST, plan_with_lookahead
-
-        return functools.partial(plan_with_lookahead, mpc=mpc, options=options,
-                                 replan_within_iterations=BETWEEN_CYCLES_REPLAN_ITER,
-                                 exit_min_fill=LOOP_EXIT_MIN_FILL, **(FAST if lookahead == "fast" else {}))
-    return functools.partial(plan_next_cycle, mpc=mpc, options=options,
-                             replan_within_iterations=BETWEEN_CYCLES_REPLAN_ITER, exit_min_fill=LOOP_EXIT_MIN_FILL)
 
 
 # the policy strategies live in their own module (this one's size); re-exported here, where they were
