@@ -173,8 +173,8 @@ def test_compiled_without_a_compiler_falls_back_to_the_virtual_machine(pile, mon
 
     monkeypatch.setenv("CC", str(tmp_path / "no-such-cc"))
     # this test's solvers and its failed compile stay out of the process's memo of NLPs
-    monkeypatch.setattr(nlp, "_CACHE", {key: {**entry, "solvers": dict(entry["solvers"]),
-                                              "derivatives": dict(entry["derivatives"])}
+    monkeypatch.setattr(nlp, "_CACHE", {key: type(entry)({**entry, "solvers": dict(entry["solvers"]),
+                                                          "derivatives": dict(entry["derivatives"])})
                                         for key, entry in nlp._CACHE.items()})
     start = default_start(pile)
     plans = []
