@@ -44,6 +44,20 @@ def test_no_test_family_and_no_held_out_soil_or_pile_is_trained_on():
     assert all(Path(p).is_file() for p in train + validation + test)
 
 
+def test_no_copy_of_a_test_cycle_is_trained_on_under_another_name():
+    # a loop's first fixed cycle on the start pile is data/mpm's path 1 itself: it must be dropped by content
+    module, split = _load("transfer"), _split()
+    cwd = os.getcwd()
+    os.chdir(ROOT)
+    try:
+        test = {module._content_digest(p) for paths in split["test"].values() for p in paths}
+        assert split["dropped_as_test_copies"]  # the shipped loops do hold such copies
+        assert not any(module._content_digest(p) in test for p in split["train"] + split["validation"])
+        assert all(module._content_digest(p) in test for p in split["dropped_as_test_copies"])
+    finally:
+        os.chdir(cwd)
+
+
 def test_band_scale_is_the_smallest_reaching_the_level():
     import numpy as np
 
