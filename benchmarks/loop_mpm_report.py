@@ -142,13 +142,13 @@ def summarise(data: dict[str, Any]) -> dict[str, Any]:
         s = pooled(sel)
         from3 = [r["prediction_rmse_percent"] for r in sel if r["cycle"] >= 3]
         floors = [r["floor_percent"] for r in sel if "floor_percent" in r]
+        between = [r["calibration_s"] + r["planning_s"] for r in sel if r["cycle"] >= 2]  # none in a 1-cycle run
         s.update(error_from_cycle3_percent=statistics.median(from3) if from3 else math.nan,
                  floor_percent=statistics.median(floors) if floors else math.nan,
                  failed_plans=sum(1 for r in sel if not r["plan_ok"]) if name in ("ours", "oracle") else 0,
                  stalled=sum(1 for r in sel if r["stalled"]),
                  empty=sum(1 for r in sel if r["fill_m3"] < 0.01 * r["capacity_m3"]),
-                 between_cycles_s_median=statistics.median(r["calibration_s"] + r["planning_s"] for r in sel
-                                                           if r["cycle"] >= 2) if len(sel) > 1 else math.nan)
+                 between_cycles_s_median=statistics.median(between) if between else math.nan)
         loops[name] = s
     out: dict[str, Any] = {"loops": loops}
     ours = {(r["soil"], r["seed"], r["cycle"]): r for r in rows if r["strategy"] == "ours"}

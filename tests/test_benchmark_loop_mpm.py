@@ -71,6 +71,19 @@ def test_gap_table_compares_the_same_loops():
     assert gap["ours"]["kept_gap_points"] == pytest.approx(-10.0)
 
 
+
+def test_one_cycle_loops_have_no_between_cycles_time():
+    # a run of one cycle per loop (the slow test's N=1) has no cycle 2: the median is NaN, not an error
+    import math
+
+    report = _load()
+    rows = [_row(name, 1, 0.10, 5000.0, seed=seed) for name in ("fixed", "ours") for seed in (0, 1)]
+    loops = report.summarise({"rows": rows, "fixed_on_ours": []})["loops"]
+    assert loops["ours"]["cycles"] == 2 and math.isnan(loops["ours"]["between_cycles_s_median"])
+    rows += [_row("ours", 2, 0.10, 5000.0)]
+    assert report.summarise({"rows": rows, "fixed_on_ours": []})["loops"]["ours"]["between_cycles_s_median"] == \
+        pytest.approx(0.5)
+
 def _need_taichi():
     try:
         import taichi  # noqa: F401
