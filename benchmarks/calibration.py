@@ -36,7 +36,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import shutil
 import statistics
 import subprocess
 import sys
@@ -289,8 +288,6 @@ def several_cycles_timing(args) -> dict:
 
 # ----------------------------------------------------------------------------- speed against a baseline
 #: Layout of the package in the repository (pyproject's package-dir): what a baseline worker imports.
-PACKAGE_DIRS = {"src/wheelloader": "wheelloader", "estimator": "wheelloader/estimator", "envs": "wheelloader/envs",
-                "planner": "wheelloader/planner"}
 SPEED_METHODS = (("baseline", "default"), ("current", "default"), ("current", "multi-stage"))
 
 
@@ -331,23 +328,6 @@ def _worker() -> int:
     return 0
 
 
-def _extract(rev: str, into: Path) -> tuple[str, Path]:
-    """``git archive`` of ``rev``'s package into ``into``; its full commit and the directory to import from."""
-    root = Path(__file__).resolve().parents[1]
-    commit = subprocess.run(["git", "-C", str(root), "rev-parse", rev], capture_output=True, text=True,
-                            check=True).stdout.strip()
-    raw = into / "tree"
-    raw.mkdir(parents=True)
-    archive = subprocess.run(["git", "-C", str(root), "archive", commit, *PACKAGE_DIRS], capture_output=True,
-                             check=True).stdout
-    subprocess.run(["tar", "-x", "-C", str(raw)], input=archive, check=True)
-    pkg = into / "pkg"
-    pkg.mkdir()
-    for src, dst in PACKAGE_DIRS.items():  # the parent package first, then its subpackages into it
-        shutil.move(str(raw / src), str(pkg / dst))
-    return commit, pkg
-
-
 def speed_against_baseline(args) -> dict:
     """Fit time of the default method, baseline ``args.baseline`` against the current code, and the
     multi-stage method, interleaved per repeat (module docstring)."""
@@ -357,7 +337,9 @@ def speed_against_baseline(args) -> dict:
         specs.append({"name": f"{log.stem.removesuffix('_path1')} path 1 (MPM)", "kind": "log", "path": str(log)})
     script = str(Path(__file__).resolve())
     with tempfile.TemporaryDirectory(prefix="calibration-baseline-") as tmp:
-        commit, pkg = _extract(args.baseline, Path(tmp))
+        from wheelloader.provenance import package_at_revision  # here: the baseline worker runs an older package
+
+        commit, pkg = package_at_revision(Path(__file__).resolve().parents[1], args.baseline, Path(tmp))
         env_base = dict(os.environ)
         workers = {}
         for version, path in (("baseline", str(pkg)), ("current", None)):

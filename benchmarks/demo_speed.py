@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import shutil
 import statistics
 import subprocess
 import sys
@@ -30,29 +29,10 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-#: Layout of the package in the repository (pyproject's package-dir): what a baseline run imports.
-PACKAGE_DIRS = {"src/wheelloader": "wheelloader", "estimator": "wheelloader/estimator", "envs": "wheelloader/envs",
-                "planner": "wheelloader/planner"}
 #: summary.json fields that are timings or describe the machine, left out of the comparison.
 TIMING_FIELDS = frozenset({"calibration_s", "planning_s", "between_cycles_s", "wall_time_s", "machine"})
 #: The issue's targets: wall time [s] and peak resident memory [MB] of the demo.
 TARGETS = {"wall_s": 8.0, "max_rss_mb": 300.0}
-
-
-def _extract(rev: str, into: Path) -> tuple[str, Path]:
-    """``git archive`` of ``rev``'s package into ``into``; its full commit and the directory to import from."""
-    commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", rev], capture_output=True, text=True,
-                            check=True).stdout.strip()
-    raw = into / "tree"
-    raw.mkdir(parents=True)
-    archive = subprocess.run(["git", "-C", str(ROOT), "archive", commit, *PACKAGE_DIRS], capture_output=True,
-                             check=True).stdout
-    subprocess.run(["tar", "-x", "-C", str(raw)], input=archive, check=True)
-    pkg = into / "pkg"
-    pkg.mkdir()
-    for src, dst in PACKAGE_DIRS.items():  # the parent package first, then its subpackages into it
-        shutil.move(str(raw / src), str(pkg / dst))
-    return commit, pkg
 
 
 def strip_timings(value):
@@ -101,7 +81,9 @@ def side_by_side(args) -> dict:
     runs: list[dict] = []
     with tempfile.TemporaryDirectory(prefix="demo-speed-") as tmp:
         tmp = Path(tmp)
-        commit, pkg = _extract(args.baseline, tmp / "baseline")
+        from wheelloader.provenance import package_at_revision
+
+        commit, pkg = package_at_revision(ROOT, args.baseline, tmp / "baseline")
         reference = None
         for rnd in range(1, args.rounds + 1):
             for version, path in (("baseline", str(pkg)), ("current", None)):

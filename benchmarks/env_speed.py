@@ -30,10 +30,8 @@ import os
 import statistics
 import subprocess
 import sys
-import tarfile
 import tempfile
 import time
-from io import BytesIO
 from pathlib import Path
 
 import numpy as np
@@ -202,18 +200,10 @@ def worker(args: argparse.Namespace) -> int:
 
 # ------------------------------------------------------------------ parent
 def export_version(ref: str, into: Path) -> Path:
-    """``git archive`` of ``ref``'s package folders, laid out as an importable ``wheelloader`` package."""
-    data = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", ref, "src/wheelloader", "estimator",
-                           "envs", "planner"], check=True, capture_output=True).stdout
-    raw = into / "raw"
-    with tarfile.open(fileobj=BytesIO(data)) as tar:
-        tar.extractall(raw, filter="data")
-    pkg = into / "site" / "wheelloader"
-    pkg.parent.mkdir()
-    (raw / "src" / "wheelloader").rename(pkg)
-    for name in ("estimator", "envs", "planner"):
-        (raw / name).rename(pkg / name)
-    return into / "site"
+    """``ref``'s package, laid out as an importable ``wheelloader`` package; the directory to import from."""
+    from wheelloader.provenance import package_at_revision  # here: a worker may run an older package
+
+    return package_at_revision(ROOT, ref, into)[1]
 
 
 def run_worker(args: argparse.Namespace, site: Path | None) -> dict:

@@ -87,3 +87,29 @@ def commit_label(machine: dict[str, object]) -> str:
     git = machine.get("git") or {}
     commit = str(git.get("commit") or "unknown")[:10]  # type: ignore[union-attr]
     return commit + (" (uncommitted changes)" if git.get("dirty") else "")  # type: ignore[union-attr]
+
+
+#: The package's folders in the repository and where each lands in an importable tree (pyproject's package-dir):
+#: the parent package first, then its subpackages into it.
+PACKAGE_DIRS = {"src/wheelloader": "wheelloader", "estimator": "wheelloader/estimator", "envs": "wheelloader/envs",
+                "planner": "wheelloader/planner"}
+
+
+def package_at_revision(root: Path, rev: str, into: Path) -> tuple[str, Path]:
+    """The package as it was at git revision ``rev`` of the repository ``root``, for a benchmark's baseline.
+
+    ``git archive`` of :data:`PACKAGE_DIRS` at ``rev``, laid out under ``into`` as an importable ``wheelloader``.
+    Returns the full commit and the directory to put first on ``PYTHONPATH``.
+    """
+    commit = subprocess.run(["git", "-C", str(root), "rev-parse", rev], capture_output=True, text=True,
+                            check=True).stdout.strip()
+    raw = into / "tree"
+    raw.mkdir(parents=True)
+    archive = subprocess.run(["git", "-C", str(root), "archive", commit, *PACKAGE_DIRS], capture_output=True,
+                             check=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(raw)], input=archive, check=True)
+    pkg = into / "pkg"
+    pkg.mkdir()
+    for src, dst in PACKAGE_DIRS.items():
+        (raw / src).rename(pkg / dst)
+    return commit, pkg
