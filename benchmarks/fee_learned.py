@@ -36,7 +36,6 @@ family's residual taken at its own joint soil.
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import math
 import sys
@@ -64,16 +63,12 @@ TEST_ROWS = {"gravel": "gravel", "sand": "sand", "modified_sand": "modified_sand
              "dirt": "dirt (held-out soil)", "gravel_slope25": "25 deg pile (held-out pile)"}
 
 
-def _digest(log: CycleLog) -> str:
-    return hashlib.sha1(np.round(np.asarray(log.tangential), 3).tobytes()).hexdigest()
-
-
 def split(data: Path, results: Path, learn: Path) -> dict:
     """The split by case family (module docstring): group name -> list of files, per part."""
     test = {soil: [str(data / f"{soil}_path{i}.csv") for i in range(1, 5)]
             for soil in ("gravel", "sand", "modified_sand", "dirt")}
     test["gravel_slope25"] = [str(data / "gravel_slope25_path1.csv")]
-    test_digests = {_digest(CycleLog.load(f)) for files in test.values() for f in files}
+    test_digests = {CycleLog.load(f).content_digest() for files in test.values() for f in files}
     train: dict[str, list[str]] = {}
     dropped = []
     for f in sorted(results.glob("adaptation_mpm*/cycles/**/*.csv.xz")) + sorted(
@@ -81,7 +76,7 @@ def split(data: Path, results: Path, learn: Path) -> dict:
         rel = f.relative_to(results)
         # group: one soil in one experiment folder and seed (its strategies' cycles on their carved piles)
         key = "/".join(rel.parts[:4]) if rel.parts[0].startswith("adaptation") else "/".join(rel.parts[:3])
-        if _digest(CycleLog.load(f)) in test_digests:
+        if CycleLog.load(f).content_digest() in test_digests:
             dropped.append(str(f))
             continue
         train.setdefault(key, []).append(str(f))

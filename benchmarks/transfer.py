@@ -59,7 +59,6 @@ Run: ``python benchmarks/transfer.py --out docs/results/transfer`` (about 20 min
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import math
 import time
@@ -108,8 +107,8 @@ def split(data: Path, results: Path) -> dict:
     test["gravel_slope25"] = [str(data / "gravel_slope25_path1.csv")]
     # a loop's first fixed (and oracle) cycle on the start pile is the very cycle data/mpm ships as path 1:
     # such copies are dropped from train and validation by content, so no test cycle is trained on
-    test_digests = {_content_digest(f) for files in test.values() for f in files}
-    dropped = [f for f in train + validation if _content_digest(f) in test_digests]
+    test_digests = {CycleLog.load(f).content_digest() for files in test.values() for f in files}
+    dropped = [f for f in train + validation if CycleLog.load(f).content_digest() in test_digests]
     train = [f for f in train if f not in dropped]
     validation = [f for f in validation if f not in dropped]
     return {"rule": "split by case family (soil x pile x path family); train: the saved MPM loops of the base and "
@@ -119,10 +118,6 @@ def split(data: Path, results: Path) -> dict:
                     "entirely: the soils modified_sand and dirt, the 25 deg pile",
             "train": train, "validation": validation, "test": test, "dropped_as_test_copies": dropped}
 
-
-def _content_digest(path: str) -> str:
-    """A cycle's identity by content (its tangential force rounded to 1 mN), not by file name."""
-    return hashlib.sha1(np.round(np.asarray(CycleLog.load(path).tangential), 3).tobytes()).hexdigest()
 
 
 class Pair:

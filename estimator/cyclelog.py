@@ -37,6 +37,7 @@ writes them when the path it is given ends in ``.csv.xz``, and every reader here
 from __future__ import annotations
 
 import csv
+import hashlib
 import json
 import lzma
 import math
@@ -185,6 +186,11 @@ class CycleLog:
     def resultant(self) -> np.ndarray:
         """Measured F_R = sqrt(F_T^2 + F_N^2) [N]."""
         return np.hypot(self.tangential, self.normal)
+
+    def content_digest(self) -> str:
+        """The cycle's identity by content: SHA-1 of the tangential force rounded to 1 mN (the same dig saved
+        under another name, e.g. a loop's first cycle that a data set also ships, has the same digest)."""
+        return hashlib.sha1(np.round(np.asarray(self.tangential), 3).tobytes()).hexdigest()
 
     def contact_state(self, slope_window: float = DEFAULT_SLOPE_WINDOW, fill: str = "log") -> ContactState:
         """Contact geometry of this cycle (with the tip's acceleration from the path).

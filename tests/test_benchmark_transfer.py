@@ -9,6 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from wheelloader.estimator import CycleLog
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -46,14 +48,14 @@ def test_no_test_family_and_no_held_out_soil_or_pile_is_trained_on():
 
 def test_no_copy_of_a_test_cycle_is_trained_on_under_another_name():
     # a loop's first fixed cycle on the start pile is data/mpm's path 1 itself: it must be dropped by content
-    module, split = _load("transfer"), _split()
+    split = _split()
     cwd = os.getcwd()
     os.chdir(ROOT)
     try:
-        test = {module._content_digest(p) for paths in split["test"].values() for p in paths}
+        test = {CycleLog.load(p).content_digest() for paths in split["test"].values() for p in paths}
         assert split["dropped_as_test_copies"]  # the shipped loops do hold such copies
-        assert not any(module._content_digest(p) in test for p in split["train"] + split["validation"])
-        assert all(module._content_digest(p) in test for p in split["dropped_as_test_copies"])
+        assert not any(CycleLog.load(p).content_digest() in test for p in split["train"] + split["validation"])
+        assert all(CycleLog.load(p).content_digest() in test for p in split["dropped_as_test_copies"])
     finally:
         os.chdir(cwd)
 
