@@ -37,6 +37,8 @@ Variants (calibration on the reference Gaussian-filtered at sigma 0.1 s, the mod
 * ``fee-payload + held, soft``: the same held parameters under a Gaussian prior at those means
   (:data:`HELD_SOFT_STD`: gamma 10 %, K 50 %, n 0.15) instead of fixed: a path that does determine them may
   move them;
+* ``fee-payload-depth``: ``force_model="fee-payload-depth"`` (``fee-payload`` with N_gamma + k, k fitted to the
+  training loops by ``benchmarks/model_form.py --fit-offset``) with the payload fitted to the training cycles;
 * ``fee-payload + residual``: a learned correction beyond the FEE (``wheelloader.estimator.residual``, a ridge
   on dimensionless inputs) trained on the training cycles' residuals after their own ``fee-payload`` fits; the
   soil is fitted to the measured forces minus the residual, and the residual added to the prediction (the band
@@ -83,7 +85,8 @@ from wheelloader.provenance import machine_info
 from wheelloader.references.filtering import filtered
 
 VARIANTS = ("fee", "fee-payload", "fee-payload + prior", "fee-payload + fixed phi, n", "fee-payload + input prior",
-            "fee-payload + residual", "fee + held", "fee-payload + held", "fee-payload + held, soft", "fee-learned")
+            "fee-payload + residual", "fee + held", "fee-payload + held", "fee-payload + held, soft", "fee-learned",
+            "fee-payload-depth")
 #: Widths of the soft held prior (``fee-payload + held, soft``): gamma 10 %, K 50 % of the held mean, n 0.15.
 HELD_SOFT_STD = {"gamma": 0.1, "K": 0.5, "n": 0.15}
 #: Candidate (K [N/m^(n+2)], n) of the held prior; the one predicting the training loops best is kept.
@@ -231,6 +234,8 @@ def held_prior(train: list[Pair], payload: PayloadOptions, free: dict) -> dict:
 def options_for(variant: str, payload: PayloadOptions, prior: dict) -> CalibrationOptions:
     if variant == "fee-learned":  # the shipped artifact, with the payload fitted with it
         return CalibrationOptions(force_model="fee-learned")
+    if variant == "fee-payload-depth":  # its N_gamma offset fitted to the training loops (benchmarks/model_form.py)
+        return CalibrationOptions(force_model="fee-payload-depth", payload=payload)
     if variant.endswith("held, soft"):
         held = HeldPrior.from_dict(prior["held"]["held"])
         mean = held.mean

@@ -24,6 +24,7 @@ from wheelloader.estimator import (
     soil_forces_single,
 )
 from wheelloader.estimator.checks import check_optional_int
+from wheelloader.estimator.force_models import fee_options_for
 from wheelloader.estimator.kinematics import surface_contact
 from wheelloader.estimator.learned_plant import LearnedCorrection, learned_correction
 from wheelloader.estimator.payload import kept_volume_float
@@ -345,7 +346,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
     def _initial_forces(self, k: int) -> tuple[float, float]:
         """Forces at the start pose (measured with the noise of step index ``k``), logged as sample 0."""
         f_t, f_n, beta, flags = soil_forces_single(self._soil, self._depth, self._rho, self._alpha, self._lt, 0.0,
-                                                   self.cfg.bucket, DEFAULT_OPTIONS)
+                                                   self.cfg.bucket, fee_options_for(self.cfg.force_model))
         learned = self._learned_at(self._soil) if self.cfg.payload is not None else None
         if learned is not None:  # "fee-learned" at rest with an empty bucket
             d_t, d_n = learned.single(self._depth, self._rho, self._alpha, self._th, 0.0, 0.0, 0.0)

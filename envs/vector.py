@@ -35,7 +35,6 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from wheelloader.estimator import (
-    DEFAULT_OPTIONS,
     FLAG_OUT_OF_SOIL,
     GRAVITY,
     ContactState,
@@ -47,6 +46,7 @@ from wheelloader.estimator import (
 )
 from wheelloader.estimator.checks import check_int
 from wheelloader.estimator.force_model import carried_forces
+from wheelloader.estimator.force_models import fee_options_for
 from wheelloader.estimator.learned_plant import LearnedCorrection, learned_correction
 from wheelloader.estimator.payload import kept_volume
 
@@ -299,7 +299,8 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
             self._crest_of = (pile, float(np.max(pile.heights)))
         self._crest[i] = self._crest_of[1]
         self._noise_n[i], self._noise_u[i] = draw_noise_chunk(rng)
-        f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, lt, 0.0, cfg.bucket, DEFAULT_OPTIONS)
+        f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, lt, 0.0, cfg.bucket,
+                                                   fee_options_for(cfg.force_model))
         if cfg.force_model == "fee-learned":  # at rest with an empty bucket
             d_t, d_n = self._correction(soil).single(depth, rho, alpha, th, 0.0, 0.0, 0.0)
             f_t, f_n = f_t + d_t, f_n + d_n
@@ -336,6 +337,7 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         guess = self._beta[rows]
         ins = depth > 0.0
         bucket = self.cfg.bucket
+        options = fee_options_for(self.cfg.force_model)
         groups = self._soil_groups()
         for soil, members in groups:
             if isinstance(members, slice):
@@ -345,7 +347,7 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
             if sel.size == 0:
                 continue
             state = ContactState(depth[sel], rho[sel], alpha[sel], lt[sel], fill[sel])
-            out = soil_forces(soil, state, bucket, DEFAULT_OPTIONS, beta_guess=guess[sel])
+            out = soil_forces(soil, state, bucket, options, beta_guess=guess[sel])
             f_t[sel], f_n[sel], flags[sel], beta[sel] = out.tangential, out.normal, out.flags, out.beta
         return f_t, f_n, flags, beta
 

@@ -23,7 +23,7 @@ from .force_model import (
     soil_forces,
     soil_forces_single,
 )
-from .force_models import DEFAULT_PAYLOAD, FORCE_MODELS
+from .force_models import DEFAULT_PAYLOAD, DEFAULT_WEDGE_OFFSET, FORCE_MODELS
 from .kinematics import DEFAULT_SLOPE_WINDOW, ContactState, blade_length_in_soil, contact_single, contact_state
 from .machine import Bucket, Loader
 from .paths import BucketPath, bezier_path, default_path, paper_paths, polyline_path
@@ -75,8 +75,9 @@ def __dir__() -> list[str]:
 
 __all__ = [
     "Bucket", "BucketPath", "Calibration", "CalibrationError", "CalibrationOptions", "CarveResult", "ContactState",
-    "CycleLog", "CycleLogError", "DEFAULT_METHOD", "DEFAULT_OPTIONS", "DEFAULT_PAYLOAD", "FORCE_MODELS",
-    "DEFAULT_SLOPE_WINDOW", "FLAG_NAMES", "FLAG_OUT_OF_SOIL", "FitQuality", "FitWarning", "GRAVITY", "Loader",
+    "CycleLog", "CycleLogError", "DEFAULT_METHOD", "DEFAULT_OPTIONS", "DEFAULT_PAYLOAD", "DEFAULT_WEDGE_OFFSET",
+    "FORCE_MODELS", "DEFAULT_SLOPE_WINDOW", "FLAG_NAMES", "FLAG_OUT_OF_SOIL", "FitQuality", "FitWarning", "GRAVITY",
+    "Loader",
     "METHODS", "METHOD_ALIASES", "ModelOptions", "PAPER_BOUNDS", "PARAMETER_NAMES", "PRESET_NAMES", "ParameterError",
     "PayloadOptions", "Pile", "PlanningError", "Prediction", "SOIL_VECTOR_NAMES", "SoilForces", "SoilParams",
     "StageResult", "SurfaceCarver", "Uncertainty", "WheelloaderError", "as_soil", "bearing_factors", "bezier_path",

@@ -280,7 +280,7 @@ def soil_forces(soil: SoilParams, state: ContactState, bucket: Bucket,
     else:
         beta = optimal_beta(alpha, rho, phi, delta, options, guess=beta_guess)  # eq 14
     n_gamma, n_c, n_a, n_q = bearing_factors(alpha, rho, beta, phi, delta)
-    n_gamma = np.maximum(n_gamma, 0.0)
+    n_gamma = np.maximum(n_gamma, 0.0) + options.wedge_offset  # eq 10; the opt-in offset (ModelOptions)
     w_load = state.load_weight(soil.gamma)
     fee = (d * d * w * soil.gamma * GRAVITY * n_gamma + soil.cohesion * w * d * n_c
            + soil.adhesion * w * d * n_a + ramp * w_load * n_q)  # eq 1
@@ -371,6 +371,7 @@ def soil_forces_single(soil: SoilParams, depth: float, rho: float, alpha: float,
     sin_beta = math.sin(beta)
     sab = math.sin(alpha + beta + phi)
     n_gamma = max(math.cos(alpha + beta) * sab / (2.0 * math.cos(alpha) * sin_beta * s_beta), 0.0)
+    n_gamma += options.wedge_offset  # the opt-in offset (ModelOptions.wedge_offset)
     n_c = math.cos(phi) / (sin_beta * s_beta)
     n_a = -math.cos(rho + beta + phi) / (math.sin(rho) * s_beta)
     n_q = sab / s_beta

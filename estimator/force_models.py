@@ -12,6 +12,10 @@ name                      model
 ``"fee-learned"``         ``"fee-payload"`` plus a correction learned offline from the continuum (MPM) cycles,
                           with the soil among its inputs (:mod:`~wheelloader.estimator.learned`); its payload
                           is the one fitted with it (the shipped artifact's), unless given
+``"fee-payload-depth"``   ``"fee-payload"`` with a depth-squared share of the soil's weight beside the wedge,
+                          ``N_gamma + k`` in eq 1 (:attr:`~wheelloader.estimator.ModelOptions.wedge_offset`,
+                          ``k =`` :data:`DEFAULT_WEDGE_OFFSET`, fitted offline to the continuum's training
+                          cycles): the calibrated phi no longer carries the depth scaling; no new parameter
 ========================  ===================================================================================
 
 :data:`DEFAULT_PAYLOAD` is the payload fitted to the project's continuum cycles except the held-out soil
@@ -22,6 +26,7 @@ the model refit it on their own training split.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import replace
 
 from .checks import check_choice
@@ -29,22 +34,26 @@ from .cyclelog import CycleLog
 from .errors import ParameterError
 from .kinematics import ContactState
 from .payload import PayloadOptions, payload_contact_state
-from .validity import ModelOptions
+from .validity import DEFAULT_OPTIONS, ModelOptions
 
-__all__ = ["DEFAULT_FORCE_MODEL", "DEFAULT_PAYLOAD", "FORCE_MODELS", "PAYLOAD_MODELS", "PLANT_FORCE_MODELS",
-           "check_force_model", "cycle_contact_state", "model_options_for"]
+__all__ = ["DEFAULT_FORCE_MODEL", "DEFAULT_PAYLOAD", "DEFAULT_WEDGE_OFFSET", "FORCE_MODELS", "PAYLOAD_MODELS",
+           "PLANT_FORCE_MODELS", "check_force_model", "fee_options_for", "cycle_contact_state", "model_options_for"]
 
 #: Names accepted by ``force_model=``.
-FORCE_MODELS: tuple[str, ...] = ("fee", "fee-payload", "fee-learned")
+FORCE_MODELS: tuple[str, ...] = ("fee", "fee-payload", "fee-learned", "fee-payload-depth")
 #: The names the env and the planner take: all of them (the env evaluates ``"fee-learned"``'s correction with
 #: :mod:`~wheelloader.estimator.learned_plant`, the planner with its CasADi twin
 #: :func:`~wheelloader.estimator.learned.casadi_correction`).
 PLANT_FORCE_MODELS: tuple[str, ...] = FORCE_MODELS
 #: The models built on the payload state.
-PAYLOAD_MODELS: tuple[str, ...] = ("fee-payload", "fee-learned")
+PAYLOAD_MODELS: tuple[str, ...] = ("fee-payload", "fee-learned", "fee-payload-depth")
 DEFAULT_FORCE_MODEL = "fee"
 #: The payload fitted to the continuum training cycles (module docstring); rounded to 4 digits.
 DEFAULT_PAYLOAD = PayloadOptions(retention=0.9649, heap_factor=0.6059, sharpness=1.926)
+#: ``"fee-payload-depth"``'s offset ``k`` of N_gamma (:attr:`ModelOptions.wedge_offset`), fitted to the training
+#: loops of ``benchmarks/transfer.py`` (never to its test paths) by ``python benchmarks/model_form.py --fit-offset``
+#: (``docs/results/model_form.md``).
+DEFAULT_WEDGE_OFFSET = 2.0
 
 
 def check_force_model(name: object, payload: PayloadOptions | None, error: type[Exception] = ParameterError
@@ -53,7 +62,7 @@ def check_force_model(name: object, payload: PayloadOptions | None, error: type[
     check_choice("force_model", name, FORCE_MODELS, error=error)
     if name == "fee":
         if payload is not None:
-            raise error('payload options need force_model="fee-payload" (or "fee-learned")')
+            raise error('payload options need force_model="fee-payload" (or "fee-learned", "fee-payload-depth")')
         return None
     if payload is None and name == "fee-learned":
         from .learned import default_learned_model
@@ -68,7 +77,16 @@ def check_force_model(name: object, payload: PayloadOptions | None, error: type[
 
 def model_options_for(name: str, options: ModelOptions) -> ModelOptions:
     """The force-model options ``name`` needs on top of ``options`` (the payload's carried load)."""
+    if name == "fee-payload-depth":
+        return replace(options, carried_load=True, carried_in_soil=False, wedge_offset=DEFAULT_WEDGE_OFFSET)
     return replace(options, carried_load=True, carried_in_soil=False) if name in PAYLOAD_MODELS else options
+
+
+@functools.lru_cache(maxsize=8)
+def fee_options_for(name: str) -> ModelOptions:
+    """The FEE's options under model ``name`` without the carried load (the envs add that on their own): the paper's
+    options, or ``"fee-payload-depth"``'s N_gamma offset."""
+    return replace(model_options_for(name, DEFAULT_OPTIONS), carried_load=False)
 
 
 def cycle_contact_state(log: CycleLog, name: str, payload: PayloadOptions | None, slope_window: float,

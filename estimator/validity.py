@@ -109,6 +109,14 @@ class ModelOptions:
         wedge and surcharge, ``d^2 N_gamma + q N_q`` with ``q = r V_fill / w``
         (:mod:`~wheelloader.estimator.failure_angle`). The planner's CasADi model does not implement it
         (it is named in :attr:`extra_terms`).
+    wedge_offset : float
+        Opt-in term beyond the paper (default 0, the paper's model): ``k >= 0`` added to the wedge factor
+        N_gamma of eq 10 after its clamp at 0, so eq 1's weight term is ``gamma g w d^2 (N_gamma + k)``: a
+        depth-squared share of the soil's weight that does not depend on phi, resolved like the FEE force
+        (``sin(delta)``, ``cos(delta)``, eqs 16-17). Fitted to the continuum's paths, the FEE alone makes phi
+        carry the depth scaling (15-30 deg below the continuum's) and fakes a cohesion in cohesionless soils;
+        with ``k`` the calibrated phi no longer has to (``docs/results/model_form.md``). The
+        ``"fee-payload-depth"`` force model sets it (:data:`~wheelloader.estimator.DEFAULT_WEDGE_OFFSET`).
     """
 
     eps1: float = math.radians(5.0)
@@ -122,12 +130,14 @@ class ModelOptions:
     slip_friction: bool = False
     slip_speed: float = 0.05
     failure_angle: str = "min_n_gamma"
+    wedge_offset: float = 0.0
 
     @property
     def extra_terms(self) -> tuple[str, ...]:
         """Names of the opt-in terms beyond the paper's model that are on (empty: the paper's model)."""
         names = tuple(name for name in ("carried_load", "slip_friction") if getattr(self, name))
-        return names + (("failure_angle",) if self.failure_angle != "min_n_gamma" else ())
+        names += ("failure_angle",) if self.failure_angle != "min_n_gamma" else ()
+        return names + (("wedge_offset",) if self.wedge_offset != 0.0 else ())
 
     def __post_init__(self) -> None:
         check_choice("ModelOptions.failure_angle", self.failure_angle, ("min_n_gamma", "min_weight_force"))
@@ -136,6 +146,7 @@ class ModelOptions:
                 raise ParameterError(f"ModelOptions.{name} must be True or False, got {getattr(self, name)!r}")
         for name in ("eps1", "eps2", "rho_min", "alpha_max", "contact_depth", "slope_margin", "slip_speed"):
             check_range(f"ModelOptions.{name}", getattr(self, name), 0.0, None, low_open=True)
+        check_range("ModelOptions.wedge_offset", self.wedge_offset, 0.0, 100.0)
         if self.eps1 + self.eps2 + self.rho_min >= math.pi / 2 or self.alpha_max >= math.pi / 2 - self.eps1:
             raise ParameterError("ModelOptions: eps1 + eps2 + rho_min must be < 90 deg and alpha_max < 90 deg - eps1")
 

@@ -132,6 +132,7 @@ def casadi_forces(soil, vertical_depth, rho, alpha, load_weight, bucket: Bucket,
     sin_beta = ca.sin(beta)
     sab = ca.sin(alpha_c + beta + phi)
     n_gamma = smooth_pos(ca.cos(alpha_c + beta) * sab / (2.0 * ca.cos(alpha_c) * sin_beta * s_beta), 1e-6)  # eq 10
+    n_gamma = n_gamma + options.wedge_offset  # the opt-in offset (ModelOptions.wedge_offset)
     n_c = ca.cos(phi) / (sin_beta * s_beta)  # eq 11
     n_a = -ca.cos(rho_c + beta + phi) / (ca.sin(rho_c) * s_beta)  # eq 12
     n_q = sab / s_beta  # eq 13

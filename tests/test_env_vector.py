@@ -23,6 +23,7 @@ _CONFIGS = [
     {"force_model": "fee-payload", "soil": "dirt", "loader": {"max_push_force": 1500.0}, "stall_patience": 3},
     {"force_model": "fee-payload", "payload": {"retention": 0.7, "heap_factor": 0.4, "sharpness": 3.0},
      "soil": "random", "truth": {"stone_rate": 3.0}, "keep_pile": True},
+    {"force_model": "fee-payload-depth", "soil": "dirt", "loader": {"max_push_force": 1500.0}, "stall_patience": 3},
     {"force_model": "fee-learned", "soil": "dirt", "loader": {"max_push_force": 900.0}, "stall_patience": 3},
     {"force_model": "fee-learned", "soil": "random", "truth": {"stone_rate": 3.0}, "keep_pile": True},
 ]

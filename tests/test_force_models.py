@@ -27,7 +27,7 @@ def payload_cal(log):
 
 
 def test_names_listed():
-    assert FORCE_MODELS == ("fee", "fee-payload", "fee-learned")
+    assert FORCE_MODELS == ("fee", "fee-payload", "fee-learned", "fee-payload-depth")
 
 
 def test_calibration_carries_its_model_and_predict_needs_nothing_more(log, payload_cal):

@@ -256,11 +256,12 @@ class FitData:
     def fee_basis(self, f: Factors):
         """``(B_gamma, B_c, B_a, q0)`` of the module docstring from :class:`Factors` (broadcast)."""
         weight, surcharge, wd = self._basis_weights
+        n_gamma = f.n_gamma + self.options.wedge_offset if self.options.wedge_offset else f.n_gamma  # ModelOptions
         if self.measured_load is None:
-            b_gamma = weight * f.n_gamma + surcharge * f.n_q
+            b_gamma = weight * n_gamma + surcharge * f.n_q
             q0 = np.zeros_like(b_gamma)
         else:
-            b_gamma = weight * f.n_gamma + np.zeros_like(f.n_q)
+            b_gamma = weight * n_gamma + np.zeros_like(f.n_q)
             q0 = surcharge * f.n_q
         return b_gamma, wd * f.n_c, wd * f.n_a, q0
 
