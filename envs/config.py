@@ -164,8 +164,19 @@ def pile_toe(pile: Pile) -> float:
 
 def nominal_start_pose(pile: Pile) -> tuple[float, float, float]:
     """The env's default start pose on ``pile``: 0.10 m before the toe, 0.03 m above the ground, blade
-    at -5 deg (x [m], z [m], blade angle [rad])."""
-    return pile_toe(pile) - 0.10, float(pile.heights.min()) + 0.03, math.radians(-5.0)
+    at -5 deg (x [m], z [m], blade angle [rad]).
+
+    The ground is the surface's minimum, or the highest surface from the pile's first node to the toe where
+    that is higher: a carved pile whose floor dips below its first node (a plant's measured surface: a few
+    mm of spill at the first node, a dip of one grid cell further on; the toe is then the first node) would
+    otherwise start the tip inside the soil with the blade flat to it, outside the model's validity domain,
+    and every plan on that pile failed its check (the MPM loop's sand piles 3-5, ``docs/results/loop_mpm.md``).
+    """
+    z = pile.heights
+    rising = np.nonzero(z > z.min() + 1e-9)[0]
+    first = int(rising[0]) if rising.size else 0
+    ground = max(float(z.min()), float(z[: max(first, 1)].max()))
+    return pile_toe(pile) - 0.10, ground + 0.03, math.radians(-5.0)
 
 
 def _as_obj(value: Any, cls: type, name: str):

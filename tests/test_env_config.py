@@ -10,7 +10,7 @@ import pytest
 
 from wheelloader.envs import BucketLoadingEnv, EnvConfig, RewardTerms, RewardWeights
 from wheelloader.envs.bookkeeping import reward_terms
-from wheelloader.envs.config import REWARD_TERMS, SETTING_NAMES
+from wheelloader.envs.config import REWARD_TERMS, SETTING_NAMES, nominal_start_pose, pile_toe
 from wheelloader.envs.vector import BucketLoadingVectorEnv
 from wheelloader.estimator import Bucket, Loader, ParameterError, Pile, preset
 
@@ -83,3 +83,22 @@ def test_reward_terms_are_named_and_sum_in_order():
     assert terms.fill == pytest.approx(0.1 / 1.2) and terms.validity == -0.01 and terms.stall == 0.0
     assert terms.total() == terms[0] + terms[1] + terms[2] + terms[3] + terms[4]
     assert REWARD_TERMS == tuple("reward_" + name for name in RewardTerms._fields)
+
+
+def test_nominal_start_pose_clears_a_carved_floor_that_dips_below_its_first_node():
+    # a plant's carved surface: a few mm of spill at the first node, a dip of one grid cell further on, then the
+    # face; the old rule started the tip at min + 0.03 m = 0.0 m, inside the spill, with the blade flat to it
+    fresh = Pile.trapezoid()
+    x = np.asarray(fresh.x)
+    z = np.where(x < 0.1, 0.0, np.asarray(fresh.heights))
+    z[0] = 0.005
+    z[(x > -0.4) & (x < 0.0)] = -0.03
+    carved = Pile.from_polyline(x, z)
+    x0, z0, blade = nominal_start_pose(carved)
+    assert x0 <= carved.x0
+    assert z0 == pytest.approx(0.005 + 0.03)
+    assert z0 > carved.height_at(x0) + 0.02
+    assert blade == pytest.approx(math.radians(-5.0))
+    # a pile whose lowest ground is in front of the face keeps the old start (min + 0.03 m, 0.10 m before the toe)
+    assert nominal_start_pose(fresh) == pytest.approx((pile_toe(fresh) - 0.10, float(fresh.heights.min()) + 0.03,
+                                                       math.radians(-5.0)))
