@@ -2,10 +2,11 @@
 # The loop judged in the MPM plant (#33 acceptance): fixed Bezier path, ours (greedy plan, kept objective) and
 # the hindsight oracle, gravel and sand x 2 seeds x 5 cycles, and the fixed path dug on every pile ours started
 # a cycle from (paired). One process at a time, resumable: every dug cycle is saved (xz) and read back when the
-# same command runs again. The phases are ordered so that a run cut short leaves whole comparisons:
+# same command runs again. The phases run in this order, so that a run cut short leaves whole comparisons
+# (the paired ones first; the folders keep their numbers):
 #   1 seed 0 of both soils: ours' loops and the fixed path on their piles (the paired comparison);
-#   2 seed 0: the hindsight oracle, its parameters fitted to the soil's cycles dug so far (ours');
 #   3 seed 1: ours and the fixed path on its piles;
+#   2 seed 0: the hindsight oracle, its parameters fitted to the soil's seed-0 cycles of ours;
 #   4 the fixed path's own loops (their first cycle is the paired one on the untouched pile, copied);
 #   5 every seed: the oracle with its parameters fitted to all of the soil's cycles (fixed and ours: phase 2's
 #     loops are dug again where the refit changes their plans).
@@ -15,6 +16,7 @@
 #   OUT     results (default docs/results/loop_mpm); CYCLES saved cycles (default data/results/loop_mpm/cycles)
 #   PY      the Python to run (default python)
 #   RES, N  MPM grid spacing [m] and cycles per loop (defaults 0.02 and 5; the smoke test: RES=0.06 N=2)
+#   PRIOR   ours' calibration prior (plant_adaptation.py --prior: none, nominal or held; default none)
 #   RL_POLICY  a PPO model.zip (train/ppo.py): after phase 2, its path (rolled out in the FEE env of the
 #           nominal soil on each pile, adaptation.PolicyPath) dug in the plant, seed 0 of both soils (OUT/rl)
 set -euo pipefail
@@ -23,24 +25,25 @@ CYCLES=${2:-data/results/loop_mpm/cycles}
 PY=${PY:-python}
 RES=${RES:-0.02}
 N=${N:-5}
+PRIOR=${PRIOR:-none}
 COMMON=(--plant mpm --resolution "$RES" --threads 2 --ray off --cycles "$N" --failure-angle min_weight_force
         --heel-clearance 0 --end-blade-angle 55 --curl-out-intervals 8 --midpoints off
-        --objective kept_per_energy --stale error)
+        --objective kept_per_energy --stale error --prior "$PRIOR")
 adapt() { "$PY" benchmarks/plant_adaptation.py "${COMMON[@]}" --cycles-dir "$CYCLES/loops" "$@"; }
 paired() { "$PY" benchmarks/plant_paired.py --plant mpm --resolution "$RES" --threads 2 --ray off \
     --cycles "$CYCLES/loops" --cycles-dir "$CYCLES/paired" --out "$OUT/paired"; }
 echo "phase 1: seed 0, gravel and sand: ours, then the fixed path on its piles ($(date -u))"
 adapt --soils gravel sand --seeds 1 --strategies ours --out "$OUT/phase1"
 paired
-echo "phase 2: seed 0: the hindsight oracle fitted to ours' cycles ($(date -u))"
+echo "phase 3: seed 1: ours, then the fixed path on its piles ($(date -u))"
+adapt --soils gravel sand --seeds 2 --strategies ours --out "$OUT/phase3"
+paired
+echo "phase 2: seed 0: the hindsight oracle fitted to ours' seed-0 cycles ($(date -u))"
 adapt --soils gravel sand --seeds 1 --strategies ours oracle --out "$OUT/phase2"
 if [ -n "${RL_POLICY:-}" ]; then
   echo "phase 2b: seed 0: the trained policy's paths ($(date -u))"
   adapt --soils gravel sand --seeds 1 --strategies rl_path --rl-policy "$RL_POLICY" --out "$OUT/rl"
 fi
-echo "phase 3: seed 1: ours, then the fixed path on its piles ($(date -u))"
-adapt --soils gravel sand --seeds 2 --strategies ours --out "$OUT/phase3"
-paired
 echo "phase 4: the fixed path's loops ($(date -u))"
 for soil in gravel sand; do
   for seed in 0 1; do

@@ -100,7 +100,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     args.fill_limit_used = fill_limit
     loop_kwargs = {"plant": plant, "cycles": args.cycles, "planner": not args.no_planner, "fill_limit": fill_limit,
                    "failure_angle": args.failure_angle, "objective": args.objective, "lookahead": args.lookahead,
-                   "rl_policy": args.rl_policy,
+                   "rl_policy": args.rl_policy, "prior": args.prior,
                    **planner_physics(args)}
     learning = [s for s in args.strategies if s != "oracle"]
     keys = [(soil, seed, name) for soil in args.soils for seed in range(args.seeds) for name in learning]
@@ -259,6 +259,7 @@ def markdown(result: dict[str, Any], cycles: Path | None = None) -> str:
               + ("" if s.get("midpoints") is None else f"; `--midpoints {s['midpoints']}`")
               + ("" if s.get("objective", "fill_energy") == "fill_energy" else f"; `--objective {s['objective']}`")
               + ("" if not s.get("lookahead") else "; `--lookahead`")
+              + ("" if s.get("prior", "none") == "none" else f"; ours with `--prior {s['prior']}`")
               + ("" if s.get("fill_limit_used") is None else f", planned fill ≤ {s['fill_limit_used']:.0%} of 0.2 m³")
               + ") at "
               f"{commit_label(result['machine'])}; loops run with `--ray {s.get('ray', 'off')}`; the last "
@@ -312,6 +313,9 @@ def main(argv: list[str] | None = None) -> int:
                              "(default), dig it again, or keep it as the cycle dug (its distance to the plan made "
                              "now is recorded); the oracle's loops always dig such a cycle again (its parameters "
                              "are fitted anew to the soil's cycles: a saved cycle may have been planned with others)")
+    parser.add_argument("--prior", choices=("none", "nominal", "held"), default="none",
+                        help="ours' calibration prior at its nominal soil (wheelloader.loop_prior.LOOP_PRIORS): none "
+                             "(default), nominal (gamma, K, n held softly) or held (all seven held softly)")
     add_ray_arguments(parser)
     parser.add_argument("--report", action="store_true",
                         help="only rewrite the Markdown and the figure from OUT/plant_adaptation.json")

@@ -1,6 +1,7 @@
 """The loop's calibration prior at the nominal soil (``wheelloader.adaptation.LoopPrior``, issue #32 item 4)."""
 
 import argparse
+import math
 
 import pytest
 
@@ -82,3 +83,38 @@ def test_the_demo_holds_its_prior_and_records_it(tmp_path, monkeypatch):
     assert seen == [LoopPrior("nominal").held(preset(adaptation.NOMINAL_SOIL), 0.02)]
     with pytest.raises(WheelloaderError, match="prior"):
         run_demo(tmp_path / "bad", cycles=1, use_planner=False, prior="sand")
+
+
+def test_held_prior_holds_all_seven_softly_and_names_resolve():
+    from wheelloader.loop_prior import HELD_PRIOR, LOOP_PRIORS, loop_prior
+
+    sand = preset("sand")
+    held = loop_prior("held").held(sand, 0.02)
+    assert loop_prior("held") is HELD_PRIOR and held.free_one == ()
+    assert held.mean["phi"] == pytest.approx(sand.phi) and held.mean["cohesion"] == pytest.approx(0.0)
+    assert held.std["phi"] == pytest.approx(math.radians(5.0)) and held.std["adhesion"] == pytest.approx(1000.0)
+    assert set(held.std) == {"gamma", "K", "n", "phi", "delta", "cohesion", "adhesion"}
+    assert loop_prior("nominal") == LoopPrior("nominal") and loop_prior("none").held(sand, 0.02) is None
+    assert set(LOOP_PRIORS) >= set(PRIOR_NAMES)
+    with pytest.raises(WheelloaderError):
+        loop_prior("sand")
+    with pytest.raises(WheelloaderError):
+        LoopPrior("nominal", phi_std=-1.0)
+
+
+def test_plant_loop_unit_calibrates_ours_with_the_named_prior(tmp_path, monkeypatch):
+    from wheelloader.loop import plant_loop_unit
+    from wheelloader.loop_prior import HELD_PRIOR
+
+    seen = []
+    real = adaptation.calibrate
+
+    def spy(cycles, options):
+        seen.append(options.held)
+        return real(cycles, options=options)
+
+    monkeypatch.setattr(adaptation, "calibrate", spy)
+    out = plant_loop_unit(FEEEnvPlant(sensor_noise=0.0), "ours", "gravel", cycles=2, seed=0, cache=None,
+                          planner=False, failure_angle="min_weight_force", prior="held")
+    assert out["records"][1]["calibration_ok"]
+    assert seen == [HELD_PRIOR.held(preset(adaptation.NOMINAL_SOIL), 0.02)]  # calibrated after cycle 1

@@ -46,7 +46,7 @@ from wheelloader.loop_planner import (  # noqa: F401 (re-exported: the loop's pl
     LOOP_PLANNER_MIDPOINTS,
     default_planner,
 )
-from wheelloader.loop_prior import DEFAULT_PRIOR, PRIOR_NAMES, LoopPrior  # noqa: F401 (re-exported)
+from wheelloader.loop_prior import DEFAULT_PRIOR, PRIOR_NAMES, LoopPrior, loop_prior  # noqa: F401 (re-exported)
 from wheelloader.planner import (
     LOOP_EXIT_MIN_FILL,
     PlanOutcome,
@@ -190,9 +190,10 @@ class Calibrating(Strategy):
         The model calibrated (:data:`~wheelloader.estimator.FORCE_MODELS`); predictions and plans use the
         calibration's (the planner gets ``force_model=``, ``payload=`` when it is not ``"fee"``).
     prior : str or LoopPrior
-        The calibration's prior (:data:`PRIOR_NAMES` or a :class:`LoopPrior`): ``"nominal"`` holds gamma, K
-        and n softly at ``prior_soil`` and fits cohesion, adhesion, phi and delta; ``"none"`` (default) fits
-        all freely (default :data:`DEFAULT_PRIOR`).
+        The calibration's prior (a name of :data:`~wheelloader.loop_prior.LOOP_PRIORS` or a
+        :class:`LoopPrior`): ``"nominal"`` holds gamma, K and n softly at ``prior_soil`` and fits cohesion,
+        adhesion, phi and delta; ``"held"`` holds all seven softly (:data:`~wheelloader.loop_prior.HELD_PRIOR`);
+        ``"none"`` fits all freely (default :data:`DEFAULT_PRIOR`).
     prior_soil : SoilParams, optional
         The soil the prior is centred on (default ``nominal``): the soil preset the user names, of which the
         hidden soil is a perturbation.
@@ -205,7 +206,7 @@ class Calibrating(Strategy):
                  payload: PayloadOptions | None = None, prior: str | LoopPrior = DEFAULT_PRIOR,
                  prior_soil: SoilParams | None = None) -> None:
         super().__init__(nominal, rate)
-        self.prior = prior if isinstance(prior, LoopPrior) else LoopPrior(prior)
+        self.prior = loop_prior(prior)
         self.prior_soil = nominal if prior_soil is None else prior_soil
         self.method = method
         self.planner = planner

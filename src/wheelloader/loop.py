@@ -258,7 +258,8 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
                     fill_limit: float | None = None, heel_clearance: float | None = None,
                     end_blade_angle: float | None = None, curl_out_intervals: int = 0,
                     midpoints: bool | None = None, objective: str = "fill_energy",
-                    lookahead: bool = False, rl_policy: str | None = None) -> dict[str, Any]:
+                    lookahead: bool = False, rl_policy: str | None = None,
+                    prior: str = "none") -> dict[str, Any]:
     """One loop of :func:`run_loop` on the trapezoid pile as a unit of :mod:`wheelloader.sweep` (picklable
     arguments only).
 
@@ -278,6 +279,8 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
     after it in view (:func:`~wheelloader.planner.lookahead.plan_with_lookahead`); both for every strategy that
     plans. ``rl_policy``: the PPO ``.zip`` of the ``rl`` (a controller: the FEE env plant only) and ``rl_path``
     strategies (:class:`~wheelloader.adaptation.PolicyPath`: the policy's path in the FEE env, dug in the plant).
+    ``prior``: the calibration prior of ``ours`` (a name of :data:`~wheelloader.loop_prior.LOOP_PRIORS`,
+    centred on ``ours``' nominal soil).
     """
     from wheelloader.adaptation import default_planner, make_strategy
 
@@ -292,8 +295,9 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
         if oracle_params is None:
             raise WheelloaderError("plant_loop_unit: the oracle needs oracle_params (hindsight_parameters)")
         chosen: Strategy = Hindsight(oracle_params, plan, options=model)
-    elif strategy == "ours" and model.extra_terms:
-        chosen = make_strategy(strategy, plan, ours_options={"options": model})
+    elif strategy == "ours" and (model.extra_terms or prior != "none"):
+        chosen = make_strategy(strategy, plan, ours_options={"prior": prior,
+                                                             **({"options": model} if model.extra_terms else {})})
     else:
         chosen = make_strategy(strategy, plan, rl_policy=rl_policy)
     name = soil if isinstance(soil, str) else "custom soil"
