@@ -98,7 +98,7 @@ def test_the_whole_run_at_a_coarse_grid(tmp_path):
     """``RES=0.08 N=1 bash benchmarks/loop_mpm.sh`` then the report: every phase runs, the paired cycles pair
     with ours' (the first pile's fixed dig is the fixed loop's first cycle, copied), the table is written."""
     _need_taichi()
-    env = dict(os.environ, RES="0.08", N="1", PY=sys.executable)
+    env = dict(os.environ, RES="0.08", N="1", PY=sys.executable, PRIOR="held")
     out, cycles = tmp_path / "out", tmp_path / "cycles"
     done = subprocess.run(["bash", "benchmarks/loop_mpm.sh", str(out), str(cycles)], cwd=ROOT, env=env,
                           capture_output=True, text=True, timeout=3000)

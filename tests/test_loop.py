@@ -170,7 +170,7 @@ def test_tiny_mpm_loop_of_ours_with_the_kept_objective(tmp_path):
 
     settings = {"cycles": 1, "seed": 0, "cache": tmp_path / "ours", "failure_angle": "min_weight_force",
                 "heel_clearance": 0.0, "end_blade_angle": math.radians(55), "curl_out_intervals": 8,
-                "midpoints": False, "objective": "kept_per_energy"}
+                "midpoints": False, "objective": "kept_per_energy", "prior": "held"}
     out = plant_loop_unit(MPMPlant(resolution=0.08), "ours", "gravel", **settings)
     record, log = out["records"][0], out["logs"][0]
     assert record["plan_ok"] and "kept" in record["plan_message"] and record["fill_m3"] > 0.0
