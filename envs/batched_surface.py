@@ -34,12 +34,21 @@ class BatchedSurfaces:
         self._w = np.full(m, self.spacing)  # trapezoid weights of the nodes
         self._w[0] = self._w[-1] = 0.5 * self.spacing
         self._base = np.arange(n) * m  # flat index of each row's first node
-        self._base_col = self._base[:, None]
+        self._base_f = self._base.astype(float)  # the same, as floats (exact: far below 2**53)
+        # the start surface most rows share (the configured pile): rows on it are gathered from this one row,
+        # which stays in the cache, instead of from their own rows of the n x m array (the same values)
+        self._shared = np.array(pile.heights, dtype=float)
+        self._shared_from = pile.heights  # the array it was copied from (an identity check first)
+        self._own = np.ones(n, dtype=bool)  # rows whose start surface is not the shared one (or not set yet)
+        self._n_own = n
 
     def set(self, i: int, heights: np.ndarray) -> None:
         """Start row ``i`` afresh on ``heights`` (start and carved surface)."""
         self.start[i] = heights
         self.carved[i] = heights
+        own = not (heights is self._shared_from or np.array_equal(heights, self._shared))
+        self._n_own += int(own) - int(self._own[i])
+        self._own[i] = own
 
     def pile(self, i: int, carved: bool = True) -> Pile:
         """Row ``i``'s carved (or start-of-cycle) surface as a :class:`Pile` (a copy)."""
@@ -51,37 +60,56 @@ class BatchedSurfaces:
 
     def _bases(self, rows: np.ndarray | None, two_d: bool) -> np.ndarray:
         if rows is None:
-            return self._base_col if two_d else self._base
+            return self._base[:, None] if two_d else self._base
         base = rows * self.nodes
         return base[:, None] if two_d else base
 
-    def height(self, heights: np.ndarray, rows: np.ndarray | None, x: np.ndarray) -> np.ndarray:
-        """Surface height of ``heights[rows]`` (every row for None) at ``x`` (as Pile.height_at, row-wise; x may
-        be 2-D) [m]."""
+    def _interpolate(self, flat: np.ndarray, base: np.ndarray | float, x: np.ndarray) -> np.ndarray:
+        """Height of the polyline rows of ``flat`` at ``x`` (a fresh array of x's shape; ``base``: the flat index of
+        each point's row start, broadcast against ``x`` along its last axis) [m]; Pile.height_at's arithmetic
+        (za + f * (zb - za) with f = u - floor(u), u clipped to the grid)."""
         last = self.nodes - 1
         u = np.subtract(x, self.x0)
         u /= self.spacing
         np.clip(u, 0.0, last, out=u)
-        i = u.astype(np.int64)
-        f = np.subtract(u, i, out=u)
-        flat = heights.reshape(-1)
-        idx = np.add(i, self._bases(rows, x.ndim == 2))
+        node = np.floor(u)  # = int(u) for u >= 0
+        f = np.subtract(u, node, out=u)
+        node += base
+        idx = node.astype(np.int64)
         za = flat.take(idx)
-        idx += i < last  # the next node (the last one at the end of the grid, where f = 0)
-        dz = flat.take(idx)
+        # the next node: at u = last (f = 0) that is the next row's first node, or clipped to the array's end; its
+        # finite height h gives za + 0 * (h - za) = za, the value at the last node, as Pile.height_at gives
+        idx += 1
+        dz = flat.take(idx, mode="clip")
         dz -= za
         dz *= f
         dz += za
-        return dz  # za + f * (zb - za)
+        return dz
+
+    def height(self, heights: np.ndarray, rows: np.ndarray | None, x: np.ndarray) -> np.ndarray:
+        """Surface height of ``heights[rows]`` (every row for None) at ``x`` (as Pile.height_at, row-wise): ``x`` of
+        shape ``(len(rows),)``, or ``(k, len(rows))`` for ``k`` points per row [m]."""
+        base = self._base_f if rows is None else (rows * self.nodes).astype(float)
+        return self._interpolate(heights.reshape(-1), base, x)
 
     def contact(self, rows: np.ndarray | None, x: np.ndarray, z: np.ndarray, th: np.ndarray, slope_window: float,
                 floor_length: float):
         """(depth, rho, alpha, blade length in soil, surface height) against the start surfaces of ``rows``
         (every row for None; as contact_single)."""
         w = slope_window
-        h = self.height(self.start, rows, np.stack([x + w, x - w, x], axis=1))
-        alpha = np.arctan((h[:, 0] - h[:, 1]) / (2.0 * w))
-        surface = h[:, 2]
+        pts = np.empty((3, x.size))
+        np.add(x, w, out=pts[0])
+        np.subtract(x, w, out=pts[1])
+        pts[2] = x
+        own = self._own if rows is None else self._own[rows]
+        if self._n_own == 0 or not own.any():  # every row on the shared start surface
+            h = self._interpolate(self._shared, 0.0, pts)
+        else:
+            h = self.height(self.start, rows, pts)
+        alpha = h[0] - h[1]
+        alpha /= 2.0 * w
+        alpha = np.arctan(alpha, out=alpha)
+        surface = h[2]
         vertical = surface - z
         depth = np.maximum(vertical, 0.0, out=vertical)
         depth *= np.cos(alpha)

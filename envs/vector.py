@@ -159,6 +159,7 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         self.single_observation_space = spaces.Box(low, high, dtype=np.float32)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self._low32, self._high32 = low.astype(np.float32), high.astype(np.float32)
+        self._look_col: tuple[Any, np.ndarray] = ((), np.zeros((0, 1)))  # (lookahead, as a column)
         n = num_envs
         self._surf = BatchedSurfaces(self.cfg.pile, n)
         self._records = (BatchedCycleRecorder(n, max_episode_steps, self.cfg.dt, keep=1) if record_cycles
@@ -586,11 +587,13 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         obs = np.empty((n, 12 + len(look)), dtype=np.float32)
         np.stack((self._x, self._z, self._th, self._vx, self._vz, self._om, self._depth, self._rho, self._alpha,
                   self._kept / cfg.bucket.capacity, self._mt * 1e-3, self._mn * 1e-3), axis=1, out=obs[:, :12])
-        if look:
-            ahead = np.add.outer(self._x, look)
+        if look:  # the look-ahead points as rows (k, n): every array operation runs along the sub-envs
+            if self._look_col[0] is not look:
+                self._look_col = (look, np.array(look, dtype=float).reshape(-1, 1))
+            ahead = self._look_col[1] + self._x
             h = self._surf.height(self._surf.carved, None, ahead)
-            h -= self._z[:, None]
-            obs[:, 12:] = h
+            h -= self._z
+            obs[:, 12:] = h.T
         np.maximum(obs, self._low32, out=obs)  # clip
         return np.minimum(obs, self._high32, out=obs)
 
