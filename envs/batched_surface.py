@@ -127,23 +127,24 @@ class BatchedSurfaces:
             was cut).
         """
         x0, sp, m = self.x0, self.spacing, self.nodes
+        # the segment's first and last node (as floats: exact integers, so the same as the int64 indices)
         lo, hi = np.minimum(xa, xb), np.maximum(xa, xb)
         lo -= x0
         lo /= sp
         lo -= 1e-12
-        i0 = np.ceil(lo, out=lo).astype(np.int64)
-        np.maximum(i0, 0, out=i0)
+        i0 = np.ceil(lo, out=lo)
+        np.maximum(i0, 0.0, out=i0)
         hi -= x0
         hi /= sp
         hi += 1e-12
-        i1 = np.floor(hi, out=hi).astype(np.int64)
+        i1 = np.floor(hi, out=hi)
         np.minimum(i1, m - 1, out=i1)
         width_k = int((i1 - i0).max()) + 1 if i0.size else 0
         empty = (np.zeros(0, np.int64), np.zeros(0), None)
         if width_k <= 0:
             return empty
         # (node k of the segment, row): the rows are contiguous, and summing over k goes in node order
-        cols = np.add.outer(np.arange(width_k), i0)
+        cols = np.add.outer(np.arange(width_k, dtype=float), i0)
         valid = cols <= i1
         cols_c = np.minimum(cols, m - 1, out=cols)
         xi = cols_c * sp
@@ -158,18 +159,23 @@ class BatchedSurfaces:
         if flat.any():
             zc = np.where(flat, np.minimum(za, zb), zc)
         flat_h = self.carved.reshape(-1)
-        flat_idx = cols_c + self._bases(rows, False)
+        node = cols_c.astype(np.int64)
+        flat_idx = node + self._bases(rows, False)
         old = flat_h.take(flat_idx)
         cut = zc < old
         cut &= valid
         if not cut.any():
             return empty
-        contrib = np.subtract(old, zc)
-        contrib *= self._w.take(cols_c)
-        contrib = np.where(cut, contrib, 0.0)
+        contrib = np.zeros(cut.shape)
+        np.subtract(old, zc, out=contrib, where=cut)
+        if i0.min() > 0.0 and i1.max() < m - 1:  # no end node (half weight) in any segment
+            contrib *= sp
+        else:
+            contrib *= self._w.take(node)
         area = np.add.reduce(contrib, axis=0)  # over k in node order, as SurfaceCarver sums
-        idx_u, old_u = flat_idx[cut], old[cut]
-        flat_h[idx_u] = zc[cut]
+        at = np.flatnonzero(cut)
+        idx_u, old_u = flat_idx.take(at), old.take(at)
+        flat_h[idx_u] = zc.take(at)
         return idx_u, old_u, area
 
     def undo(self, idx_u: np.ndarray, old_u: np.ndarray, rows: np.ndarray) -> None:

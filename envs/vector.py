@@ -193,6 +193,8 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         self._noise_n = np.zeros((n, NOISE_CHUNK, 2))
         self._noise_u = np.zeros((n, NOISE_CHUNK, 2))
         self._noise_base = np.arange(n) * NOISE_CHUNK  # flat index of row i's first pair in _pairs(...)
+        self._rows = np.arange(n)
+        self._motion: tuple[Any, tuple[np.ndarray, ...]] = (None, ())  # (cfg, _motion_constants())
         self._renderer = None
         self._started = False
 
@@ -424,8 +426,9 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
                 self._reset_env(i, request, heights)
             info = self._mask_info(info, ~pending, pending)
         else:
-            for key in STEP_INFO_KEYS:
-                info["_" + key] = np.ones(n, dtype=bool)
+            masks = np.ones((len(STEP_INFO_KEYS), n), dtype=bool)  # one allocation, a row per key
+            for key, mask in zip(STEP_INFO_KEYS, masks, strict=True):
+                info["_" + key] = mask
         obs = self._observation()
         if mode is AutoresetMode.SAME_STEP and ended.any():
             info = self._same_step_reset(info, obs, ended)
@@ -433,6 +436,19 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         else:
             self._prev_done = ended
         return obs, reward, terminated, truncated, info
+
+    def _motion_constants(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per axis (x, z, blade angle) as (3, 1) columns: the command scale, the rate limit per step and the
+        workspace limits (made once per configuration)."""
+        cfg = self.cfg
+        if self._motion[0] is not cfg:
+            ld = cfg.loader
+            (x0, x1), (z0, z1), (a0, a1) = cfg.x_limits, cfg.z_limits, cfg.blade_angle_limits
+            dv, dw = cfg.speed_step, cfg.tilt_rate_step
+            cols = [np.array(v, dtype=float).reshape(3, 1) for v in ((ld.max_speed, ld.max_speed, ld.max_tilt_rate),
+                                                                     (dv, dv, dw), (x0, z0, a0), (x1, z1, a1))]
+            self._motion = (cfg, tuple(cols))
+        return self._motion[1]
 
     def _close_cycle(self, i: int, reason: str) -> None:
         if self._records is not None:
@@ -445,35 +461,35 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         :data:`STEP_INFO_KEYS` key), the rewards and the terminations."""
         cfg = self.cfg
         ld = cfg.loader
-        dt, dv, dw = cfg.dt, cfg.speed_step, cfg.tilt_rate_step
-        # the three axes at once, as (n, 3) arrays (the same operations per element; clip as maximum, minimum)
-        a = np.where(np.isnan(a), 0.0, a)
+        dt = cfg.dt
+        # the three axes at once, as (3, n) rows (the same operations per element; clip as maximum, minimum)
+        a = np.array(a.T, order="C")
+        np.copyto(a, 0.0, where=np.isnan(a))
         np.maximum(a, -1.0, out=a)
         np.minimum(a, 1.0, out=a)
-        pos = np.stack((self._x, self._z, self._th), axis=1)
-        vel = np.stack((self._vx, self._vz, self._om), axis=1)
-        change = a * (ld.max_speed, ld.max_speed, ld.max_tilt_rate)
+        scale, rate_step, low, high = self._motion_constants()
+        pos = np.stack((self._x, self._z, self._th))
+        vel = np.stack((self._vx, self._vz, self._om))
+        change = np.multiply(a, scale, out=a)
         change -= vel
-        rate_step = np.array((dv, dv, dw))
         np.maximum(change, -rate_step, out=change)
         np.minimum(change, rate_step, out=change)
         vel += change  # rate-limited velocity command
-        (x0, x1), (z0, z1), (a0, a1) = cfg.x_limits, cfg.z_limits, cfg.blade_angle_limits
         new = vel * dt
         new += pos
-        np.maximum(new, (x0, z0, a0), out=new)
-        np.minimum(new, (x1, z1, a1), out=new)
+        np.maximum(new, low, out=new)
+        np.minimum(new, high, out=new)
         vel = np.subtract(new, pos, out=vel)
         vel /= dt
-        x, z, th = pos.T
-        xn, zn, thn = new.T
-        vx, vz, om = vel.T
+        x, z, th = pos
+        xn, zn, thn = new
+        vx, vz, om = vel
         fill0 = self._fill.copy()
         spilled0 = self._spilled.copy()
         removed0 = self._removed.copy()
         kept0 = self._kept.copy()
         payload = cfg.payload
-        rows = np.arange(self.num_envs)
+        rows = self._rows
         undo = self._carve(None, x, z, xn, zn)
         fill = self._fill.copy()
         depth, rho, alpha, lt, h_surf = self._surf.contact(None, xn, zn, thn, cfg.slope_window,
