@@ -13,7 +13,16 @@ Reads the loops' JSON (``OUT/loops/plant_adaptation.json``, else the latest phas
   over cycles >= 3; the floor: the same cycles, each fitted to itself (``calibrate`` with the strategy's model,
   its error on that cycle), the best the FEE can do there;
 * failures: plans that failed the NumPy check (the loop then digs the Bezier fallback), cycles that kept less
-  than 1 % of the bucket, and stalled cycles.
+  than 1 % of the bucket, stalled cycles (a closed-loop cycle the env's stall rule ended), and cycles whose plant
+  force exceeded the loader's limits (F_T > 20 kN or F_N > 25 kN in a raw sample: the loader would have stalled);
+  a closed-loop policy's cycles also say how they ended (out of the soil, stall, step limit).
+
+Trained policies (``rl_path``: the policy's FEE-env path replayed open loop; ``rl_closed``: the policy acting on the
+plant's state every control step, :mod:`wheelloader.references.mpm.closed_loop`): the rows of ``OUT/rl`` and
+``OUT/rl_closed`` are the policy trained in the FEE env's default model; ``--policy LABEL DIR CYCLES`` adds another
+policy's (``DIR/rl``, ``DIR/rl_closed``, FEE env ``DIR/fee_env_rl``; cycles ``CYCLES/loops``, ``CYCLES/fee_env``),
+its rows named ``STRATEGY (LABEL)``. In the gap table a closed-loop row's FEE-env side is its policy's path there
+(the policy closed loop in its own env: the same cycle).
 
 Usage::
 
@@ -62,8 +71,27 @@ def floor_percent(log: Any, failure_angle: str) -> float:
     return float(predict(params, smooth, options=options).quality.percent_r)
 
 
-#: The folders of loop_mpm.sh's phases under OUT, in the order they run (``rl``: its RL_POLICY loops).
-PHASES = ("phase1", "phase2", "phase3", "phase4", "loops", "rl")
+#: The folders of loop_mpm.sh's phases under OUT, in the order they run (``rl``: its RL_POLICY loops; ``rl_closed``:
+#: the same policy closed loop in the plant).
+PHASES = ("phase1", "phase2", "phase3", "phase4", "loops", "rl", "rl_closed")
+#: The strategies whose rows come first in the tables, in this order; the others (policies) follow as found.
+PLANNED = ("fixed", "ours", "oracle")
+#: The loader's force limits [N] (``Loader().max_push_force``, ``max_lift_force``: the env's stall rule).
+FORCE_LIMITS = (20_000.0, 25_000.0)
+
+
+def strategies(rows: list[dict[str, Any]]) -> list[str]:
+    """The strategies of ``rows``: the planned ones first, then the others in the order they appear."""
+    found = list(dict.fromkeys(r["strategy"] for r in rows))
+    return [n for n in PLANNED if n in found] + [n for n in found if n not in PLANNED]
+
+
+def plant_failures(log: Any) -> dict[str, Any]:
+    """What the log says beyond the loop's record: whether a raw sample of the plant's force exceeded the loader's
+    limits, and how a closed-loop cycle ended (None for a path)."""
+    closed = log.metadata.get("closed_loop") or {}
+    above = bool(max(float(log.tangential.max()), 0.0) > FORCE_LIMITS[0] or float(log.normal.max()) > FORCE_LIMITS[1])
+    return {"above_limits": above, "end": closed.get("end")}
 
 
 def _latest_loops(out: Path) -> dict[str, Any]:
@@ -80,8 +108,20 @@ def _latest_loops(out: Path) -> dict[str, Any]:
     return {**found[-1], "rows": list(rows.values()), "oracle_fits": [r.get("oracle", {}) for r in found]}
 
 
-def collect(out: Path, cycles: Path) -> dict[str, Any]:
-    """Per cycle rows of every strategy's loop and of the fixed path on ours' piles, with the lifted energy."""
+def policy_loops(policies: list[tuple[str, Path, Path]]) -> list[tuple[dict[str, Any], Path, str]]:
+    """Each ``--policy``'s loop rows (``DIR/rl``, ``DIR/rl_closed``) with its saved cycles' folder and label."""
+    found = []
+    for label, folder, cycles in policies:
+        for name in ("rl", "rl_closed"):
+            path = folder / name / "plant_adaptation.json"
+            if path.is_file():
+                found += [(r, cycles / "loops", label) for r in json.loads(path.read_text())["rows"]]
+    return found
+
+
+def collect(out: Path, cycles: Path, policies: list[tuple[str, Path, Path]] | None = None) -> dict[str, Any]:
+    """Per cycle rows of every strategy's loop and of the fixed path on ours' piles, with the lifted energy; the
+    rows of other ``policies`` (label, results folder, cycles folder) named ``STRATEGY (LABEL)``."""
     from wheelloader.planner.kept import dump_height
     from wheelloader.saved_loops import load_saved_cycle
 
@@ -89,13 +129,19 @@ def collect(out: Path, cycles: Path) -> dict[str, Any]:
     loops = _latest_loops(out)
     failure_angle = loops["settings"].get("failure_angle", "min_n_gamma")
     rows = []
-    for r in loops["rows"]:
+    sources = [(r, cycles / "loops", None) for r in loops["rows"]] + policy_loops(policies or [])
+    for r, saved, label in sources:
         r = {**r, "strategy": _folder(r["strategy"])}
-        log = load_saved_cycle(cycles / "loops" / r["soil"] / f"seed{r['seed']}" / r["strategy"], r["cycle"])
+        log = load_saved_cycle(saved / r["soil"] / f"seed{r['seed']}" / r["strategy"], r["cycle"])
         if log is None:
-            raise SystemExit(f"cycle {r['cycle']} of {r['soil']} seed {r['seed']} {r['strategy']} is not saved")
+            raise SystemExit(f"cycle {r['cycle']} of {r['soil']} seed {r['seed']} {r['strategy']} is not saved "
+                             f"under {saved}")
         row = {k: r[k] for k in ("soil", "seed", "strategy", "cycle", "fill_m3", "energy_J", "plan_ok", "stalled",
                                  "prediction_rmse_percent", "calibration_s", "planning_s")}
+        row.update(plant_failures(log))
+        row["stalled"] = bool(row["stalled"]) or row["end"] == "stall"
+        if label is not None:
+            row["strategy"] = f"{r['strategy']} ({label})"
         row["lifted_J"] = lifted(r["energy_J"], r["fill_m3"], log, z_ref, r["soil"])
         row["z_end"] = float(log.path.z[-1])
         row["capacity_m3"] = log.bucket.capacity
@@ -135,10 +181,8 @@ def summarise(data: dict[str, Any]) -> dict[str, Any]:
     """The acceptance figures: the loops, the paired comparison (also per soil and seed) and the verdicts."""
     rows, paired = data["rows"], data["fixed_on_ours"]
     loops: dict[str, Any] = {}
-    for name in ("fixed", "ours", "oracle", "rl_path"):
+    for name in strategies(rows):
         sel = [r for r in rows if r["strategy"] == name]
-        if not sel:
-            continue
         s = pooled(sel)
         from3 = [r["prediction_rmse_percent"] for r in sel if r["cycle"] >= 3]
         floors = [r["floor_percent"] for r in sel if "floor_percent" in r]
@@ -148,6 +192,9 @@ def summarise(data: dict[str, Any]) -> dict[str, Any]:
                  failed_plans=sum(1 for r in sel if not r["plan_ok"]) if name in ("ours", "oracle") else 0,
                  stalled=sum(1 for r in sel if r["stalled"]),
                  empty=sum(1 for r in sel if r["fill_m3"] < 0.01 * r["capacity_m3"]),
+                 above_limits=sum(1 for r in sel if r.get("above_limits")),
+                 ends={e: sum(1 for r in sel if r.get("end") == e) for e in ("exit", "stall", "step limit")
+                       if any(r.get("end") == e for r in sel)},
                  between_cycles_s_median=statistics.median(between) if between else math.nan)
         loops[name] = s
     out: dict[str, Any] = {"loops": loops}
@@ -182,10 +229,12 @@ def summarise(data: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def fee_rows(fee_outs: list[Path], fee_cycles: Path, z_ref: float) -> list[dict[str, Any]]:
+def fee_rows(fee_outs: list[Path], fee_cycles: Path, z_ref: float, label: str | None = None) -> list[dict[str, Any]]:
     """The same loops in the FEE env plant (``plant_adaptation.py --plant fee-env``, same settings): per cycle the
     kept soil by the payload model (``DEFAULT_PAYLOAD``'s kept fill of the env's carved fill: the model world's
-    own kept soil) and the env's work with that load lifted from the path's end to ``z_ref``."""
+    own kept soil) and the env's work with that load lifted from the path's end to ``z_ref``. A policy's path
+    (``rl_path``) stands for it closed loop too (``rl_closed``: in its own env the policy takes that path);
+    ``label``: another policy's, its rows named ``STRATEGY (LABEL)``."""
     from wheelloader.estimator import preset
     from wheelloader.estimator.force_model import GRAVITY
     from wheelloader.estimator.force_models import DEFAULT_PAYLOAD
@@ -201,17 +250,19 @@ def fee_rows(fee_outs: list[Path], fee_cycles: Path, z_ref: float) -> list[dict[
             raise SystemExit(f"--fee: cycle {r['cycle']} of {r['soil']} seed {r['seed']} {r['strategy']} is not saved")
         kept = float(kept_volume(r["fill_m3"], log.bucket.capacity, DEFAULT_PAYLOAD))
         z_end = float(log.path.z[-1])
-        rows.append({"soil": r["soil"], "seed": r["seed"], "strategy": r["strategy"], "cycle": r["cycle"],
-                     "fill_m3": kept, "carved_m3": r["fill_m3"], "energy_J": r["energy_J"], "z_end": z_end,
-                     "lifted_J": r["energy_J"] + preset(r["soil"]).gamma * GRAVITY * kept * (z_ref - z_end),
-                     "capacity_m3": log.bucket.capacity})
+        row = {"soil": r["soil"], "seed": r["seed"], "strategy": r["strategy"], "cycle": r["cycle"],
+               "fill_m3": kept, "carved_m3": r["fill_m3"], "energy_J": r["energy_J"], "z_end": z_end,
+               "lifted_J": r["energy_J"] + preset(r["soil"]).gamma * GRAVITY * kept * (z_ref - z_end),
+               "capacity_m3": log.bucket.capacity}
+        names = [r["strategy"]] + (["rl_closed"] if r["strategy"] == "rl_path" else [])
+        rows += [{**row, "strategy": name if label is None else f"{name} ({label})"} for name in names]
     return rows
 
 
 def gap_table(mpm: list[dict[str, Any]], fee: list[dict[str, Any]]) -> dict[str, Any]:
     """Per strategy, over the (soil, seed) loops run in both plants: the FEE env's figure beside the MPM plant's."""
     out = {}
-    for name in ("fixed", "ours", "oracle", "rl_path"):
+    for name in strategies(mpm):
         keys = ({(r["soil"], r["seed"]) for r in mpm if r["strategy"] == name}
                 & {(r["soil"], r["seed"]) for r in fee if r["strategy"] == name})
         if not keys:
@@ -229,15 +280,21 @@ def markdown(data: dict[str, Any], summary: dict[str, Any]) -> str:
     z = data["z_ref_m"]
     lines = [f"| strategy (MPM loop) | cycles | energy per m³, load lifted to {z:.2f} m | plant's energy per m³ | "
              "mean end height | mean kept fill | next-cycle F_R error from cycle 3 (median) | its floor (median) "
-             "| failed plans / empty cycles / stalls | between cycles (median) |",
+             "| failed plans / empty cycles / stalls / above the loader's limits | between cycles (median) |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for name, s in summary["loops"].items():
         err = "–" if math.isnan(s["error_from_cycle3_percent"]) else f"{s['error_from_cycle3_percent']:.1f} %"
         flo = "–" if math.isnan(s["floor_percent"]) else f"{s['floor_percent']:.1f} %"
         lines.append(f"| {name} | {s['cycles']} | {s['lifted_energy_per_m3_kJ']:.1f} kJ/m³ | "
                      f"{s['energy_per_m3_kJ']:.1f} kJ/m³ | {s['end_height_m']:.2f} m | {s['kept_fill']:.1%} | {err} | "
-                     f"{flo} | {s['failed_plans']} / {s['empty']} / {s['stalled']} | "
+                     f"{flo} | {s['failed_plans']} / {s['empty']} / {s['stalled']} / {s['above_limits']} | "
                      f"{s['between_cycles_s_median']:.1f} s |")
+    closed = {name: s["ends"] for name, s in summary["loops"].items() if s.get("ends")}
+    if closed:
+        lines += ["", "| closed loop in the plant | cycles out of the soil | ended by a stall | at the step limit |",
+                  "|---|---|---|---|"]
+        lines += [f"| {name} | {e.get('exit', 0)} | {e.get('stall', 0)} | {e.get('step limit', 0)} |"
+                  for name, e in closed.items()]
     if "paired" in summary:
         p = summary["paired"]
         lines += ["", f"| paired (same piles, only the path differs) | cycles | energy per m³, lifted to {z:.2f} m | "
@@ -330,20 +387,32 @@ def main(argv: list[str] | None = None) -> int:
                         help="the same loops in the FEE env plant (plant_adaptation.py --plant fee-env --out OUT "
                              "--cycles-dir FEE_CYCLES; one or more invocations): the sim-to-real gap table")
     parser.add_argument("--fee-cycles", default=None, metavar="FEE_CYCLES", help="their saved cycles (with --fee)")
+    parser.add_argument("--policy", nargs=3, action="append", default=[], metavar=("LABEL", "DIR", "CYCLES"),
+                        help="another trained policy's loops: DIR/rl and DIR/rl_closed (plant_adaptation.py --out), "
+                             "DIR/fee_env_rl (the FEE env plant), their cycles under CYCLES/loops and "
+                             "CYCLES/fee_env; rows named 'STRATEGY (LABEL)' (repeatable)")
+    parser.add_argument("--write", default=None, metavar="DIR",
+                        help="write acceptance.json/.md/.png here (default OUT)")
     args = parser.parse_args(argv)
     out, cycles = Path(args.out), Path(args.cycles)
-    data = collect(out, cycles)
+    policies = [(label, Path(folder), Path(saved)) for label, folder, saved in args.policy]
+    data = collect(out, cycles, policies)
     if args.fee is not None:
         if args.fee_cycles is None:
             parser.error("--fee needs --fee-cycles")
         data["fee_rows"] = fee_rows([Path(f) for f in args.fee], Path(args.fee_cycles), data["z_ref_m"])
+        for label, folder, saved in policies:
+            if (folder / "fee_env_rl" / "plant_adaptation.json").is_file():
+                data["fee_rows"] += fee_rows([folder / "fee_env_rl"], saved / "fee_env", data["z_ref_m"], label)
     summary = summarise(data)
     if args.fee is not None:
         summary["gap"] = gap_table(data["rows"], data["fee_rows"])
-    (out / "acceptance.json").write_text(json.dumps({**data, "summary": summary}, indent=1, default=str))
+    target = Path(args.write) if args.write else out
+    target.mkdir(parents=True, exist_ok=True)
+    (target / "acceptance.json").write_text(json.dumps({**data, "summary": summary}, indent=1, default=str))
     text = markdown(data, summary)
-    (out / "acceptance.md").write_text(text)
-    plot(data, out / "acceptance.png")
+    (target / "acceptance.md").write_text(text)
+    plot(data, target / "acceptance.png")
     print(text)
     return 0
 

@@ -44,8 +44,8 @@ from wheelloader.provenance import commit_label, load_label, machine_info
 from wheelloader.ray_mode import add_ray_arguments
 from wheelloader.references import PLANT_NAMES
 
-STRATEGIES = ("fixed", "ours", "paper", "oracle", "rl_path")
-#: The strategies run by default (``rl_path`` needs ``--rl-policy``).
+STRATEGIES = ("fixed", "ours", "paper", "oracle", "rl_path", "rl_closed")
+#: The strategies run by default (``rl_path`` and ``rl_closed`` need ``--rl-policy``).
 DEFAULT_STRATEGIES = ("fixed", "ours", "paper", "oracle")
 
 
@@ -289,9 +289,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cycles", type=int, default=5, help="cycles per loop")
     parser.add_argument("--strategies", nargs="+", default=list(DEFAULT_STRATEGIES), choices=STRATEGIES,
                         help="loops to run (default %(default)s); rl_path: a trained policy's path, rolled out in the "
-                             "FEE env of the nominal soil on each cycle's pile, dug in the plant")
+                             "FEE env of the nominal soil on each cycle's pile, dug in the plant (open loop); "
+                             "rl_closed: the policy acting on the plant's state every control step (MPM plant)")
     parser.add_argument("--rl-policy", default=None, metavar="ZIP",
-                        help="the trained PPO policy (model.zip of train/ppo.py) of the rl_path strategy")
+                        help="the trained PPO policy (model.zip of train/ppo.py) of the rl_path and rl_closed "
+                             "strategies; rolled out in the env of its config.json's force model")
     parser.add_argument("--resolution", type=float, default=0.02, help="MPM grid spacing [m] (verified: 0.02)")
     parser.add_argument("--threads", type=int, default=1, help="Taichi CPU threads")
     parser.add_argument("--no-planner", action="store_true", help="dig Bezier paths only")
@@ -326,8 +328,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         args.soils, args.seeds, args.cycles, args.strategies, args.resolution = (["gravel"], 1, 1,
                                                                                   ["fixed", "ours"], 0.06)
-    if "rl_path" in args.strategies and not args.rl_policy:
-        parser.error("--strategies rl_path needs --rl-policy ZIP (a policy trained by train/ppo.py)")
+    for name in ("rl_path", "rl_closed"):
+        if name in args.strategies and not args.rl_policy:
+            parser.error(f"--strategies {name} needs --rl-policy ZIP (a policy trained by train/ppo.py)")
     if args.seeds < 1 or args.cycles < 1:
         parser.error("--seeds and --cycles must be >= 1")
     out = Path(args.out)

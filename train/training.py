@@ -52,6 +52,9 @@ def add_training_args(parser: argparse.ArgumentParser, default_steps: int, defau
     parser.add_argument("--reward-weights", type=weights, default=None,
                         help="training reward weights, e.g. 'stall=0.2,validity=0.001' (RewardWeights fields; "
                              "default: the env's). Evaluations always use the env's default reward")
+    parser.add_argument("--force-model", choices=("fee", "fee-payload"), default="fee",
+                        help="the env's force model (EnvConfig.force_model): 'fee-payload' trains with the bucket's "
+                             "fill = the payload model's kept soil; the learning-curve evaluation uses the same")
     parser.add_argument("--verbose", type=int, default=0, help="SB3 verbosity")
 
 
@@ -74,6 +77,8 @@ def train(algo: str, args: argparse.Namespace, model_kwargs: dict[str, Any]) -> 
     env_kwargs = dict(setup["env_kwargs"])
     if args.reward_weights:
         env_kwargs["reward_weights"] = dict(args.reward_weights)
+    model_env = {"force_model": args.force_model} if args.force_model != "fee" else {}
+    env_kwargs.update(model_env)
     eval_soils = [args.plant_soil] if args.setup == "twin" else list(args.eval_soils)
     env = make_train_env(env_kwargs, args.n_envs, args.seed, args.vec)
     cls = {"ppo": PPO, "sac": SAC}[algo]
@@ -86,9 +91,10 @@ def train(algo: str, args: argparse.Namespace, model_kwargs: dict[str, Any]) -> 
         model = cls("MlpPolicy", env, seed=args.seed, device="cpu", verbose=args.verbose, tensorboard_log=tb,
                     **model_kwargs)
     config = {"algo": algo, "env_id": ENV_ID, "setup": setup["description"], "args": vars(args),
+              "env_kwargs": {k: v for k, v in env_kwargs.items() if k != "soil"},
               "model_kwargs": model_kwargs, "torch_threads": threads, "machine": machine_info()}
     write_json(out / "config.json", config)
-    curve = LearningCurveCallback(out, args.eval_freq, eval_soils, args.eval_seeds, verbose=1)
+    curve = LearningCurveCallback(out, args.eval_freq, eval_soils, args.eval_seeds, env_kwargs=model_env, verbose=1)
     callbacks = [curve]
     if args.checkpoint_freq > 0:
         callbacks.append(CheckpointCallback(max(args.checkpoint_freq // args.n_envs, 1), str(out / "checkpoints"),

@@ -307,13 +307,14 @@ def run_loop(env: Any, strategy: Strategy, cycles: int = 5, seed: int = 0,
 
 
 #: Strategy names of :func:`make_strategy` (``rl`` needs a trained policy).
-STRATEGY_NAMES: tuple[str, ...] = ("fixed", "ours", "oracle", "paper", "rl", "rl_path")
+STRATEGY_NAMES: tuple[str, ...] = ("fixed", "ours", "oracle", "paper", "rl", "rl_path", "rl_closed")
 
 
 def make_strategy(name: str, planner: Any = None, rl_policy: str | None = None,
                   ours_options: Mapping[str, Any] | None = None) -> Strategy:
-    """A fresh strategy by name: ``fixed``, ``ours``, ``oracle``, ``paper`` or ``rl`` (a stable-baselines3
-    PPO ``.zip`` at ``rl_policy``); ``planner`` plans between cycles (None: Bezier paths);
+    """A fresh strategy by name: ``fixed``, ``ours``, ``oracle``, ``paper``, or a trained policy's ``rl``,
+    ``rl_path`` or ``rl_closed`` (a stable-baselines3 PPO ``.zip`` at ``rl_policy``,
+    :func:`~wheelloader.policy_strategies.policy_strategy`); ``planner`` plans between cycles (None: Bezier paths);
     ``ours_options``: keyword arguments of ``ours``' :class:`Calibrating` (``window``, ``forgetting``,
     ``keep_untrustworthy``, ``prior``, ``prior_soil``, ...)."""
     if name == "fixed":
@@ -324,18 +325,10 @@ def make_strategy(name: str, planner: Any = None, rl_policy: str | None = None,
         return Oracle(planner)
     if name == "paper":
         return Calibrating(preset(NOMINAL_SOIL), "multi-stage", planner, name="paper")
-    if name == "rl":
-        if not rl_policy:
-            raise WheelloaderError("strategy 'rl' needs a trained policy (rl_policy=PATH of a PPO .zip)")
-        from stable_baselines3 import PPO
+    if name in ("rl", "rl_path", "rl_closed"):
+        from wheelloader.policy_strategies import policy_strategy
 
-        return PolicyStrategy(PPO.load(rl_policy, device="cpu"))
-    if name == "rl_path":
-        if not rl_policy:
-            raise WheelloaderError("strategy 'rl_path' needs a trained policy (rl_policy=PATH of a PPO .zip)")
-        from stable_baselines3 import PPO
-
-        return PolicyPath(PPO.load(rl_policy, device="cpu"))
+        return policy_strategy(name, rl_policy)
     raise WheelloaderError(f"unknown strategy {name!r}; choose from {STRATEGY_NAMES}")
 
 
@@ -437,5 +430,14 @@ def hidden_default_soil() -> SoilParams:
 
 
 
-# the policy strategies live in their own module (this one's size); re-exported here, where they were
-from wheelloader.policy_strategies import PolicyPath, PolicyStrategy  # noqa: E402, F401
+#: The policy strategies live in their own module (this one's size); re-exported here, where they were, on first use
+#: (the module imports this one: either may be imported first).
+_POLICY_EXPORTS = ("PolicyClosedLoop", "PolicyPath", "PolicyStrategy", "policy_strategy")
+
+
+def __getattr__(name: str) -> Any:
+    if name in _POLICY_EXPORTS:
+        from wheelloader import policy_strategies
+
+        return getattr(policy_strategies, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

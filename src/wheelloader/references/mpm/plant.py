@@ -166,8 +166,12 @@ class MPMPlant:
         area = 0.5 * abs(float(np.dot(x, np.roll(z, -1)) - np.dot(z, np.roll(x, -1))))
         return area * self.bucket.width
 
+    #: :meth:`dig` also runs a controller that acts on the bucket-loading env's observations
+    #: (:mod:`.closed_loop`), given the path that bounds where the bucket may go.
+    accepts_controller = True
+
     def dig(self, path: BucketPath, pile: Pile, soil: SoilParams | str | ContinuumSoil, *, seed: int = 0,
-            observer: Callable[[float, np.ndarray], None] | None = None) -> CycleLog:
+            observer: Callable[[float, np.ndarray], None] | None = None, controller: Any = None) -> CycleLog:
         """Dig ``path`` into ``pile`` of ``soil``; see :class:`wheelloader.references.Plant`.
 
         The bucket rests at the path's first pose while the soil settles (``settle_time``), then follows
@@ -179,6 +183,11 @@ class MPMPlant:
 
         ``observer``, if given, is called at every sample with the time [s] and the particle positions
         (N, 2) [m] (for figures; it does not change the result).
+
+        ``controller``, if given, drives the bucket instead of the path, closed loop: a callable from the
+        bucket-loading env's observation to its action, built from this plant's state at every control step
+        (:func:`.closed_loop.dig_closed_loop`; its ``env_config`` attribute, if any, is the env's settings).
+        ``path`` then gives the start pose and bounds where the bucket may go (the simulated domain).
         """
         if not isinstance(path, BucketPath):
             raise ValueError(f"path must be a BucketPath, got {type(path).__name__}")
@@ -186,59 +195,73 @@ class MPMPlant:
             raise ValueError(f"pile must be a Pile, got {type(pile).__name__}")
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
             raise ValueError(f"seed must be an integer, got {seed!r}")
+        if controller is not None:
+            from .closed_loop import dig_closed_loop
+
+            return dig_closed_loop(self, path, pile, soil, int(seed), controller)
+        traj = Trajectory.from_path(path)
+        run = self.begin(traj, pile, soil, int(seed))
+        try:
+            force, fill = self._follow(run.solver, traj, path.t, traj.poses(), run.start_positions, observer)
+            return self.finish(run, path, force, fill)
+        finally:
+            run.solver.close()
+
+    def begin(self, domain: Trajectory, pile: Pile, soil: SoilParams | str | ContinuumSoil, seed: int) -> CycleStart:
+        """A cycle's solver with the soil of ``pile`` settled around the poses of ``domain`` (the bucket resting at
+        its first pose, at its first time); the caller advances it and closes it (``run.solver.close()``)."""
         material = self.continuum(soil)
-        soil_label = soil if isinstance(soil, str) else None
         cfg = self.settings
         wall0 = time.perf_counter()
-        traj = Trajectory.from_path(path)
-        scene = bucket_scene(pile, traj, self.shape, cfg.resolution, int(seed), cfg.scene)
+        scene = bucket_scene(pile, domain, self.shape, cfg.resolution, seed, cfg.scene)
         solver = MPMSolver(material, scene.domain, cfg.resolution, scene.particles, tool=self.shape,
                            contact_band=cfg.contact_band, cfl=cfg.cfl, sticky_floor=True, threads=cfg.threads,
                            legacy=cfg.legacy, backend=cfg.backend)
         try:
-            t0 = float(path.t[0])
-            cache_status = self._settle(solver, scene, material, traj, t0)
-            start_positions = solver.positions()
-            settle_s = time.perf_counter() - wall0
-            poses = traj.poses()
-            force, fill = self._follow(solver, traj, path.t, poses, start_positions, observer)
-            end_positions = solver.positions()
-            tangential, normal = blade_frame(force[:, 0], force[:, 1], path.blade_angle)
-            pile_after, balance = _carved_pile(pile, scene, start_positions, end_positions,
-                                               self.shape.inside(tuple(poses[-1]), end_positions),
-                                               solver.particle_volume)
-            if cfg.relax_pile_after and material.cohesion == 0.0 and material.friction_angle > 0.0:
-                pile_after = pile_after.relaxed(material.friction_angle)
-            steps, guard = solver.steps, solver.guard_corrections
-            guard_share = float(np.linalg.norm(solver.guard_impulse) / max(1e-12, np.linalg.norm(solver.total_impulse)))
-            dt = solver.dt_max
-            kernels = solver.kernels
-        finally:
+            cache_status = self._settle(solver, scene, material, domain, float(domain.t[0]))
+        except BaseException:
             solver.close()
-        wall = time.perf_counter() - wall0
+            raise
+        return CycleStart(solver, scene, material, pile, soil if isinstance(soil, str) else None,
+                          None if isinstance(soil, ContinuumSoil) else as_soil(soil).to_dict(), seed, wall0,
+                          time.perf_counter() - wall0, cache_status, solver.positions())
+
+    def finish(self, run: CycleStart, path: BucketPath, force: np.ndarray, fill: np.ndarray) -> CycleLog:
+        """The cycle's log from the samples of ``path`` (world-frame mean forces (n, 2) and fills (n,) per metre
+        of width) and the solver's end state (the carved pile)."""
+        cfg, solver, scene, material, pile = self.settings, run.solver, run.scene, run.material, run.pile
+        end_positions = solver.positions()
+        tangential, normal = blade_frame(force[:, 0], force[:, 1], path.blade_angle)
+        last = (float(path.x[-1]), float(path.z[-1]), float(path.blade_angle[-1]))
+        pile_after, balance = _carved_pile(pile, scene, run.start_positions, end_positions,
+                                           self.shape.inside(last, end_positions), solver.particle_volume)
+        if cfg.relax_pile_after and material.cohesion == 0.0 and material.friction_angle > 0.0:
+            pile_after = pile_after.relaxed(material.friction_angle)
+        guard_share = float(np.linalg.norm(solver.guard_impulse) / max(1e-12, np.linalg.norm(solver.total_impulse)))
+        wall = time.perf_counter() - run.wall0
         width = self.bucket.width
         metadata = {
             "source": "mpm",
             "plant": self.name,
-            "soil": soil_label,
-            "soil_params": None if isinstance(soil, ContinuumSoil) else as_soil(soil).to_dict(),
+            "soil": run.soil_label,
+            "soil_params": run.soil_params,
             "continuum": material.to_dict(),
             "settings": cfg.to_dict(),
             "resolution": cfg.resolution,
             "youngs_modulus": material.youngs_modulus,
             "contact_band": cfg.contact_band,
-            "seed": int(seed),
+            "seed": run.seed,
             "particles": int(len(scene.particles)),
             "domain": [scene.domain.x_min, scene.domain.z_min, scene.domain.x_max, scene.domain.z_max],
-            "steps": int(steps),
-            "dt_max": dt,
-            "guard_corrections": int(guard),
+            "steps": int(solver.steps),
+            "dt_max": solver.dt_max,
+            "guard_corrections": int(solver.guard_corrections),
             "guard_impulse_share": guard_share,
             "mass_balance": balance,
             "wall_s": wall,
-            "settle_wall_s": settle_s,
-            "settle_cache": cache_status,
-            "kernels": kernels,
+            "settle_wall_s": run.settle_s,
+            "settle_cache": run.cache_status,
+            "kernels": solver.kernels,
             "taichi": TAICHI_VERSION,
             "taichi_threads": initialised_threads(),
             "taichi_backend": initialised_backend(),
@@ -247,7 +270,6 @@ class MPMPlant:
         }
         return CycleLog(path, tangential * width, normal * width, pile, self.bucket, fill * width, None, pile_after,
                         metadata)
-
 
     def _follow(self, solver: MPMSolver, traj: Trajectory, t: np.ndarray, poses: np.ndarray,
                 start_positions: np.ndarray, observer: Callable[[float, np.ndarray], None] | None
@@ -301,6 +323,23 @@ class MPMPlant:
             return "off"
         self.cache.save(digest, solver.state())
         return "miss"
+
+
+@dataclass(frozen=True, eq=False)
+class CycleStart:
+    """A cycle's settled solver (:meth:`MPMPlant.begin`) and what :meth:`MPMPlant.finish` needs besides the samples."""
+
+    solver: MPMSolver
+    scene: Any
+    material: ContinuumSoil
+    pile: Pile
+    soil_label: str | None
+    soil_params: dict[str, Any] | None
+    seed: int
+    wall0: float
+    settle_s: float
+    cache_status: str
+    start_positions: np.ndarray
 
 
 def _carved_pile(pile: Pile, scene: Any, start: np.ndarray, end: np.ndarray, in_bucket: np.ndarray,
