@@ -260,3 +260,17 @@ def test_video_recorder_runs_without_warnings(tmp_path):
         rec.close()
     videos = list(tmp_path.glob("*.mp4"))
     assert len(videos) == 1 and videos[0].stat().st_size > 0
+
+
+def test_a_policy_trained_with_the_payload_model_says_so_for_its_rollouts(tmp_path):
+    """``--force-model fee-payload``: config.json records the training env's model, where the policy strategies
+    read the env to roll the policy out in."""
+    from wheelloader.policy_strategies import policy_env_kwargs
+
+    out = tmp_path / "ppo"
+    _run("ppo.py", "--total-timesteps", "32", "--n-steps", "16", "--batch-size", "16", "--n-envs", "2",
+         "--no-progress-bar", "--eval-soils", "gravel", "--eval-seeds", "1000", "--eval-freq", "0",
+         "--checkpoint-freq", "0", "--force-model", "fee-payload", "--out", str(out))
+    config = json.loads((out / "config.json").read_text())
+    assert config["env_kwargs"] == {"force_model": "fee-payload"} and config["args"]["force_model"] == "fee-payload"
+    assert policy_env_kwargs(out / "model.zip") == {"force_model": "fee-payload"}
