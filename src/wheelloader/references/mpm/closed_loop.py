@@ -18,8 +18,9 @@ The cycle ends by the env's rules (:mod:`wheelloader.envs.bookkeeping`): out of 
 is not undone, the cycle ends there with the bucket where it is), or the env's step limit
 (:data:`~wheelloader.envs.config.STEPS_PER_CYCLE`). Where the bucket may go is fixed before the cycle (the
 solver's domain): the poses of the path given (e.g. the policy's own path in the FEE env) widened by
-:data:`ENVELOPE_AHEAD` along x and :data:`ENVELOPE_ABOVE` up; a commanded pose beyond it is held at its edge (the
-velocity follows) and the step counted (``metadata["closed_loop"]["envelope_steps"]``).
+:data:`ENVELOPE_AHEAD` along x and :data:`ENVELOPE_ABOVE` up, within the env's workspace; a commanded pose beyond it
+is held at its edge (the velocity follows, as at the workspace's edges in the env) and the step counted where the
+envelope, not the env's own workspace (e.g. the ground), held it (``metadata["closed_loop"]["envelope_steps"]``).
 
 The log is the plant's as for a path (:meth:`MPMPlant.finish`): the forces are the means over each sample's interval
 centred on the sample, the path the poses the controller commanded. What the cycle did is in
@@ -82,7 +83,7 @@ def dig_closed_loop(plant: Any, path: BucketPath, pile: Pile, soil: SoilParams |
     run = plant.begin(domain, pile, soil, seed)
     solver, shape, scene = run.solver, plant.shape, run.scene
     try:
-        dt, dv, dw, vmax, wmax, _, _, (a_lo, a_hi) = cfg.motion
+        dt, dv, dw, vmax, wmax, (wx0, wx1), (wz0, wz1), (a_lo, a_hi) = cfg.motion
         loader, bucket = cfg.loader, cfg.bucket
         low, high = cfg.observation_limits
         x_lo, x_hi = scene.soil_x
@@ -126,9 +127,9 @@ def dig_closed_loop(plant: Any, path: BucketPath, pile: Pile, soil: SoilParams |
             vx = vel[0] + float(np.clip(a[0] * vmax - vel[0], -dv, dv))
             vz = vel[1] + float(np.clip(a[1] * vmax - vel[1], -dv, dv))
             om = vel[2] + float(np.clip(a[2] * wmax - vel[2], -dw, dw))
-            xn, zn = x + vx * dt, z + vz * dt
+            xn, zn = min(max(x + vx * dt, wx0), wx1), min(max(z + vz * dt, wz0), wz1)  # the env's workspace
             thn = min(max(th + om * dt, a_lo), a_hi)
-            xc, zc = min(max(xn, xs[0]), xs[1]), min(max(zn, zs[0]), zs[1])
+            xc, zc = min(max(xn, xs[0]), xs[1]), min(max(zn, zs[0]), zs[1])  # the envelope within it
             held += int(xc != xn or zc != zn)
             new = (xc, zc, thn)
             vel = ((xc - x) / dt, (zc - z) / dt, (thn - th) / dt)
