@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 import time
 from pathlib import Path
@@ -360,7 +361,9 @@ def plot(result: dict[str, Any], target: Path) -> None:
     for name in dict.fromkeys(r["strategy"] for r in rows):
         cycles = sorted({r["cycle"] for r in rows if r["strategy"] == name})
         sel = {k: [r for r in rows if r["strategy"] == name and r["cycle"] == k] for k in cycles}
-        energy = [sum(r["energy_J"] for r in v) / sum(r["fill_m3"] for r in v) / 1e3 for v in sel.values()]
+        # a cycle that loaded nothing in every loop (a policy's path that never entered the carved pile) has none
+        energy = [sum(r["energy_J"] for r in v) / filled / 1e3 if (filled := sum(r["fill_m3"] for r in v)) > 0
+                  else math.nan for v in sel.values()]
         fill = [statistics.fmean(r["fill_fraction"] for r in v) * 100 for v in sel.values()]
         err = [statistics.median(r["prediction_rmse_percent"] for r in v) for v in sel.values()]
         axes[0].plot(cycles, energy, "o-", label=name)
