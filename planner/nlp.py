@@ -60,7 +60,7 @@ import casadi as ca
 import numpy as np
 
 from wheelloader.envs.bookkeeping import step_work
-from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, Loader
+from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, Loader, PlanningError
 from wheelloader.estimator.payload import kept_volume
 from wheelloader.estimator.validity import alpha_lower_limit
 
@@ -70,7 +70,8 @@ from .interrupt import guarded
 from .kept import KEPT_OBJECTIVE_SCALE, kept_terms, smooth_lift
 from .options import PlannerOptions
 
-__all__ = ["VALIDITY_RELAX", "build", "handle", "origin", "problem_function", "release", "structural_options"]
+__all__ = ["VALIDITY_RELAX", "build", "handle", "hold_margin_variants", "origin", "problem_function", "release",
+           "structural_options"]
 
 #: The NLPs of this process by (bucket, loader, structural options): expressions, layout, derivatives, solvers.
 _CACHE: dict[tuple, dict] = {}
@@ -109,7 +110,8 @@ _NOT_STRUCTURAL = ("max_iter", "max_wall_time", "ipopt_warm_start", "tolerance",
 _DERIVATIVES = {"ipopt": (("grad_f", "nlp_grad_f"), ("jac_g", "nlp_jac_g"), ("hess_lag", "nlp_hess_l")),
                 "sqpmethod": (("jac_fg", "nlp_jac_fg"), ("hess_lag", "nlp_hess_l"))}
 #: The structural options that only set the margins of the constraints (what
-#: :func:`~wheelloader.planner.cycle.cautious_options` widens for a re-plan): one NLP per family in memory.
+#: :func:`~wheelloader.planner.cycle.cautious_options` widens for a re-plan): with ``hold_margin_variants(False)`` one
+#: NLP per family in memory.
 _MARGINS = ("rho_margin", "force_margin")
 
 
@@ -156,11 +158,12 @@ def build(bucket: Bucket, loader: Loader, options: PlannerOptions):
     structural = structural_options(options)
     entry = _CACHE.get((bucket, loader, structural))
     if entry is None:
-        # a margin variant of this NLP (the loop's wider-margin re-plans) takes the place of the one in memory
-        # (~150 MB each): released before the build, so two are never held at once
-        for key in [key for key in _CACHE if key[:2] == (bucket, loader) and _margin_family(key[2])
-                    == _margin_family(structural)]:
-            del _CACHE[key]
+        # with hold_margin_variants(False) a margin variant of this NLP (the loop's wider-margin re-plans) takes the
+        # place of the one in memory (~150 MB each): released before the build, so two are never held at once
+        if not _POLICY["hold_margin_variants"]:
+            for key in [key for key in _CACHE if key[:2] == (bucket, loader) and _margin_family(key[2])
+                        == _margin_family(structural)]:
+                del _CACHE[key]
         # the disk cache holds the NLP's expressions (plain CasADi Functions); the IPOPT solver with its
         # iteration callback (a Python object, not serialisable) is made on top of them in each process
         # CasADi may swallow a Ctrl-C while it builds or loads (as inside IPOPT): guarded re-raises it
@@ -215,6 +218,27 @@ def handle(bucket: Bucket, loader: Loader, options: PlannerOptions) -> Callable[
         return solver, functions, entry["layout"]
 
     return get
+
+
+#: This process's memory rule for the NLPs (:func:`hold_margin_variants`).
+_POLICY = {"hold_margin_variants": True}
+
+
+def hold_margin_variants(hold: bool) -> bool:
+    """Whether the NLPs of one margin family (the plan's and the wider-margin re-plans' of
+    :func:`~wheelloader.planner.cycle.cautious_options`) stay in memory side by side; returns the previous rule.
+
+    ``True`` (the default): each is built once per process. ``False``: a variant takes the place of the NLP of
+    its family in memory (one of them at a time, ~150 MB each for 40 intervals), and the next solve of the other
+    builds it again (the same plans, bit for bit, at ~1.3-1.6 s of CPU per build): ``wheelloader demo``'s memory
+    budget. Measured on the replayed MPM loop (``benchmarks/between_cycles.py``): a re-planned cycle made the next
+    cycle rebuild its plan's NLP, the longest time between cycles after the re-plan itself.
+    """
+    if not isinstance(hold, bool):
+        raise PlanningError(f"hold must be True or False, got {hold!r}")
+    previous = _POLICY["hold_margin_variants"]
+    _POLICY["hold_margin_variants"] = hold
+    return previous
 
 
 def release() -> int:

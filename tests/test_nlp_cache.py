@@ -9,7 +9,7 @@ import weakref
 import numpy as np
 import pytest
 
-from wheelloader.estimator import Bucket, Loader, Pile
+from wheelloader.estimator import Bucket, Loader, Pile, PlanningError
 from wheelloader.planner import (
     PlannerOptions,
     TrajectoryOptimizer,
@@ -166,10 +166,19 @@ def test_a_solver_made_from_another_solvers_derivatives_plans_bit_identically(mo
     assert shared.iterations == 15 and not shared.success
 
 
-def test_a_margin_variant_takes_the_nlps_place_in_memory_with_the_same_plans(cache):
-    """The loop's wider-margin re-plan NLP replaces the plan's NLP in this process's memory (one NLP of a margin
-    family at a time: ~150 MB each at 40 intervals); the plan's NLP is built again at its next solve and plans
-    bit-identically. Another transcription is not a margin variant: both stay."""
+@pytest.fixture
+def one_per_family():
+    """The demo's memory rule for this test: one NLP of a margin family in memory."""
+    held = nlp.hold_margin_variants(False)
+    yield
+    nlp.hold_margin_variants(held)
+
+
+def test_a_margin_variant_takes_the_nlps_place_in_memory_with_the_same_plans(cache, one_per_family):
+    """With hold_margin_variants(False) (the demo's rule), the loop's wider-margin re-plan NLP replaces the plan's
+    NLP in this process's memory (one NLP of a margin family at a time: ~150 MB each at 40 intervals); the plan's
+    NLP is built again at its next solve and plans bit-identically. Another transcription is not a margin
+    variant: both stay."""
     opt = TrajectoryOptimizer(options=OPTIONS)
     pile = Pile.trapezoid()
     start = default_start(pile)
@@ -185,6 +194,27 @@ def test_a_margin_variant_takes_the_nlps_place_in_memory_with_the_same_plans(cac
     _same(first, again)
     TrajectoryOptimizer(options=PlannerOptions(intervals=8))
     assert len(nlp._CACHE) == 2
+
+
+def test_by_default_margin_variants_stay_in_memory_and_nothing_is_built_twice(cache, monkeypatch):
+    """The default rule holds the plan's NLP beside its wider-margin variant: after a re-plan's NLP the plan's
+    next solve builds nothing (no nlpsol) and plans as before; the rule is restored as it was set."""
+    assert nlp.hold_margin_variants(True) is True  # the default
+    opt = TrajectoryOptimizer(options=OPTIONS)
+    pile = Pile.trapezoid()
+    start = default_start(pile)
+    first = opt.solve("gravel", pile, start, cycle_duration(pile, start))
+    wider = cautious_options(OPTIONS)
+    TrajectoryOptimizer(options=wider)
+    assert set(nlp._CACHE) == {(Bucket(), Loader(), OPTIONS), (Bucket(), Loader(), nlp.structural_options(wider))}
+    built = []
+    real = nlp.ca.nlpsol
+    monkeypatch.setattr(nlp.ca, "nlpsol", lambda *a, **k: built.append(a[0]) or real(*a, **k))
+    _same(first, opt.solve("gravel", pile, start, cycle_duration(pile, start)))
+    assert built == []
+    assert nlp.hold_margin_variants(False) is True and nlp.hold_margin_variants(True) is False
+    with pytest.raises(PlanningError, match="True or False"):
+        nlp.hold_margin_variants(1)
 
 
 def test_release_drops_the_nlps_and_the_next_solve_builds_them_again(cache):

@@ -63,13 +63,7 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     if plant != "fee-env" and mpc:
         raise ParameterError("--mpc needs the env's feedback and runs only with the fee-env plant")
     seeds = check_int("seeds", seeds, minimum=1, maximum=MAX_SEEDS)
-    from wheelloader.adaptation import (
-        DEFAULT_WINDOW,
-        NOMINAL_SOIL,
-        PRIOR_NAMES,
-        default_planner,
-        hidden_default_soil,
-    )
+    from wheelloader.adaptation import PRIOR_NAMES, hidden_default_soil
 
     prior = DEMO_PRIOR if prior is None else prior
     if prior not in PRIOR_NAMES:
@@ -80,6 +74,23 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     hidden = hidden_default_soil()
     if use_planner:
         say("building the planner's CasADi NLP (once, a few seconds) ...")
+    from wheelloader.planner.nlp import hold_margin_variants
+
+    # the demo's memory budget: a wider-margin re-plan's NLP takes the place of the plan's (rebuilt when needed)
+    held = hold_margin_variants(False)
+    try:
+        return _run_demo(out, cycles, seed, use_planner, say, mpc, plant, resolution, window, seeds, prior, start,
+                         hidden)
+    finally:
+        hold_margin_variants(held)
+
+
+def _run_demo(out: Path, cycles: int, seed: int, use_planner: bool, say: Any, mpc: bool, plant: str,
+              resolution: float, window: int | None, seeds: int, prior: str, start: float,
+              hidden: Any) -> dict[str, Any]:
+    """:func:`run_demo` after its checks (with the NLP memory rule set)."""
+    from wheelloader.adaptation import DEFAULT_WINDOW, NOMINAL_SOIL, default_planner
+
     planner = default_planner(mpc=mpc) if use_planner else None
     if planner is not None and not mpc:
         from wheelloader.planner.memo import RememberedPlanner

@@ -1,0 +1,272 @@
+"""The work between cycles of the MPM loop, replayed on its committed cycles, against a baseline revision (#33, #31).
+
+The acceptance run of the MPM loop (``benchmarks/loop_mpm.sh``) saved every cycle it dug under
+``data/results/loop_mpm/cycles/loops/SOIL/seedS/STRATEGY``. Replaying a loop runs its strategy again with the run's
+settings (:data:`LOOP_SETTINGS`) through :func:`wheelloader.loop.plant_loop_unit`: after each cycle it calibrates on
+the saved log, plans the next cycle on the saved carved pile, and the saved cycle is resumed instead of dug
+(``stale="error"``: the plan must be the one that was dug, path digest and all, or the replay stops). What is
+measured is exactly the work between cycles, on the machine's CPU clock (``time.process_time``, not the wall clock
+that the loop's records and the acceptance table carry): per cycle the calibration after the previous cycle and
+the plan of this one, the IPOPT iterations the plan spent (its re-plans included) and the NLPs it had to build
+(``casadi.nlpsol`` calls and their CPU).
+
+Each variant runs in a fresh process and they alternate within one invocation: ``baseline`` is the package at
+``--baseline REV`` (:func:`wheelloader.provenance.package_at_revision`, first on ``PYTHONPATH``), ``current`` this
+worktree's. Each version has its own NLP disk cache (``WHEELLOADER_NLP_CACHE``): round 1 starts it empty (the
+NLPs' expressions are built then, inside the first plan that needs them), later rounds read it.
+
+Run: ``python benchmarks/between_cycles.py --baseline REV [--rounds 2] [--out docs/results/between_cycles]``;
+``--from-json`` rewrites the table from ``--out``'s ``between_cycles.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+#: The acceptance run's loop settings (``benchmarks/loop_mpm.sh``'s COMMON; angles in radians).
+LOOP_SETTINGS = {"cycles": 5, "failure_angle": "min_weight_force", "heel_clearance": 0.0,
+                 "end_blade_angle": math.radians(55.0), "curl_out_intervals": 8, "midpoints": False,
+                 "objective": "kept_per_energy", "fill_limit": None}
+#: The loops replayed by default: the learning strategies of seed 0 (``phase2``'s loops, oracle parameters there).
+DEFAULT_LOOPS = ("gravel/0/ours", "sand/0/ours", "gravel/0/oracle", "sand/0/oracle")
+CYCLES = ROOT / "data" / "results" / "loop_mpm" / "cycles" / "loops"
+ORACLE_PARAMS = ROOT / "docs" / "results" / "loop_mpm" / "phase2" / "plant_adaptation.json"
+#: The issue's target: the median time between cycles [s] (#33).
+TARGET_S = 1.0
+
+
+def worker(loops: list[str], cycles_dir: Path, out: Path, cycles: int = LOOP_SETTINGS["cycles"]) -> int:
+    """Replay the first ``cycles`` cycles of ``loops`` in this process; write the calibrations' and plans' CPU,
+    iterations and NLP builds (and the imports' CPU) to ``out`` (JSON)."""
+    cpu0 = time.process_time()
+    import casadi
+
+    import wheelloader
+    from wheelloader.adaptation import Calibrating
+    from wheelloader.estimator import SoilParams
+    from wheelloader.loop import plant_loop_unit
+    from wheelloader.planner.trajectory import TrajectoryOptimizer
+    from wheelloader.references import make_plant
+
+    event = {"iterations": 0, "builds": 0, "build_cpu_s": 0.0}
+    rows: list[dict] = []
+
+    def counted_nlpsol(*args, **kwargs):
+        tic = time.process_time()
+        try:
+            return real_nlpsol(*args, **kwargs)
+        finally:
+            event["builds"] += 1
+            event["build_cpu_s"] += time.process_time() - tic
+
+    def counted_solve(self, *args, **kwargs):
+        plan = real_solve(self, *args, **kwargs)
+        event["iterations"] += int(plan.iterations)
+        return plan
+
+    def timed(kind, method):
+        def wrapper(self, *args, **kwargs):
+            event.update(iterations=0, builds=0, build_cpu_s=0.0)
+            tic, wall = time.process_time(), time.perf_counter()
+            result = method(self, *args, **kwargs)
+            row = {"kind": kind, "cpu_s": time.process_time() - tic, "wall_s": time.perf_counter() - wall, **event}
+            if kind == "plan":
+                row.update(ok=bool(result.success), message=str(result.message)[:160])
+            rows.append(row)
+            return result
+        return wrapper
+
+    real_nlpsol, real_solve = casadi.nlpsol, TrajectoryOptimizer.solve
+    casadi.nlpsol = counted_nlpsol
+    TrajectoryOptimizer.solve = counted_solve
+    Calibrating.plan = timed("plan", Calibrating.plan)
+    Calibrating.update = timed("calibration", Calibrating.update)
+    oracle = json.loads(ORACLE_PARAMS.read_text(encoding="utf-8"))["oracle"]
+    plant = make_plant("mpm", resolution=0.02, threads=2)
+    result = {"module": wheelloader.__file__, "import_cpu_s": time.process_time() - cpu0, "loops": {}}
+    for loop in loops:
+        soil, seed, strategy = loop.split("/")
+        rows.clear()
+        tic = time.process_time()
+        extra = {"oracle_params": SoilParams.from_dict(oracle[soil]["params"])} if strategy == "oracle" else {}
+        plant_loop_unit(plant, strategy, soil, seed=int(seed), stale="error", planner=True,
+                        cache=cycles_dir / soil / f"seed{seed}" / strategy, **{**LOOP_SETTINGS, "cycles": cycles},
+                        **extra)
+        result["loops"][loop] = {"cpu_s": time.process_time() - tic, "events": list(rows)}
+    out.write_text(json.dumps(result), encoding="utf-8")
+    return 0
+
+
+def between(events: list[dict]) -> list[dict]:
+    """Per cycle: the calibration after the previous cycle (none before cycle 1, none for the oracle) and the
+    plan of this cycle, summed."""
+    cycles: list[dict] = []
+    pending: dict | None = None
+    for e in events:
+        if e["kind"] == "calibration":
+            pending = e
+            continue
+        calib = pending or {"cpu_s": 0.0, "wall_s": 0.0, "builds": 0, "build_cpu_s": 0.0}
+        cycles.append({"cycle": len(cycles) + 1, "calibration_cpu_s": calib["cpu_s"], "plan_cpu_s": e["cpu_s"],
+                       "cpu_s": calib["cpu_s"] + e["cpu_s"], "wall_s": calib["wall_s"] + e["wall_s"],
+                       "iterations": e["iterations"], "nlp_builds": e["builds"] + calib["builds"],
+                       "nlp_build_cpu_s": e["build_cpu_s"] + calib["build_cpu_s"], "plan_ok": e["ok"],
+                       "message": e["message"]})
+        pending = None
+    return cycles
+
+
+def run_worker(variant: str, pythonpath: str | None, loops: list[str], cycles_dir: Path, tmp: Path,
+               cycles: int = LOOP_SETTINGS["cycles"]) -> dict:
+    """One replay in a fresh process (NLP disk cache ``tmp/nlp-VARIANT``); its rows and its CPU, wall, peak memory
+    and load."""
+    env = dict(os.environ, WHEELLOADER_NLP_CACHE=str(tmp / f"nlp-{variant}"))
+    env.pop("PYTHONPATH", None)
+    if pythonpath:
+        env["PYTHONPATH"] = pythonpath
+    out = tmp / f"{variant}-{time.monotonic_ns()}.json"
+    load = os.getloadavg()
+    wall = time.perf_counter()
+    command = [sys.executable, str(Path(__file__).resolve()), "--worker", str(out), "--cycles-dir", str(cycles_dir),
+               "--cycles", str(cycles), "--loops", *loops]
+    proc = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    output = proc.stdout.read().decode(errors="replace")
+    _, status, usage = os.wait4(proc.pid, 0)
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise RuntimeError(f"{variant} replay failed:\n{output[-3000:]}")
+    result = json.loads(out.read_text(encoding="utf-8"))
+    result.update(variant=variant, process_cpu_s=usage.ru_utime + usage.ru_stime,
+                  wall_s=time.perf_counter() - wall, max_rss_mb=usage.ru_maxrss / 1024.0, load_before=load,
+                  load_after=os.getloadavg())
+    for loop in result["loops"].values():
+        loop["cycles"] = between(loop.pop("events"))
+    return result
+
+
+def summarise(run: dict) -> dict:
+    """Medians over every replayed cycle from cycle 2 (as the acceptance table's "between cycles")."""
+    cycles = [c for loop in run["loops"].values() for c in loop["cycles"] if c["cycle"] >= 2]
+    med = (lambda key: statistics.median(c[key] for c in cycles)) if cycles else (lambda key: math.nan)  # noqa: E731
+    return {"cycles": len(cycles), "cpu_s_median": med("cpu_s"), "calibration_cpu_s_median": med("calibration_cpu_s"),
+            "plan_cpu_s_median": med("plan_cpu_s"), "iterations_median": med("iterations"),
+            "cpu_s_max": max((c["cpu_s"] for c in cycles), default=math.nan),
+            "cpu_s_total": sum(c["cpu_s"] for c in cycles),
+            "nlp_builds": sum(c["nlp_builds"] for c in cycles),
+            "nlp_build_cpu_s": sum(c["nlp_build_cpu_s"] for c in cycles),
+            "iterations_total": sum(c["iterations"] for c in cycles)}
+
+
+def markdown(data: dict) -> str:
+    """The side-by-side table (one row per run) and the per-cycle table of the last round."""
+    lines = ["| round | version | NLP disk cache | between cycles, CPU median (max) | calibration / plan, CPU "
+             "median | IPOPT iterations median (total) | NLPs built between cycles (their CPU) | replay CPU / wall | "
+             "load (before-after) |", "|" + "---|" * 9]
+    for run in data["runs"]:
+        s = run["summary"]
+        lines.append(f"| {run['round']} | {run['variant']} | {run['nlp_cache']} | "
+                     f"{s['cpu_s_median']:.2f} s ({s['cpu_s_max']:.2f} s) | "
+                     f"{s['calibration_cpu_s_median']:.2f} / {s['plan_cpu_s_median']:.2f} s | "
+                     f"{s['iterations_median']:.0f} ({s['iterations_total']}) | {s['nlp_builds']} "
+                     f"({s['nlp_build_cpu_s']:.1f} s) | {run['process_cpu_s']:.1f} / {run['wall_s']:.1f} s | "
+                     f"{run['load_before'][0]:.1f}-{run['load_after'][0]:.1f} |")
+    last = {}
+    for run in data["runs"]:
+        last[run["variant"]] = run
+    lines += ["", "| loop | cycle | " + " | ".join(f"{v}: CPU (calibration + plan), iterations, NLPs built"
+                                                  for v in last) + " |", "|" + "---|" * (2 + len(last))]
+    first = next(iter(last.values()))
+    for name, loop in first["loops"].items():
+        for k, c in enumerate(loop["cycles"]):
+            cells = []
+            for run in last.values():
+                o = run["loops"][name]["cycles"][k]
+                cells.append(f"{o['cpu_s']:.2f} s ({o['calibration_cpu_s']:.2f} + {o['plan_cpu_s']:.2f}), "
+                             f"{o['iterations']} it., {o['nlp_builds']}" + ("" if o["plan_ok"] else ", plan failed"))
+            lines.append(f"| {name} | {c['cycle']} | " + " | ".join(cells) + " |")
+    lines += ["", f"*`python benchmarks/between_cycles.py --baseline {data['baseline']}` (baseline = "
+              f"{data['baseline_commit'][:10]}, current = {data['current_commit'][:10]}); CPU seconds of this "
+              f"process (`time.process_time`); target {TARGET_S:g} s median (#33).*"]
+    return "\n".join(lines)
+
+
+def side_by_side(args: argparse.Namespace) -> dict:
+    """Alternating replays of the baseline and the current package (module docstring)."""
+    from wheelloader.provenance import package_at_revision
+
+    runs = []
+    with tempfile.TemporaryDirectory(prefix="between-cycles-") as tmp:
+        tmp = Path(tmp)
+        commit, pkg = package_at_revision(ROOT, args.baseline, tmp / "baseline")
+        for rnd in range(1, args.rounds + 1):
+            for variant, path in (("baseline", str(pkg)), ("current", None)):
+                run = run_worker(variant, path, args.loops, args.cycles_dir, tmp, args.cycles)
+                run.update(round=rnd, nlp_cache="empty" if rnd == 1 else "filled", summary=summarise(run))
+                runs.append(run)
+                s = run["summary"]
+                print(f"round {rnd} {variant:8s} median {s['cpu_s_median']:.2f} s CPU (calibration "
+                      f"{s['calibration_cpu_s_median']:.2f}, plan {s['plan_cpu_s_median']:.2f}), "
+                      f"{s['iterations_median']:.0f} it., NLPs built {s['nlp_builds']} "
+                      f"({s['nlp_build_cpu_s']:.1f} s), load {run['load_before'][0]:.1f}", flush=True)
+    return {"baseline": args.baseline, "baseline_commit": commit, "current_commit": _head(),
+            "loops": list(args.loops), "settings": {**LOOP_SETTINGS, "cycles": args.cycles}, "runs": runs}
+
+
+def _head() -> str:
+    done = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True)
+    dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "--untracked-files=no"],
+                           capture_output=True, text=True).stdout.strip()
+    return done.stdout.strip() + (" (with uncommitted changes)" if dirty else "")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--baseline", default="HEAD", help="git revision of the baseline (default: %(default)s)")
+    parser.add_argument("--rounds", type=int, default=2,
+                        help="rounds of baseline and current (default 2: the first with empty NLP disk caches)")
+    parser.add_argument("--loops", nargs="+", default=list(DEFAULT_LOOPS), metavar="SOIL/SEED/STRATEGY",
+                        help="the committed loops to replay (default: %(default)s)")
+    parser.add_argument("--cycles", type=int, default=LOOP_SETTINGS["cycles"],
+                        help="replay the first CYCLES cycles of each loop (default %(default)s)")
+    parser.add_argument("--cycles-dir", type=Path, default=CYCLES, help="the saved cycles (default: the committed)")
+    parser.add_argument("--out", type=Path, default=None, help="write between_cycles.json and table.md here")
+    parser.add_argument("--from-json", action="store_true", help="rewrite --out's table.md from its JSON")
+    parser.add_argument("--worker", type=Path, default=None, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.worker is not None:
+        return worker(args.loops, args.cycles_dir, args.worker, args.cycles)
+    for loop in args.loops:
+        parts = loop.split("/")
+        if len(parts) != 3 or parts[2] not in ("ours", "oracle") or not parts[1].isdigit():
+            parser.error(f"a loop is SOIL/SEED/ours or SOIL/SEED/oracle, got {loop!r}")
+    if args.rounds < 1:
+        parser.error("--rounds must be at least 1")
+    if not 1 <= args.cycles <= LOOP_SETTINGS["cycles"]:
+        parser.error(f"--cycles must be 1 to {LOOP_SETTINGS['cycles']}")
+    if args.from_json:
+        if args.out is None:
+            parser.error("--from-json needs --out")
+        data = json.loads((args.out / "between_cycles.json").read_text(encoding="utf-8"))
+    else:
+        data = side_by_side(args)
+    table = markdown(data)
+    print(table)
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        if not args.from_json:
+            (args.out / "between_cycles.json").write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+        (args.out / "table.md").write_text(table + "\n", encoding="utf-8")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
