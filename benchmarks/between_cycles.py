@@ -4,19 +4,21 @@ The acceptance run of the MPM loop (``benchmarks/loop_mpm.sh``) saved every cycl
 ``data/results/loop_mpm/cycles/loops/SOIL/seedS/STRATEGY``. Replaying a loop runs its strategy again with the run's
 settings (:data:`LOOP_SETTINGS`) through :func:`wheelloader.loop.plant_loop_unit`: after each cycle it calibrates on
 the saved log, plans the next cycle on the saved carved pile, and the saved cycle is resumed instead of dug
-(``stale="error"``: the plan must be the one that was dug, path digest and all, or the replay stops). What is
-measured is exactly the work between cycles, on the machine's CPU clock (``time.process_time``, not the wall clock
+(``stale="keep"``: the saved cycle is used even where today's code plans another path; each plan's path digest is
+recorded, and the summary counts the plans equal to the dug ones and to the baseline's). What is measured is
+exactly the work between cycles, on the machine's CPU clock (``time.process_time``, not the wall clock
 that the loop's records and the acceptance table carry): per cycle the calibration after the previous cycle and
 the plan of this one, the IPOPT iterations the plan spent (its re-plans included) and the NLPs it had to build
 (``casadi.nlpsol`` calls and their CPU).
 
 Each variant runs in a fresh process and they alternate within one invocation: ``baseline`` is the package at
-``--baseline REV`` (:func:`wheelloader.provenance.package_at_revision`, first on ``PYTHONPATH``), ``current`` this
-worktree's. Each version has its own NLP disk cache (``WHEELLOADER_NLP_CACHE``): round 1 starts it empty (the
+``--baseline REV`` and ``current`` the package at ``--current REV`` (default ``HEAD``), each extracted with
+:func:`wheelloader.provenance.package_at_revision` and put first on ``PYTHONPATH`` (so edits made while it runs do
+not leak in). Each version has its own NLP disk cache (``WHEELLOADER_NLP_CACHE``): round 1 starts it empty (the
 NLPs' expressions are built then, inside the first plan that needs them), later rounds read it.
 
-Run: ``python benchmarks/between_cycles.py --baseline REV [--rounds 2] [--out docs/results/between_cycles]``;
-``--from-json`` rewrites the table from ``--out``'s ``between_cycles.json``.
+Run: ``python benchmarks/between_cycles.py --baseline REV [--current REV] [--rounds 2]
+[--out docs/results/between_cycles]``; ``--from-json`` rewrites the table from ``--out``'s ``between_cycles.json``.
 """
 
 from __future__ import annotations
@@ -57,8 +59,9 @@ def worker(loops: list[str], cycles_dir: Path, out: Path, cycles: int = LOOP_SET
     from wheelloader.loop import plant_loop_unit
     from wheelloader.planner.trajectory import TrajectoryOptimizer
     from wheelloader.references import make_plant
+    from wheelloader.saved_loops import load_saved_cycle, path_digest
 
-    event = {"iterations": 0, "builds": 0, "build_cpu_s": 0.0}
+    event: dict = {"iterations": 0, "builds": 0, "build_cpu_s": 0.0, "folder": None}
     rows: list[dict] = []
 
     def counted_nlpsol(*args, **kwargs):
@@ -79,9 +82,13 @@ def worker(loops: list[str], cycles_dir: Path, out: Path, cycles: int = LOOP_SET
             event.update(iterations=0, builds=0, build_cpu_s=0.0)
             tic, wall = time.process_time(), time.perf_counter()
             result = method(self, *args, **kwargs)
-            row = {"kind": kind, "cpu_s": time.process_time() - tic, "wall_s": time.perf_counter() - wall, **event}
+            row = {"kind": kind, "cpu_s": time.process_time() - tic, "wall_s": time.perf_counter() - wall,
+                   "iterations": event["iterations"], "builds": event["builds"], "build_cpu_s": event["build_cpu_s"]}
             if kind == "plan":
-                row.update(ok=bool(result.success), message=str(result.message)[:160])
+                digest = None if result.path is None else path_digest(result.path)
+                saved = load_saved_cycle(event["folder"], sum(r["kind"] == "plan" for r in rows) + 1)
+                row.update(ok=bool(result.success), message=str(result.message)[:160], digest=digest,
+                           as_dug=saved is not None and digest == saved.metadata.get("planned_path_sha256"))
             rows.append(row)
             return result
         return wrapper
@@ -99,9 +106,9 @@ def worker(loops: list[str], cycles_dir: Path, out: Path, cycles: int = LOOP_SET
         rows.clear()
         tic = time.process_time()
         extra = {"oracle_params": SoilParams.from_dict(oracle[soil]["params"])} if strategy == "oracle" else {}
-        plant_loop_unit(plant, strategy, soil, seed=int(seed), stale="error", planner=True,
-                        cache=cycles_dir / soil / f"seed{seed}" / strategy, **{**LOOP_SETTINGS, "cycles": cycles},
-                        **extra)
+        event["folder"] = cycles_dir / soil / f"seed{seed}" / strategy
+        plant_loop_unit(plant, strategy, soil, seed=int(seed), stale="keep", planner=True, cache=event["folder"],
+                        **{**LOOP_SETTINGS, "cycles": cycles}, **extra)
         result["loops"][loop] = {"cpu_s": time.process_time() - tic, "events": list(rows)}
     out.write_text(json.dumps(result), encoding="utf-8")
     return 0
@@ -121,7 +128,7 @@ def between(events: list[dict]) -> list[dict]:
                        "cpu_s": calib["cpu_s"] + e["cpu_s"], "wall_s": calib["wall_s"] + e["wall_s"],
                        "iterations": e["iterations"], "nlp_builds": e["builds"] + calib["builds"],
                        "nlp_build_cpu_s": e["build_cpu_s"] + calib["build_cpu_s"], "plan_ok": e["ok"],
-                       "message": e["message"]})
+                       "message": e["message"], "digest": e.get("digest"), "as_dug": e.get("as_dug")})
         pending = None
     return cycles
 
@@ -163,21 +170,30 @@ def summarise(run: dict) -> dict:
             "cpu_s_total": sum(c["cpu_s"] for c in cycles),
             "nlp_builds": sum(c["nlp_builds"] for c in cycles),
             "nlp_build_cpu_s": sum(c["nlp_build_cpu_s"] for c in cycles),
-            "iterations_total": sum(c["iterations"] for c in cycles)}
+            "iterations_total": sum(c["iterations"] for c in cycles),
+            "plans_as_dug": sum(bool(c["as_dug"]) for loop in run["loops"].values() for c in loop["cycles"]),
+            "plans": sum(len(loop["cycles"]) for loop in run["loops"].values())}
+
+
+def same_plans(run: dict, reference: dict) -> int:
+    """How many of ``run``'s plans have the path digest of ``reference``'s plan of the same loop and cycle."""
+    return sum(c["digest"] == r["digest"] for name, loop in run["loops"].items()
+               for c, r in zip(loop["cycles"], reference["loops"][name]["cycles"], strict=True))
 
 
 def markdown(data: dict) -> str:
     """The side-by-side table (one row per run) and the per-cycle table of the last round."""
     lines = ["| round | version | NLP disk cache | between cycles, CPU median (max) | calibration / plan, CPU "
-             "median | IPOPT iterations median (total) | NLPs built between cycles (their CPU) | replay CPU / wall | "
-             "load (before-after) |", "|" + "---|" * 9]
+             "median | IPOPT iterations median (total) | NLPs built between cycles (their CPU) | plans as dug / as "
+             "the first baseline's | replay CPU / wall | load (before-after) |", "|" + "---|" * 10]
     for run in data["runs"]:
         s = run["summary"]
         lines.append(f"| {run['round']} | {run['variant']} | {run['nlp_cache']} | "
                      f"{s['cpu_s_median']:.2f} s ({s['cpu_s_max']:.2f} s) | "
                      f"{s['calibration_cpu_s_median']:.2f} / {s['plan_cpu_s_median']:.2f} s | "
                      f"{s['iterations_median']:.0f} ({s['iterations_total']}) | {s['nlp_builds']} "
-                     f"({s['nlp_build_cpu_s']:.1f} s) | {run['process_cpu_s']:.1f} / {run['wall_s']:.1f} s | "
+                     f"({s['nlp_build_cpu_s']:.1f} s) | {s['plans_as_dug']} / {s['plans_as_first_baseline']} of "
+                     f"{s['plans']} | {run['process_cpu_s']:.1f} / {run['wall_s']:.1f} s | "
                      f"{run['load_before'][0]:.1f}-{run['load_after'][0]:.1f} |")
     last = {}
     for run in data["runs"]:
@@ -207,30 +223,28 @@ def side_by_side(args: argparse.Namespace) -> dict:
     with tempfile.TemporaryDirectory(prefix="between-cycles-") as tmp:
         tmp = Path(tmp)
         commit, pkg = package_at_revision(ROOT, args.baseline, tmp / "baseline")
+        current, current_pkg = package_at_revision(ROOT, args.current, tmp / "current")
+        reference = None
         for rnd in range(1, args.rounds + 1):
-            for variant, path in (("baseline", str(pkg)), ("current", None)):
-                run = run_worker(variant, path, args.loops, args.cycles_dir, tmp, args.cycles)
+            for variant, path in (("baseline", pkg), ("current", current_pkg)):
+                run = run_worker(variant, str(path), args.loops, args.cycles_dir, tmp, args.cycles)
+                reference = reference or run
                 run.update(round=rnd, nlp_cache="empty" if rnd == 1 else "filled", summary=summarise(run))
+                run["summary"]["plans_as_first_baseline"] = same_plans(run, reference)
                 runs.append(run)
                 s = run["summary"]
                 print(f"round {rnd} {variant:8s} median {s['cpu_s_median']:.2f} s CPU (calibration "
                       f"{s['calibration_cpu_s_median']:.2f}, plan {s['plan_cpu_s_median']:.2f}), "
                       f"{s['iterations_median']:.0f} it., NLPs built {s['nlp_builds']} "
                       f"({s['nlp_build_cpu_s']:.1f} s), load {run['load_before'][0]:.1f}", flush=True)
-    return {"baseline": args.baseline, "baseline_commit": commit, "current_commit": _head(),
+    return {"baseline": args.baseline, "baseline_commit": commit, "current": args.current, "current_commit": current,
             "loops": list(args.loops), "settings": {**LOOP_SETTINGS, "cycles": args.cycles}, "runs": runs}
-
-
-def _head() -> str:
-    done = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True)
-    dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "--untracked-files=no"],
-                           capture_output=True, text=True).stdout.strip()
-    return done.stdout.strip() + (" (with uncommitted changes)" if dirty else "")
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--baseline", default="HEAD", help="git revision of the baseline (default: %(default)s)")
+    parser.add_argument("--current", default="HEAD", help="git revision of the current version (default: %(default)s)")
     parser.add_argument("--rounds", type=int, default=2,
                         help="rounds of baseline and current (default 2: the first with empty NLP disk caches)")
     parser.add_argument("--loops", nargs="+", default=list(DEFAULT_LOOPS), metavar="SOIL/SEED/STRATEGY",
