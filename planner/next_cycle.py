@@ -86,6 +86,14 @@ KEPT_EXIT_SHARE = 0.5
 MIN_FILL = 0.1
 
 
+def _dug(check: PlanCheck) -> float:
+    """What a checked plan loads into the bucket for :data:`MIN_FILL` and :data:`ITERATE_MIN_FILL` [m^3]: the
+    carved volume (under the payload force models ``check.fill`` is the kept soil, at most the payload's heap,
+    ~0.5 of the capacity with the default payload: no iterate reached ITERATE_MIN_FILL and every plan of the
+    MPM loop's ours with ``"fee-payload"`` on the committed piles failed, 6 of 8)."""
+    return check.carved if math.isfinite(check.carved) else check.fill
+
+
 def _flag_note(flags: dict[str, int]) -> str:
     """The validity flags that fired (samples per flag), without "tip out of soil"."""
     fired = [f"{name}: {count}" for name, count in flags.items() if count and name != "tip out of soil"]
@@ -167,7 +175,7 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
                            plan=plan, check=check, first_failures=first_failures)
     if not best:
         return PlanOutcome(None, False, f"IPOPT: {plan.status}; the plan loads only "
-                           f"{check.fill / opt.bucket.capacity:.0%} of the bucket by the NumPy check{retried}",
+                           f"{_dug(check) / opt.bucket.capacity:.0%} of the bucket by the NumPy check{retried}",
                            seconds, plan=plan, check=check, first_failures=first_failures)
     # a plan that passes every check of the NumPy re-simulation is feasible even when IPOPT stopped at its
     # iteration limit (then it is not proven optimal): use it and say so
@@ -224,7 +232,7 @@ def _search(opt: TrajectoryOptimizer, options: PlannerOptions | None, params: So
         # the NumPy model's objective (fill against energy, as the NLP's) of a plan that passes the check; an
         # iterate on the way counts only once it loads ITERATE_MIN_FILL of the bucket (not the air it starts in)
         score = -check.fill / opt.bucket.capacity + lam * check.energy / 1000.0
-        useful = check.fill >= (ITERATE_MIN_FILL if iterate else MIN_FILL) * opt.bucket.capacity
+        useful = _dug(check) >= (ITERATE_MIN_FILL if iterate else MIN_FILL) * opt.bucket.capacity
         if kept_objective:  # the kept objective (planner.kept) by the NumPy check, its kept fill on target
             terms = _kept_terms(plan, check, params, opt)
             score = terms.per_kept * opt.bucket.capacity / KEPT_OBJECTIVE_SCALE

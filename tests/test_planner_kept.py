@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -93,3 +94,25 @@ def test_plan_keeps_the_fixed_paths_fill():
     assert target > 0.3 * bucket.capacity
     assert kept >= target - 0.01 * bucket.capacity
     assert "kept" in out.message
+
+
+
+def test_a_payload_models_plan_counts_what_it_digs_for_the_least_fill():
+    # under "fee-payload" the check's fill is the kept soil (below ITERATE_MIN_FILL of the bucket with the default
+    # payload); the least-fill rules count the carved volume. Known case: the MPM loop's gravel pile 3 (seed 0,
+    # committed) with ours' "held" fit of cycles 1-2 under "fee-payload": every iterate was refused
+    # ("the plan loads only 46 % of the bucket") before
+    from wheelloader.adaptation import default_planner
+    from wheelloader.estimator import SoilParams
+    from wheelloader.saved_loops import load_saved_cycle
+
+    root = Path(__file__).resolve().parents[1] / "data/results/loop_mpm/cycles/loops/gravel/seed0/ours"
+    pile = load_saved_cycle(root, 3).pile
+    params = SoilParams(gamma=1468.8336340993567, cohesion=0.0, adhesion=104.21003636438923, phi=0.678312549989537,
+                        delta=0.6636747061876138, k_c=0.0, k_phi=91143.44891315638, n=1.4970007537431995)
+    plan = default_planner(failure_angle="min_weight_force", heel_clearance=0.0, end_blade_angle=math.radians(55),
+                           curl_out_intervals=8, midpoints=False, objective="kept_per_energy")
+    out = plan(params, pile, force_model="fee-payload", payload=DEFAULT_PAYLOAD)
+    assert out.success, out.message
+    capacity = optimizer_for(options=KEPT).bucket.capacity
+    assert out.check.fill < 0.55 * capacity < out.check.carved
