@@ -15,7 +15,8 @@ name                      model
 ``"fee-payload-depth"``   ``"fee-payload"`` with a depth-squared share of the soil's weight beside the wedge,
                           ``N_gamma + k`` in eq 1 (:attr:`~wheelloader.estimator.ModelOptions.wedge_offset`,
                           ``k =`` :data:`DEFAULT_WEDGE_OFFSET`, fitted offline to the continuum's training
-                          cycles): the calibrated phi no longer carries the depth scaling; no new parameter
+                          cycles): a term of fixed shape carries the depth scaling that phi and a fake
+                          cohesion carry in the FEE; no new parameter
 ========================  ===================================================================================
 
 :data:`DEFAULT_PAYLOAD` is the payload fitted to the project's continuum cycles except the held-out soil

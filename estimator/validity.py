@@ -114,9 +114,10 @@ class ModelOptions:
         N_gamma of eq 10 after its clamp at 0, so eq 1's weight term is ``gamma g w d^2 (N_gamma + k)``: a
         depth-squared share of the soil's weight that does not depend on phi, resolved like the FEE force
         (``sin(delta)``, ``cos(delta)``, eqs 16-17). Fitted to the continuum's paths, the FEE alone makes phi
-        carry the depth scaling (15-30 deg below the continuum's) and fakes a cohesion in cohesionless soils;
-        with ``k`` the calibrated phi no longer has to (``docs/results/model_form.md``). The
-        ``"fee-payload-depth"`` force model sets it (:data:`~wheelloader.estimator.DEFAULT_WEDGE_OFFSET`).
+        and a fake cohesion carry the depth scaling (phi 15-30 deg below the continuum's); with ``k`` a term of
+        fixed shape carries it, which transfers better to other depths, though the fitted phi is no more
+        physical (``docs/results/model_form.md``). The ``"fee-payload-depth"`` force model sets it
+        (:data:`~wheelloader.estimator.DEFAULT_WEDGE_OFFSET`).
     """
 
     eps1: float = math.radians(5.0)
