@@ -8,6 +8,7 @@ and torch, unless ``WHEELLOADER_REQUIRE_RL=1`` (then a missing install fails).
 
 from __future__ import annotations
 
+import argparse
 import importlib
 import json
 import os
@@ -126,6 +127,23 @@ def test_run_episode_metrics(common):
     assert s["episodes"] == 2 and 0.0 <= s["stall_rate"] <= 1.0
 
 
+def test_train_vec_default_is_the_faster_backend_at_each_env_count(common):
+    """train/'s --vec default "auto" is make_sb3_vec_env's choice: serial single envs below BATCHED_FROM envs, the
+    batched env from there (the faster one at each count, benchmarks/env_speed.py --sb3); the others as named."""
+    from wheelloader.envs.sb3 import BATCHED_FROM, BatchedVecEnv, SerialVecEnv
+
+    parser = argparse.ArgumentParser()
+    common.add_training_args(parser, 64, 2)
+    assert parser.parse_args([]).vec == "auto"
+    for n, vec, kind in ((2, "auto", SerialVecEnv), (BATCHED_FROM, "auto", BatchedVecEnv),
+                         (2, "batched", BatchedVecEnv), (2, "serial", SerialVecEnv)):
+        env = common.make_train_env({"max_episode_steps": 20}, n, 0, vec)
+        assert type(env.venv) is kind, (n, vec)
+        env.close()
+    with pytest.raises(ValueError, match="--vec"):
+        common.make_train_env({}, 2, 0, "fast")
+
+
 def test_train_and_evaluate_smoke(tmp_path):
     """PPO and SAC train for a tiny budget, save loadable models, and the evaluation compares them with the
     baselines (JSON, Markdown table, learning-curve PNG)."""
@@ -142,6 +160,8 @@ def test_train_and_evaluate_smoke(tmp_path):
         assert curve["records"][0]["timesteps"] == 0 and curve["records"][-1]["timesteps"] >= 64
         summary = json.loads((out / "train_summary.json").read_text())
         assert summary["timesteps"] >= 64 and summary["env_steps_per_s"] > 0
+        config = json.loads((out / "config.json").read_text())
+        assert config["vec_env"] == {"ppo": "SerialVecEnv", "sac": "DummyVecEnv"}[algo]  # --vec auto at 2 envs
     from stable_baselines3 import PPO, SAC
 
     model = PPO.load(tmp_path / "ppo" / "model.zip", device="cpu")

@@ -15,17 +15,27 @@ import wheelloader.envs  # noqa: F401  (registers the env ids)
 from wheelloader.envs.sb3 import make_sb3_vec_env
 from wheelloader.estimator import PRESET_NAMES, as_soil, paper_paths
 
+#: ``--vec`` choices: make_sb3_vec_env's backends (``"auto"``: the faster one at the env count) and SB3's DummyVecEnv.
+VEC_BACKENDS = ("auto", "batched", "serial", "dummy")
 
-def make_train_env(env_kwargs: dict[str, Any], n_envs: int, seed: int, vec: str = "batched") -> VecEnv:
-    """The training VecEnv: ``"batched"`` (the packaged adapter :class:`wheelloader.envs.sb3.BatchedVecEnv`)
-    or ``"dummy"`` (SB3 DummyVecEnv of ``gym.make`` envs), wrapped in ``VecMonitor`` (episode returns for
-    the logs), seeded with ``seed`` (sub-env ``i`` gets ``seed + i``)."""
+
+def make_train_env(env_kwargs: dict[str, Any], n_envs: int, seed: int, vec: str = "auto") -> VecEnv:
+    """The training VecEnv, wrapped in ``VecMonitor`` (episode returns for the logs), seeded with ``seed`` (sub-env
+    ``i`` gets ``seed + i``).
+
+    ``vec``: ``"auto"`` (default: :func:`wheelloader.envs.sb3.make_sb3_vec_env`'s choice, the faster backend at
+    ``n_envs`` as ``benchmarks/env_speed.py --sb3`` measured it: serial single envs below ``BATCHED_FROM`` envs,
+    the NumPy-batched env from there), ``"batched"`` (:class:`wheelloader.envs.sb3.BatchedVecEnv`), ``"serial"``
+    (:class:`wheelloader.envs.sb3.SerialVecEnv`) or ``"dummy"`` (SB3's DummyVecEnv of ``gym.make`` envs). All give
+    the same episodes for the same seed and actions, to rounding (the batched env's vectorised tangents may differ
+    from the single env's in the last bit).
+    """
     if n_envs < 1:
         raise ValueError(f"--n-envs must be >= 1, got {n_envs!r}")
-    if vec == "batched":
-        return make_sb3_vec_env(ENV_ID, n_envs, seed, backend="batched", **env_kwargs)
+    if vec not in VEC_BACKENDS:
+        raise ValueError(f"--vec must be one of {VEC_BACKENDS}, got {vec!r}")
     if vec != "dummy":
-        raise ValueError(f"--vec must be 'batched' or 'dummy', got {vec!r}")
+        return make_sb3_vec_env(ENV_ID, n_envs, seed, backend=vec, **env_kwargs)
     env = DummyVecEnv([lambda: gym.make(ENV_ID, **env_kwargs) for _ in range(n_envs)])
     env.seed(seed)
     return VecMonitor(env)

@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 from common import machine_info, set_torch_threads, write_json
-from setups import make_train_env
+from setups import VEC_BACKENDS, make_train_env
 
 TARGET = 1000.0
 
@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--total-timesteps", type=int, default=131_072)
     parser.add_argument("--n-envs", type=int, default=16)
-    parser.add_argument("--vec", nargs="+", default=["batched", "dummy"], choices=("batched", "dummy"))
+    parser.add_argument("--vec", nargs="+", default=["batched", "dummy"], choices=VEC_BACKENDS)
     parser.add_argument("--sde", nargs="+", default=["on"], choices=("on", "off"), help="gSDE settings to measure")
     parser.add_argument("--n-epochs", type=int, default=10, help="PPO epochs per update (train/ppo.py's default)")
     parser.add_argument("--seed", type=int, default=0)

@@ -19,7 +19,7 @@ from common import (
     write_json,
 )
 from curves import LearningCurveCallback
-from setups import make_train_env, resolve_setup
+from setups import VEC_BACKENDS, make_train_env, resolve_setup
 
 
 def add_training_args(parser: argparse.ArgumentParser, default_steps: int, default_envs: int) -> None:
@@ -30,8 +30,10 @@ def add_training_args(parser: argparse.ArgumentParser, default_steps: int, defau
                         help=f"hidden soil of the plant cycle for --setup twin (default {DEFAULT_PLANT_SOIL})")
     parser.add_argument("--total-timesteps", type=int, default=default_steps, help="env-steps to train")
     parser.add_argument("--n-envs", type=int, default=default_envs, help="parallel sub-envs")
-    parser.add_argument("--vec", choices=("batched", "dummy"), default="batched",
-                        help="batched NumPy vector env (default) or SB3 DummyVecEnv of single envs")
+    parser.add_argument("--vec", choices=VEC_BACKENDS, default="auto",
+                        help="auto (default): the faster backend at --n-envs (make_sb3_vec_env's choice: serial single "
+                             "envs below wheelloader.envs.sb3.BATCHED_FROM envs, the batched NumPy vector env from "
+                             "there; docs/results/env_speed.md); batched; serial; or SB3's DummyVecEnv of single envs")
     parser.add_argument("--seed", type=int, default=0, help="seed of the envs, the policy and the twin's plant cycle")
     parser.add_argument("--out", type=Path, default=None, help="output directory (default results/<algo>_<setup>)")
     parser.add_argument("--torch-threads", type=int, default=1, help="torch intra-op threads (default 1)")
@@ -92,6 +94,7 @@ def train(algo: str, args: argparse.Namespace, model_kwargs: dict[str, Any]) -> 
                     **model_kwargs)
     config = {"algo": algo, "env_id": ENV_ID, "setup": setup["description"], "args": vars(args),
               "env_kwargs": {k: v for k, v in env_kwargs.items() if k != "soil"},
+              "vec_env": type(getattr(env, "venv", env)).__name__,  # what --vec resolved to
               "model_kwargs": model_kwargs, "torch_threads": threads, "machine": machine_info()}
     write_json(out / "config.json", config)
     curve = LearningCurveCallback(out, args.eval_freq, eval_soils, args.eval_seeds, env_kwargs=model_env, verbose=1)
