@@ -50,9 +50,10 @@ class BatchedCycleRecorder:
     def __init__(self, n: int, max_steps: int, dt: float, keep: int) -> None:
         self.n, self.dt, self.keep = n, dt, keep
         self.tick = 0
-        # (step, sub-env, column): a step's samples are one contiguous block (written with one np.stack), a
-        # cycle's are one short row per step. Filled now, so that the steps do not pay for first touches.
-        self._ring = np.full((max_steps + 1, n, len(SAMPLE_KEYS)), 0.0)
+        # (step, column, sub-env): a step's samples are one contiguous block (written with one np.stack of
+        # contiguous rows), a cycle's are one strided column per step. Filled now, so that the steps do not pay
+        # for first touches.
+        self._ring = np.full((max_steps + 1, len(SAMPLE_KEYS), n), 0.0)
         self._first = np.zeros((n, len(SAMPLE_KEYS)))
         self._start = np.zeros(n, dtype=np.int64)
         self._open = np.zeros(n, dtype=bool)
@@ -85,7 +86,7 @@ class BatchedCycleRecorder:
         lazy = self._lazy
         while lazy and lazy[0][0] + size <= self.tick:  # its first step's row is about to be overwritten
             self._materialize(heapq.heappop(lazy)[2])
-        np.stack(columns, axis=1, out=self._ring[self.tick % size])
+        np.stack(columns, axis=0, out=self._ring[self.tick % size])
 
     def _materialize(self, entry: dict[str, Any]) -> None:
         """Copy a kept cycle's samples out of the ring (once; nothing for a dropped one)."""
@@ -139,7 +140,7 @@ class BatchedCycleRecorder:
         if steps > self._ring.shape[0] - 1:
             raise ParameterError(f"a cycle of {steps} steps does not fit the record of {self._ring.shape[0] - 1}")
         ticks = np.arange(start + 1, start + steps + 1) % self._ring.shape[0]
-        samples = np.concatenate([first[None, :], self._ring[ticks, i]])
+        samples = np.concatenate([first[None, :], self._ring[ticks, :, i]])
         out = {"t": np.arange(steps + 1) * self.dt}
         for c, key in enumerate(SAMPLE_KEYS):
             out[key] = samples[:, c].astype(np.int64) if key == "flags" else samples[:, c].copy()

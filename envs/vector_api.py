@@ -67,13 +67,14 @@ class VectorApi:
         """Reset info of the sub-envs in ``mask``, as SyncVectorEnv gathers the single env's (``soil``: a dict
         of parameter arrays with their masks)."""
         rows = np.nonzero(mask)[0]
+        soils = [self._soils[i] for i in rows]
+        values = np.zeros((len(PARAMETER_NAMES), self.num_envs))  # a row per parameter
+        masks = np.repeat(mask[None, :], len(PARAMETER_NAMES) + 2, axis=0)  # fresh mask rows, one allocation
         soil: dict[str, np.ndarray] = {}
-        for name in PARAMETER_NAMES:
-            values = np.zeros(self.num_envs)
-            values[rows] = [getattr(self._soils[i], name) for i in rows]
-            soil[name], soil["_" + name] = values, mask.copy()
-        return {"soil": soil, "_soil": mask.copy(), "cycle": np.zeros(self.num_envs, dtype=int),
-                "_cycle": mask.copy()}
+        for k, name in enumerate(PARAMETER_NAMES):
+            values[k, rows] = [getattr(s, name) for s in soils]
+            soil[name], soil["_" + name] = values[k], masks[k]
+        return {"soil": soil, "_soil": masks[-2], "cycle": np.zeros(self.num_envs, dtype=int), "_cycle": masks[-1]}
 
     def _mask_info(self, info: dict[str, Any], stepped: np.ndarray, reset: np.ndarray) -> dict[str, Any]:
         """The step info of the sub-envs in ``stepped`` (zeros elsewhere, as SyncVectorEnv leaves them) and the
@@ -81,10 +82,11 @@ class VectorApi:
         out: dict[str, Any] = {}
         if stepped.any():
             idle = np.flatnonzero(~stepped)
-            for key in STEP_INFO_KEYS:
+            masks = np.repeat(stepped[None, :], len(STEP_INFO_KEYS), axis=0)  # fresh mask rows, one allocation
+            for key, mask in zip(STEP_INFO_KEYS, masks, strict=True):
                 value = info[key]
                 value[idle] = 0
-                out[key], out["_" + key] = value, stepped.copy()
+                out[key], out["_" + key] = value, mask
         reset_info = self._reset_info(reset)
         out["soil"], out["_soil"] = reset_info["soil"], reset_info["_soil"]
         out["cycle"], out["_cycle"] = out.get("cycle", reset_info["cycle"]), stepped | reset
