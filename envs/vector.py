@@ -607,7 +607,7 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
             if self._look_col[0] is not look:
                 self._look_col = (look, np.array(look, dtype=float).reshape(-1, 1))
             ahead = self._look_col[1] + self._x
-            h = self._surf.height(self._surf.carved, None, ahead)
+            h = self._surf.carved_height(ahead)
             h -= self._z
             obs[:, 12:] = h.T
         np.maximum(obs, self._low32, out=obs)  # clip
