@@ -116,3 +116,40 @@ def test_vector_reset_accepts_seed_lists_and_renders():
     for frame in frames:
         assert frame.dtype == np.uint8 and frame.ndim == 3
     vec.close()
+
+
+def test_batched_surfaces_read_the_shared_start_row_only_where_nothing_was_carved():
+    """The look-ahead and the carve read a row's own nodes only inside its carved range (elsewhere the shared start
+    row): the same heights and the same cuts as reading every row, through carves, undos and a row on another pile."""
+    from wheelloader.envs.batched_surface import BatchedSurfaces
+    from wheelloader.estimator import Pile, SurfaceCarver
+
+    pile = Pile.trapezoid()
+    n = 6
+    surf = BatchedSurfaces(pile, n)
+    for i in range(n):
+        surf.set(i, pile.heights)
+    carvers = [SurfaceCarver(pile, 1.0, 10.0) for _ in range(n)]
+    rng = np.random.default_rng(2)
+    x = rng.uniform(0.2, 1.5, n)
+    z = rng.uniform(0.0, 0.6, n)
+    for step in range(60):
+        if step == 30:  # a row on another pile: every read of it goes to its own row
+            other = Pile(pile.x0, pile.spacing, 0.8 * pile.heights)
+            surf.set(2, other.heights)
+            carvers[2] = SurfaceCarver(other, 1.0, 10.0)
+        xn = x + rng.uniform(-0.005, 0.02, n)
+        zn = z + rng.uniform(-0.02, 0.01, n)
+        idx_u, old_u, area = surf.carve(None, x, z, xn, zn)
+        removed = [c.cut_segment(x[i], z[i], xn[i], zn[i]) for i, c in enumerate(carvers)]
+        np.testing.assert_array_equal(np.zeros(n) if area is None else area, np.asarray(removed))  # width 1
+        if step % 7 == 3 and area is not None:  # undo some rows' cuts (as a stall does)
+            surf.undo(idx_u, old_u, np.array([0, 4]))
+            for i in (0, 4):
+                carvers[i] = SurfaceCarver(surf.pile(i), 1.0, 10.0)
+        for i, c in enumerate(carvers):
+            np.testing.assert_array_equal(surf.carved[i], c.pile().heights)
+        ahead = np.add.outer(np.r_[np.linspace(-0.03, 0.03, 31), 0.1, 0.3, 0.5], xn)  # around the cuts, ahead
+        np.testing.assert_array_equal(surf.carved_height(ahead), surf.height(surf.carved, None, ahead))
+        x, z = xn, zn
+    assert area is not None  # the paths cut
