@@ -39,7 +39,8 @@ motion that advances the edge, :func:`~wheelloader.estimator.force_model.slip_fa
 * ``gated Bekker``: the penetration term only while the edge advances, ``K w b d^n s_a`` (no new coefficient);
 * ``fee-payload-depth (k fixed)``: the shipped ``"fee-payload-depth"`` form, N_gamma + k with k fixed at
   :data:`~wheelloader.estimator.DEFAULT_WEDGE_OFFSET` (the ``wedge`` term along the FEE's direction, tied to gamma:
-  no coefficient of its own).
+  no coefficient of its own); ``fee-payload-depth + lift`` and ``+ edge + lift``: that form with the free terms
+  (what a parameter of its own for them would add to the shipped form).
 
 ``--fit-offset`` fits that k instead (:func:`fit_offset`, the training loops only) and writes ``offset.json``.
 
@@ -83,7 +84,8 @@ FORMS: dict[str, tuple[str, ...]] = {
     "fee-payload": (), "+ gated Bekker": ("gated Bekker",), "+ wedge": ("wedge",), "+ kept weight": ("kept weight",),
     "+ push": ("push",), "+ edge": ("edge",), "+ lift": ("lift",), "+ edge + lift": ("edge", "lift"),
     "+ push + lift": ("push", "lift"), "+ edge + push + lift": ("edge", "push", "lift"),
-    "fee-payload-depth (k fixed)": ("N_gamma offset",),
+    "fee-payload-depth (k fixed)": ("N_gamma offset",), "fee-payload-depth + lift": ("N_gamma offset", "lift"),
+    "fee-payload-depth + edge + lift": ("N_gamma offset", "edge", "lift"),
 }
 
 
