@@ -333,6 +333,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         self._stall_count = 0
         self._stone = 0.0
         self._beta: float | None = None
+        self._exit_angle = self._th  # the blade angle the payload's heap sees: current in soil, held after exit
         self._energy_soil = self._energy_payload = 0.0
         self._fill = 0.0  # the bucket's fill [m^3]: the carved volume ("fee") or the payload's kept soil
         self._cycle_t = 0
@@ -402,8 +403,10 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
             self._stall_count = 0
         if depth > 0.0:
             self._beta = beta
+            self._exit_angle = thn
         fill = self._fill = (carver.fill if payload is None
-                             else kept_volume_float(carver.removed, cfg.bucket.capacity, payload))
+                             else kept_volume_float(carver.removed, cfg.bucket.capacity, payload, 0.0,
+                                                    self._exit_angle))
         e_soil, e_pay = step_work(f_t, f_n, xn - x, zn - z, thn, w_load, cos=math.cos, sin=math.sin)
         self._energy_soil += e_soil
         self._energy_payload += e_pay
@@ -494,7 +497,8 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
             f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, lt, w_load, bucket, DEFAULT_OPTIONS,
                                                        self._beta)
         else:  # "fee-payload": the kept soil's weight and inertia take over from the surcharge at exit
-            kept = kept_volume_float(self._carver.removed, bucket.capacity, payload)
+            kept = kept_volume_float(self._carver.removed, bucket.capacity, payload, 0.0,
+                                     th if depth > 0.0 else self._exit_angle)
             carried = soil.gamma * GRAVITY * kept
             f_t, f_n, beta, flags = soil_forces_single(soil, depth, rho, alpha, lt, w_load, bucket, cfg.model_options,
                                                        self._beta, acceleration=acceleration, carried_weight=carried)

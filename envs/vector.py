@@ -179,6 +179,7 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         self._depth, self._rho, self._alpha = z(n), z(n), z(n)
         self._fill, self._spilled, self._stone = z(n), z(n), z(n)  # fill: the carved volume up to the capacity
         self._removed = z(n)  # volume removed since the cycle started (the payload's input) [m^3]
+        self._exit_angle = z(n)  # the blade angle the payload's heap sees: current in soil, held after exit [rad]
         self._kept = z(n)  # the bucket's fill as the env reports it: _fill, or the payload's kept soil [m^3]
         self._mt, self._mn = z(n), z(n)
         self._e_soil, self._e_pay = z(n), z(n)
@@ -291,6 +292,7 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         self._vx[i] = self._vz[i] = self._om[i] = 0.0
         self._fill[i] = self._spilled[i] = self._stone[i] = 0.0
         self._removed[i] = self._kept[i] = 0.0
+        self._exit_angle[i] = th
         self._e_soil[i] = self._e_pay[i] = 0.0
         self._stall[i] = 0
         self._k[i] = 0
@@ -496,7 +498,8 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
                                                            cfg.bucket.floor_length)
         f_t, f_n, flags, beta = self._forces(rows, depth, rho, alpha, lt, fill)
         if payload is not None:  # "fee-payload": the kept soil's weight and inertia, in and out of soil
-            kept = kept_volume(self._removed, cfg.bucket.capacity, payload)
+            kept = kept_volume(self._removed, cfg.bucket.capacity, payload, 0.0,
+                               np.where(depth > 0.0, thn, self._exit_angle) if payload.curl_gain else 0.0)
             acc = np.column_stack([(vx - self._vx) / dt, (vz - self._vz) / dt])
             d_t, d_n = carried_forces(depth, alpha - rho, self._gamma * GRAVITY * kept, acc, cfg.model_options)
             f_t, f_n = f_t + d_t, f_n + d_n
@@ -540,9 +543,11 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         else:
             self._stall[:] = 0
         self._beta = np.where(depth > 0.0, beta, self._beta)
+        if payload is not None and payload.curl_gain:
+            self._exit_angle = np.where(depth > 0.0, thn, self._exit_angle)
         carved = fill
         if payload is not None:  # the fill is the payload's kept soil (obs, info, reward, cycle end, records)
-            kept = kept_volume(self._removed, cfg.bucket.capacity, payload)
+            kept = kept_volume(self._removed, cfg.bucket.capacity, payload, 0.0, self._exit_angle)
             fill0, fill = kept0, kept
         self._kept = fill.copy()
         # energy (the shared bookkeeping)

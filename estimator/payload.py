@@ -7,11 +7,20 @@ that grows with the removed volume ``R`` times a retention fraction ``r`` and sa
 capacity ``C = h * capacity``:
 
     V(R) = V_0 + u / (1 + (u / C_free)^p)^(1/p),   u = r R,   C_free = C - V_0,
+    C = (h + g sin theta_exit) * capacity,
 
 a smooth minimum of ``u`` and ``C_free`` (exponent ``p``; ``p -> inf`` gives the hard cap of
 :meth:`~wheelloader.estimator.pile.Pile.carve`). ``V`` is monotone in ``R``, equals ``V_0 + r R`` for small cuts,
 never exceeds ``C`` and is differentiable everywhere, so the planner can write it in CasADi
-(:func:`kept_volume` works on NumPy arrays and on CasADi symbols alike). The kept soil's weight stays on the
+(:func:`kept_volume` works on NumPy arrays and on CasADi symbols alike).
+
+The heaped capacity may depend on the curl: ``theta_exit`` is the blade angle (above +x, tip-down negative) as
+the tip leaves the soil (the current one while it is in soil, held after it leaves: :func:`exit_angle_profile`),
+and ``g`` (``PayloadOptions.curl_gain``, default 0: no dependence) how much more a bucket curled further at the
+exit keeps. Measured on the project's MPM cycles (``docs/results/transfer.md``, "Kept fill"): at the same removed
+volume the plant keeps more the more the bucket is curled as its tip leaves the soil (soil above the lip line
+then has nothing left to hold it and runs off); the blade angle at the path's end, after the curl-out, does not
+explain it. The kept soil's weight stays on the
 bucket after the tip leaves the soil; the force model's opt-in carried-load term
 (:class:`~wheelloader.estimator.validity.ModelOptions` ``carried_load=True``) resolves that weight (and its
 inertia where the acceleration is known) in the blade frame.
@@ -21,7 +30,7 @@ inertia where the acceleration is known) in the blade frame.
 whose ``carried_volume`` is ``V`` along the path (the surcharge keeps the FEE's carved fill; see
 :func:`with_payload`).
 
-The parameters ``(r, h, p)`` are calibrated from logs that carry the kept fill (the MPM plant's ``fill_volume``
+The parameters ``(r, h, p, g)`` are calibrated from logs that carry the kept fill (the MPM plant's ``fill_volume``
 column) by :func:`fit_payload`.
 """
 
@@ -38,9 +47,9 @@ from .cyclelog import CycleLog
 from .errors import CalibrationError, ParameterError
 from .kinematics import DEFAULT_SLOPE_WINDOW, GRAVITY, ContactState
 
-__all__ = ["PAYLOAD_FIELDS", "PayloadOptions", "as_payload", "fit_payload", "kept_fill", "kept_volume",
-           "kept_volume_float", "logged_kept", "payload_contact_state", "removed_volume", "with_kept_fill",
-           "with_payload"]
+__all__ = ["DEFAULT_FREE", "PAYLOAD_FIELDS", "PayloadOptions", "as_payload", "exit_angle_profile", "fit_payload",
+           "kept_fill", "kept_volume", "kept_volume_float", "logged_kept", "payload_contact_state", "removed_volume",
+           "with_kept_fill", "with_payload"]
 
 
 @dataclass(frozen=True)
@@ -55,25 +64,42 @@ class PayloadOptions:
         ``h`` > 0: the heaped capacity the bucket holds, as a multiple of its nominal ``capacity``.
     sharpness : float
         ``p`` in [1, 50]: how sharply the fill bends onto the heaped capacity (1 is gentle, 50 nearly a hard cap).
+    curl_gain : float
+        ``g`` in [-2, 2] (default 0): the heaped capacity is ``(h + g sin theta_exit)`` times the nominal one,
+        ``theta_exit`` the blade angle as the tip leaves the soil [rad] (module docstring). It is floored at
+        :data:`MIN_HEAP` of the nominal capacity.
     """
 
     retention: float = 1.0
     heap_factor: float = 1.0
     sharpness: float = 50.0
+    curl_gain: float = 0.0
 
     def __post_init__(self) -> None:
         check_range("PayloadOptions.retention", self.retention, 0.0, 1.0, low_open=True)
         check_range("PayloadOptions.heap_factor", self.heap_factor, 0.0, 10.0, low_open=True)
         check_range("PayloadOptions.sharpness", self.sharpness, 1.0, 50.0)
+        check_range("PayloadOptions.curl_gain", self.curl_gain, -2.0, 2.0)
 
     def to_dict(self) -> dict[str, float]:
-        """Plain-JSON form."""
-        return {"retention": self.retention, "heap_factor": self.heap_factor, "sharpness": self.sharpness}
+        """Plain-JSON form (``curl_gain`` only where it is not 0, so older readers read the rest)."""
+        out = {"retention": self.retention, "heap_factor": self.heap_factor, "sharpness": self.sharpness}
+        if self.curl_gain != 0.0:
+            out["curl_gain"] = self.curl_gain
+        return out
+
+    def heaped(self, capacity: float, exit_angle=0.0):
+        """The heaped capacity ``(h + g sin theta_exit) capacity`` [m^3] (NumPy or CasADi ``exit_angle``)."""
+        if self.curl_gain == 0.0:
+            return self.heap_factor * capacity
+        if hasattr(exit_angle, "fmax"):  # a CasADi expression: its own sin and fmax
+            return (self.heap_factor + self.curl_gain * exit_angle.sin()).fmax(MIN_HEAP) * capacity
+        return np.maximum(self.heap_factor + self.curl_gain * np.sin(exit_angle), MIN_HEAP) * capacity
 
     @classmethod
     def from_dict(cls, data: Mapping[str, float]) -> PayloadOptions:
         """From :meth:`to_dict`'s form (some keys may be left out); an unknown key raises ParameterError."""
-        names = ("retention", "heap_factor", "sharpness")
+        names = PAYLOAD_FIELDS
         unknown = sorted(str(k) for k in set(data) - set(names))
         if unknown:
             raise ParameterError(f"payload: unknown key(s) {unknown}; expected some of {list(names)}")
@@ -89,7 +115,21 @@ def as_payload(value: PayloadOptions | Mapping[str, float] | None) -> PayloadOpt
     raise ParameterError(f"payload must be a PayloadOptions, a dict or None, got {type(value).__name__}")
 
 
-def kept_volume(removed, capacity: float, options: PayloadOptions, initial: float = 0.0):
+#: Floor of the heaped capacity's factor ``h + g sin theta_exit`` (a curl_gain that would make it vanish).
+MIN_HEAP = 0.05
+
+
+def exit_angle_profile(blade_angle: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """Per sample, the blade angle the payload's heaped capacity sees: the current one while the tip is in soil
+    (``depth > 0``) and before it first enters, the one at the last in-soil sample after it leaves [rad]."""
+    angle = np.asarray(blade_angle, dtype=float)
+    inside = np.asarray(depth) > 0.0
+    idx = np.where(inside, np.arange(angle.size), -1)
+    last = np.maximum.accumulate(idx)
+    return np.where(inside | (last < 0), angle, angle[np.maximum(last, 0)])
+
+
+def kept_volume(removed, capacity: float, options: PayloadOptions, initial: float = 0.0, exit_angle=0.0):
     """Kept soil ``V`` [m^3] for a removed volume ``removed`` [m^3] (module docstring).
 
     Works elementwise on NumPy arrays and on CasADi ``SX``/``MX`` expressions (only ``+ * / **`` and ``fmax``
@@ -105,10 +145,14 @@ def kept_volume(removed, capacity: float, options: PayloadOptions, initial: floa
         ``(r, h, p)``.
     initial : float
         Soil already in the bucket when the cycle starts [m^3].
+    exit_angle : float, array_like or casadi expression
+        The blade angle as the tip leaves the soil [rad] (:func:`exit_angle_profile` per sample); used only
+        where ``options.curl_gain`` is not 0.
     """
-    heaped = options.heap_factor * capacity
-    free = heaped - initial
-    if free <= 0.0:
+    free = options.heaped(capacity, exit_angle) - initial
+    if isinstance(free, np.ndarray) and free.ndim:
+        free = np.maximum(free, 1e-12)  # (a bucket holding its heap at the start keeps nothing more)
+    elif np.isscalar(free) and free <= 0.0:
         return initial + 0.0 * removed
     u = options.retention * removed
     if isinstance(u, np.ndarray) or np.isscalar(u):
@@ -117,9 +161,13 @@ def kept_volume(removed, capacity: float, options: PayloadOptions, initial: floa
     return initial + u / (1.0 + (u / free) ** p) ** (1.0 / p)
 
 
-def kept_volume_float(removed: float, capacity: float, options: PayloadOptions, initial: float = 0.0) -> float:
+def kept_volume_float(removed: float, capacity: float, options: PayloadOptions, initial: float = 0.0,
+                      exit_angle: float = 0.0) -> float:
     """:func:`kept_volume` of one Python float (the env's step: no NumPy scalars), the same formula."""
-    free = options.heap_factor * capacity - initial
+    if options.curl_gain == 0.0:
+        free = options.heap_factor * capacity - initial
+    else:
+        free = max(options.heap_factor + options.curl_gain * math.sin(exit_angle), MIN_HEAP) * capacity - initial
     if free <= 0.0:
         return initial
     u = options.retention * removed
@@ -129,11 +177,12 @@ def kept_volume_float(removed: float, capacity: float, options: PayloadOptions, 
     return initial + u / (1.0 + (u / free) ** p) ** (1.0 / p)
 
 
-def removed_volume(kept: float, capacity: float, options: PayloadOptions, initial: float = 0.0) -> float:
+def removed_volume(kept: float, capacity: float, options: PayloadOptions, initial: float = 0.0,
+                   exit_angle: float = 0.0) -> float:
     """The removed volume [m^3] whose kept soil is ``kept`` (:func:`kept_volume` inverted, in closed form:
     ``u = v / (1 - (v / C_free)^p)^(1/p)``, ``v = kept - V_0``, ``R = u / r``); inf at or above the heaped
     capacity."""
-    free = options.heap_factor * capacity - initial
+    free = float(options.heaped(capacity, exit_angle)) - initial
     v = kept - initial
     if v <= 0.0:
         return 0.0
@@ -143,11 +192,27 @@ def removed_volume(kept: float, capacity: float, options: PayloadOptions, initia
     return v / (1.0 - (v / free) ** p) ** (1.0 / p) / options.retention
 
 
-def kept_fill(state: ContactState, capacity: float, options: PayloadOptions, initial: float = 0.0) -> float:
-    """The kept fill [m^3] at the end of a path whose contact state carries its carving."""
+def kept_fill(state: ContactState, capacity: float, options: PayloadOptions, initial: float = 0.0,
+              blade_angle: np.ndarray | None = None) -> float:
+    """The kept fill [m^3] at the end of a path whose contact state carries its carving (``blade_angle``: the
+    path's, per sample [rad]; needed where ``options.curl_gain`` is not 0)."""
     if state.carve is None:
         raise ParameterError("kept_fill needs a contact state computed by carving (fill='model')")
-    return float(kept_volume(state.carve.removed_history[-1], capacity, options, initial))
+    angle = _exit_angles(state, options, blade_angle)
+    return float(kept_volume(state.carve.removed_history[-1], capacity, options, initial,
+                             angle[-1] if isinstance(angle, np.ndarray) else 0.0))
+
+
+def _exit_angles(state: ContactState, options: PayloadOptions, blade_angle: np.ndarray | None):
+    """:func:`exit_angle_profile` of a state's path, or 0 where the payload has no curl dependence."""
+    if options.curl_gain == 0.0:
+        return 0.0
+    if blade_angle is None:
+        raise ParameterError("a payload with a curl_gain needs the path's blade angle (blade_angle=)")
+    angle = np.asarray(blade_angle, dtype=float)
+    if angle.shape != state.depth.shape:
+        raise ParameterError(f"blade_angle has {angle.size} samples, the contact state {state.depth.size}")
+    return exit_angle_profile(angle, state.depth)
 
 
 def payload_contact_state(log: CycleLog, options: PayloadOptions,
@@ -158,12 +223,14 @@ def payload_contact_state(log: CycleLog, options: PayloadOptions,
     carried load the payload's kept soil. A logged load or fill is not used: this is what the model predicts
     for the path.
     """
-    return with_payload(log.contact_state(slope_window=slope_window, fill="model"), log.bucket.capacity, options)
+    return with_payload(log.contact_state(slope_window=slope_window, fill="model"), log.bucket.capacity, options,
+                        blade_angle=log.path.blade_angle)
 
 
 def with_payload(state: ContactState, capacity: float, options: PayloadOptions,
-                 initial: float = 0.0) -> ContactState:
-    """``state`` (computed by carving) with the payload's kept soil as its carried volume.
+                 initial: float = 0.0, blade_angle: np.ndarray | None = None) -> ContactState:
+    """``state`` (computed by carving) with the payload's kept soil as its carried volume (``blade_angle``: the
+    path's, per sample [rad]; needed where ``options.curl_gain`` is not 0).
 
     The surcharge ``W_load N_q`` keeps the FEE's carved fill; the carried-load term
     (:attr:`~wheelloader.estimator.validity.ModelOptions.carried_in_soil` False) puts the kept soil's weight on
@@ -172,22 +239,29 @@ def with_payload(state: ContactState, capacity: float, options: PayloadOptions,
     """
     if state.carve is None:
         raise ParameterError("the payload model needs the carved volume (a contact state computed by carving)")
-    kept = kept_volume(state.carve.removed_history, capacity, options, initial)
+    kept = kept_volume(state.carve.removed_history, capacity, options, initial,
+                       _exit_angles(state, options, blade_angle))
     return replace(state, carried_volume=np.asarray(kept, dtype=float), measured_load=None)
 
 
 def with_kept_fill(state: ContactState, capacity: float, options: PayloadOptions,
-                   initial: float = 0.0) -> ContactState:
-    """``state`` (computed by carving) with the payload's kept soil as its fill and no logged load."""
+                   initial: float = 0.0, blade_angle: np.ndarray | None = None) -> ContactState:
+    """``state`` (computed by carving) with the payload's kept soil as its fill and no logged load
+    (``blade_angle`` as :func:`with_payload`)."""
     if state.carve is None:
         raise ParameterError("the payload model needs the carved volume (a contact state computed by carving)")
-    fill = kept_volume(state.carve.removed_history, capacity, options, initial)
+    fill = kept_volume(state.carve.removed_history, capacity, options, initial,
+                       _exit_angles(state, options, blade_angle))
     return replace(state, fill_volume=np.asarray(fill, dtype=float), measured_load=None)
 
 
 #: The parameters :func:`fit_payload` may fit, in ``PayloadOptions`` order, with their bounds.
-PAYLOAD_FIELDS: tuple[str, ...] = ("retention", "heap_factor", "sharpness")
-_BOUNDS = {"retention": (1e-3, 1.0), "heap_factor": (1e-2, 10.0), "sharpness": (1.0, 50.0)}
+PAYLOAD_FIELDS: tuple[str, ...] = ("retention", "heap_factor", "sharpness", "curl_gain")
+#: What :func:`fit_payload` fits unless told otherwise (the curl dependence is opt-in).
+DEFAULT_FREE: tuple[str, ...] = ("retention", "heap_factor", "sharpness")
+_BOUNDS = {"retention": (1e-3, 1.0), "heap_factor": (1e-2, 10.0), "sharpness": (1.0, 50.0), "curl_gain": (-2.0, 2.0)}
+#: Where :func:`fit_payload` compares the model with the logged kept fill.
+FIT_SAMPLES = ("path", "end")
 
 
 def logged_kept(log: CycleLog, density: float | None = None) -> np.ndarray | None:
@@ -213,12 +287,14 @@ def logged_kept(log: CycleLog, density: float | None = None) -> np.ndarray | Non
 
 
 def fit_payload(logs: Sequence[CycleLog], *, slope_window: float = DEFAULT_SLOPE_WINDOW,
-                free: Sequence[str] = PAYLOAD_FIELDS, initial: PayloadOptions | None = None,
-                density: float | None = None) -> PayloadOptions:
-    """Calibrate the payload ``(r, h, p)`` to logs that carry the kept fill or the load.
+                free: Sequence[str] = DEFAULT_FREE, initial: PayloadOptions | None = None,
+                density: float | None = None, samples: str = "path",
+                max_kept_ratio: float | None = None) -> PayloadOptions:
+    """Calibrate the payload ``(r, h, p, g)`` to logs that carry the kept fill or the load.
 
-    Least squares on the relative error of the kept fill along each path, every sample where the log's fill is
-    above 2 % of the capacity weighted alike (so a cycle's end and its rise both count). A log's kept fill is
+    Least squares on the relative error of the kept fill: with ``samples="path"`` (default) along each path,
+    every sample where the log's fill is above 2 % of the capacity weighted alike (so a cycle's end and its rise
+    both count); with ``samples="end"`` at each path's end only (what a cycle delivers). A log's kept fill is
     its ``fill_volume`` (the plant's kept soil; the env's fill under ``"fee-payload"``), else its logged load
     over ``gamma g`` (:func:`logged_kept`); logs with neither are skipped.
 
@@ -229,12 +305,19 @@ def fit_payload(logs: Sequence[CycleLog], *, slope_window: float = DEFAULT_SLOPE
     slope_window : float
         As :meth:`CycleLog.contact_state` (the carving of each path gives the removed volume).
     free : sequence of str
-        The parameters fitted (names of :data:`PAYLOAD_FIELDS`); the others stay at ``initial``'s. A cycle
-        that does not fill the bucket to its heap identifies the retention only: ``free=("retention",)``.
+        The parameters fitted (names of :data:`PAYLOAD_FIELDS`; default :data:`DEFAULT_FREE`); the others stay
+        at ``initial``'s. A cycle that does not fill the bucket to its heap identifies the retention only:
+        ``free=("retention",)``. ``"curl_gain"`` needs paths whose blade angle at the exit from the soil varies.
     initial : PayloadOptions, optional
-        The start of the fit and the values of the held parameters (default ``(0.9, 0.7, 2.0)``).
+        The start of the fit and the values of the held parameters (default ``(0.9, 0.7, 2.0, 0)``).
     density : float, optional
         Soil density [kg/m^3] of logs that carry a load but no fill (default: each log's true soil).
+    samples : {"path", "end"}
+        Where the model is compared with the log (above).
+    max_kept_ratio : float, optional
+        Skip a log whose kept fill at its end exceeds this share of the volume its carving removed: its logged
+        start pile is not the surface the plant dug (on the project's MPM loops, a carved face that slumped into
+        the bucket while the soil settled keeps up to 1.6 times what the path removed). Default: keep every log.
 
     Raises
     ------
@@ -246,20 +329,30 @@ def fit_payload(logs: Sequence[CycleLog], *, slope_window: float = DEFAULT_SLOPE
     unknown = sorted(set(free) - set(PAYLOAD_FIELDS))
     if unknown or not free:
         raise ParameterError(f"fit_payload: free must name some of {list(PAYLOAD_FIELDS)}, got {list(free)}")
+    if samples not in FIT_SAMPLES:
+        raise ParameterError(f"fit_payload: samples must be one of {list(FIT_SAMPLES)}, got {samples!r}")
+    if max_kept_ratio is not None:
+        check_range("max_kept_ratio", max_kept_ratio, 0.0, None, low_open=True)
     start = initial or PayloadOptions(0.9, 0.7, 2.0)
-    removed, kept, caps = [], [], []
+    removed, kept, caps, angles = [], [], [], []
     for log in logs:
         logged = logged_kept(log, density)
         if logged is None:
             continue
         state = log.contact_state(slope_window=slope_window, fill="model")
+        history = state.carve.removed_history
+        if max_kept_ratio is not None and logged[-1] > max_kept_ratio * history[-1]:
+            continue
         mask = logged > 0.02 * log.bucket.capacity
-        removed.append(state.carve.removed_history[mask])
+        if samples == "end":
+            mask = mask & (np.arange(mask.size) == mask.size - 1)
+        removed.append(history[mask])
         kept.append(logged[mask])
         caps.append(np.full(int(mask.sum()), log.bucket.capacity))
+        angles.append(exit_angle_profile(log.path.blade_angle, state.depth)[mask])
     if not removed or sum(r.size for r in removed) == 0:
         raise CalibrationError("fit_payload needs logs with a logged fill_volume or load (the plant's kept soil)")
-    r_all, k_all, c_all = (np.concatenate(v) for v in (removed, kept, caps))
+    r_all, k_all, c_all, a_all = (np.concatenate(v) for v in (removed, kept, caps, angles))
     names = [name for name in PAYLOAD_FIELDS if name in free]
 
     def options(theta: np.ndarray) -> PayloadOptions:
@@ -267,12 +360,12 @@ def fit_payload(logs: Sequence[CycleLog], *, slope_window: float = DEFAULT_SLOPE
 
     def residual(theta: np.ndarray) -> np.ndarray:
         opts = options(theta)
-        heaped = opts.heap_factor * c_all
+        heaped = np.maximum(opts.heap_factor + opts.curl_gain * np.sin(a_all), MIN_HEAP) * c_all
         u = opts.retention * r_all
         model = u / (1.0 + (u / heaped) ** opts.sharpness) ** (1.0 / opts.sharpness)
         return (model - k_all) / k_all
 
-    scale = {"retention": 0.1, "heap_factor": 0.1, "sharpness": 1.0}
+    scale = {"retention": 0.1, "heap_factor": 0.1, "sharpness": 1.0, "curl_gain": 0.1}
     fit = least_squares(residual, x0=[getattr(start, n) for n in names],
                         bounds=([_BOUNDS[n][0] for n in names], [_BOUNDS[n][1] for n in names]),
                         x_scale=[scale[n] for n in names])

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wheelloader.estimator import GRAVITY, Bucket, Pile, default_path
-from wheelloader.estimator.payload import PayloadOptions, kept_volume
+from wheelloader.estimator.payload import PayloadOptions, exit_angle_profile, kept_volume
 
 from .fallback import LOOP_EXIT_MIN_FILL, _kept, bezier_on_face
 
@@ -72,7 +72,7 @@ def smooth_lift(v, eps: float = LIFT_SMOOTHING, sqrt: Callable = np.sqrt):
 
 
 def kept_terms(carved, dig_energy, z_end, gamma: float, capacity: float, payload: PayloadOptions,
-               z_dump: float, pos: Callable = lambda v: np.maximum(v, 0.0)):
+               z_dump: float, pos: Callable = lambda v: np.maximum(v, 0.0), exit_angle=0.0):
     """``(kept, lift_energy, energy, energy / kept)`` of a path, on NumPy values or CasADi expressions.
 
     Parameters
@@ -93,18 +93,20 @@ def kept_terms(carved, dig_energy, z_end, gamma: float, capacity: float, payload
         The dump height [m].
     pos : callable
         Positive part of the lift height (default the exact one; the NLP passes :func:`smooth_lift`).
+    exit_angle : float or casadi expression
+        Blade angle as the tip leaves the soil [rad]: the heaped capacity's, where ``payload`` has a ``curl_gain``.
     """
-    kept = kept_volume(carved, capacity, payload)
+    kept = kept_volume(carved, capacity, payload, 0.0, exit_angle)
     lift = gamma * GRAVITY * kept * pos(z_dump - z_end)
     energy = dig_energy + lift
     return kept, lift, energy, energy / kept
 
 
 def evaluate(carved: float, dig_energy: float, z_end: float, gamma: float, capacity: float,
-             payload: PayloadOptions, z_dump: float) -> KeptTerms:
+             payload: PayloadOptions, z_dump: float, exit_angle: float = 0.0) -> KeptTerms:
     """:func:`kept_terms` on plain numbers (exact positive part) as :class:`KeptTerms`."""
     kept, lift, energy, _ = kept_terms(float(carved), float(dig_energy), float(z_end), gamma, capacity, payload,
-                                       z_dump)
+                                       z_dump, exit_angle=float(exit_angle))
     kept, lift, energy = float(kept), float(lift), float(energy)
     return KeptTerms(kept, lift, energy, energy / kept if kept > 0.0 else float("inf"))
 
@@ -122,4 +124,6 @@ def fixed_kept_fill(pile: Pile, bucket: Bucket, payload: PayloadOptions, rate: f
     path = bezier_on_face(pile, rate, bucket, exit_min_fill=exit_min_fill)
     _, end = _kept(pile, path.x, path.z, bucket, exit_min_fill)
     removed = pile.carve(path.x[:end + 1], path.z[:end + 1], bucket.width, bucket.capacity).removed
-    return float(kept_volume(removed, bucket.capacity, payload))
+    x, z = path.x[:end + 1], path.z[:end + 1]
+    exit_angle = exit_angle_profile(path.blade_angle[:end + 1], pile.surface_height(x) - z)[-1]
+    return float(kept_volume(removed, bucket.capacity, payload, 0.0, exit_angle))

@@ -84,7 +84,7 @@ def _path_terms(path: BucketPath, soil: SoilParams, pile: Pile, bucket: Bucket, 
     sim = path_energy(path, soil, pile, bucket, model_options=options.model_options, payload=options.force_payload,
                       learned=options.force_model == "fee-learned")
     return evaluate(sim["carved"], sim["energy"], float(path.z[-1]), soil.gamma, bucket.capacity,
-                    options.kept_payload, options.kept_dump_height)
+                    options.kept_payload, options.kept_dump_height, float(path.blade_angle[-1]))
 
 
 def two_cycle_cost(first: KeptTerms | None, second: KeptTerms | None) -> float:

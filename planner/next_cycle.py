@@ -293,4 +293,4 @@ def _kept_terms(plan: Plan, check: PlanCheck, params: SoilParams, opt) -> KeptTe
     """The kept objective's terms of ``plan`` by the NumPy check (its carved fill and energy, exact lift)."""
     options = opt.options
     return evaluate(check.carved, check.energy, float(plan.z[-1]), params.gamma, opt.bucket.capacity,
-                    options.kept_payload, options.kept_dump_height)
+                    options.kept_payload, options.kept_dump_height, float(plan.blade_angle[-1]))

@@ -89,10 +89,12 @@ KEPT_SMOOTHING = 1e-6
 
 def _kept_of(bucket: Bucket, payload):
     """The fill the NLP counts for a carved volume ``V``: ``V`` itself, or under ``"fee-payload"`` the payload's
-    kept soil of it (:func:`~wheelloader.estimator.payload.kept_volume`)."""
+    kept soil of it (:func:`~wheelloader.estimator.payload.kept_volume`) at the node's blade angle ``th`` (the
+    heaped capacity's exit angle where the payload has a ``curl_gain``: the end node is the one just out of the
+    soil)."""
     if payload is None:
-        return lambda v: v
-    return lambda v: kept_volume(smooth_pos(v, KEPT_SMOOTHING), bucket.capacity, payload)
+        return lambda v, th=0.0: v
+    return lambda v, th=0.0: kept_volume(smooth_pos(v, KEPT_SMOOTHING), bucket.capacity, payload, 0.0, th)
 
 
 def _smooth_work(v):
@@ -320,14 +322,14 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     w_load = p_soil[0] * GRAVITY * vs
     payload = options.force_payload
     kept_of = _kept_of(bucket, payload)  # the fill the plan counts: V, or the payload's kept soil of it
-    carried = None if payload is None else p_soil[0] * GRAVITY * kept_of(vs)
+    carried = None if payload is None else p_soil[0] * GRAVITY * kept_of(vs, ths)
     out = casadi_forces(p_soil, vertical, alpha - ths, alpha, w_load, bucket, options.model_options, carried)
     rho = alpha - ths
     f_node, n_node = out["F_T"], out["F_N"]
     velocity = []  # "fee-learned": the node's tip velocity, an input of its correction (the interval's)
     if options.force_model == "fee-learned":
         velocity = [ca.SX.sym("vx"), ca.SX.sym("vz")]
-        c_t, c_n = casadi_learned(p_soil, out["depth"], rho, alpha, ths, vs, kept_of(vs), *velocity, bucket)
+        c_t, c_n = casadi_learned(p_soil, out["depth"], rho, alpha, ths, vs, kept_of(vs, ths), *velocity, bucket)
         f_node, n_node = f_node + c_t, n_node + c_n
     forces = ca.Function("forces", [xs, zs, ths, vs, p_soil, p_win, *velocity], [f_node, n_node])
     node_fn = ca.Function("node", [xs, zs, ths, vs, p_soil, p_win, *velocity], [f_node, n_node, rho, vertical, alpha])
@@ -425,7 +427,7 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
                 along = u[0] * ca.cos(blade) + u[1] * ca.sin(blade)
                 g_ineq.append(along - math.cos(cone) * speed + 10.0 * shallow)
         # energy: the env's bookkeeping, with a smooth positive part (1 J wide)
-        e_soil, e_payload = step_work(f_t, f_n, dx, dz, tn, p_soil[0] * GRAVITY * kept_of(vn), cos=ca.cos,
+        e_soil, e_payload = step_work(f_t, f_n, dx, dz, tn, p_soil[0] * GRAVITY * kept_of(vn, tn), cos=ca.cos,
                                       sin=ca.sin, pos=_smooth_work)
         energy = energy + e_soil + e_payload
     # end out of the pile
@@ -433,14 +435,14 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     g_ineq.append(end_clear)
     if options.end_blade_angle is not None:  # opt-in: end curled, carrying the load
         g_ineq.append(X[2, n] - options.end_blade_angle)
-    fill_end = kept_of(X[3, n])
+    fill_end = kept_of(X[3, n], X[2, n])
     extra: dict[str, ca.Function] = {}
     if options.objective == "kept_per_energy":
         # opt-in (planner.kept): energy per m^3 of kept soil, the load lifted on to the dump height; the kept
         # fill (the payload state of the carved volume) is constrained from below by the solve's bounds
         kept, lift, total, per_kept = kept_terms(X[3, n], energy, X[1, n], p_soil[0], bucket.capacity,
                                                  options.kept_payload, options.kept_dump_height,
-                                                 pos=lambda v: smooth_lift(v, sqrt=ca.sqrt))
+                                                 pos=lambda v: smooth_lift(v, sqrt=ca.sqrt), exit_angle=X[2, n])
         main = per_kept * bucket.capacity / KEPT_OBJECTIVE_SCALE
         g_kept = [kept]
         extra["kept"] = ca.Function("kept", [w, p], [kept, lift, total, per_kept])

@@ -304,10 +304,11 @@ class StartState:
 
         ``payload``: the env's under ``force_model="fee-payload"``, whose fill is the kept soil; the start's
         ``fill`` (the planner's carved volume) is then the volume that keeps it
-        (:func:`~wheelloader.estimator.payload.removed_volume`), at most the capacity.
+        (:func:`~wheelloader.estimator.payload.removed_volume`, at the observed blade angle: a plan starts in
+        or at the soil), at most the capacity.
         """
         o = [float(v) for v in np.asarray(obs, dtype=float).ravel()[:10]]
         fill = max(o[9], 0.0) * capacity
         if payload is not None:
-            fill = min(removed_volume(fill, capacity, payload), capacity)
+            fill = min(removed_volume(fill, capacity, payload, 0.0, o[2]), capacity)
         return cls(o[0], o[1], o[2], o[3], o[4], o[5], fill)

@@ -93,7 +93,7 @@ def path_energy(path: BucketPath, soil: SoilParams, pile: Pile, bucket: Bucket,
     state = contact_state(path.x, path.z, path.blade_angle, pile, bucket, initial_fill=initial_fill)
     carved = float(state.fill_volume[-1])
     if payload is not None:
-        state = with_payload(state, bucket.capacity, payload)
+        state = with_payload(state, bucket.capacity, payload, blade_angle=path.blade_angle)
     forces = soil_forces(soil, state, bucket, model_options)
     if learned:
         lf = learned_forces(default_learned_model(), state, path, bucket, soil)

@@ -24,6 +24,9 @@ _CONFIGS = [
     {"force_model": "fee-payload", "payload": {"retention": 0.7, "heap_factor": 0.4, "sharpness": 3.0},
      "soil": "random", "truth": {"stone_rate": 3.0}, "keep_pile": True},
     {"force_model": "fee-payload-depth", "soil": "dirt", "loader": {"max_push_force": 1500.0}, "stall_patience": 3},
+    {"force_model": "fee-payload", "soil": "dirt",
+     "payload": {"retention": 0.8, "heap_factor": 0.45, "sharpness": 2.5, "curl_gain": 0.3},
+     "loader": {"max_push_force": 1500.0}, "stall_patience": 3},
     {"force_model": "fee-learned", "soil": "dirt", "loader": {"max_push_force": 900.0}, "stall_patience": 3},
     {"force_model": "fee-learned", "soil": "random", "truth": {"stone_rate": 3.0}, "keep_pile": True},
 ]

@@ -170,7 +170,7 @@ def predict(
                           initial_fill=initial_fill, fill_volume=fill_volume, measured_load=load,
                           acceleration=acceleration, velocity=velocity)
     if payload is not None:
-        state = with_payload(state, bucket.capacity, payload, initial_fill)
+        state = with_payload(state, bucket.capacity, payload, initial_fill, blade_angle=path.blade_angle)
     forces = soil_forces(soil, state, bucket, options)
     outside = None
     if force_model == "fee-learned":
