@@ -54,10 +54,23 @@ def test_no_copy_of_a_test_cycle_is_trained_on_under_another_name():
     try:
         test = {CycleLog.load(p).content_digest() for paths in split["test"].values() for p in paths}
         assert split["dropped_as_test_copies"]  # the shipped loops do hold such copies
-        assert not any(CycleLog.load(p).content_digest() in test for p in split["train"] + split["validation"])
+        assert not any(CycleLog.load(p).content_digest() in test
+                       for p in split["train"] + split["validation"] + split["payload_extra"])
         assert all(CycleLog.load(p).content_digest() in test for p in split["dropped_as_test_copies"])
     finally:
         os.chdir(cwd)
+
+
+def test_the_payloads_extra_cycles_hold_no_test_family_and_no_held_out_soil_or_pile():
+    split = _split()
+    extra = split["payload_extra"]
+    assert len(extra) >= 40 and all(Path(p).is_file() for p in extra)
+    test = [p for paths in split["test"].values() for p in paths]
+    assert set(extra).isdisjoint(test + split["train"] + split["validation"])
+    assert not any(s in p for p in extra for s in ("dirt", "modified_sand", "slope25", "data/mpm", "end55"))
+    # the candidates include the plain fit of the training cycles (the payload before the recipe was chosen)
+    module = _load("transfer")
+    assert {"cycles": "train", "samples": "path", "curl": False, "max_kept_ratio": None} in module.PAYLOAD_CANDIDATES
 
 
 def test_band_scale_is_the_smallest_reaching_the_level():
