@@ -2,16 +2,22 @@
 
 The model (issue #32)::
 
-    F_T, F_N = FEE_payload(soil; state) + s * MLP(x),       s = gamma g w L^2
+    F_T, F_N = FEE_payload(soil; state) + g(d) s MLP(x),       s = gamma g w L^2
 
 where ``FEE_payload`` is ``force_model="fee-payload"`` (the paper's eqs 1-17 with the payload state,
 :mod:`~wheelloader.estimator.payload`), ``gamma`` the soil's density, ``w`` the bucket width, ``L`` its floor
 length, and ``x`` the dimensionless inputs :data:`INPUT_NAMES`: the contact geometry (depth / L, the contact
 ramp, the blade angle to the surface rho, the slope alpha, the blade angle, the carved and the kept fill as
 fractions of the nominal capacity, the Froude number of the tip speed) and the soil (tan phi, tan delta,
-c / (gamma g L), c_a / (gamma g L)). The soil is an input, so online calibration still fits the physical
-parameters: :func:`~wheelloader.estimator.calibration.calibrate` fits the FEE to the measured forces minus the
-correction at the current soil, a few times (a fixed point, :data:`CALIBRATION_PASSES`).
+c / (gamma g L), c_a / (gamma g L)). ``g(d)`` is the contact gate :func:`contact_gate`: the smoothstep of the
+depth over :data:`CONTACT_DEPTH` (C1, exactly 0 at and above the surface, 1 from 2 cm deep), so the correction
+is exactly zero out of the soil (before entry, in the air, after exit: the payload model carries the load there).
+
+The soil inputs are the soil a one-cycle ``fee-payload`` calibration finds, not the true soil: the network is
+trained on the residual of each training cycle's own path and of other paths of its family at the soil fitted
+to one cycle (``benchmarks/fee_learned.py``). So :func:`~wheelloader.estimator.calibration.calibrate` fits the
+payload FEE's physical parameters as ``"fee-payload"`` does (:data:`CALIBRATION_PASSES` = 0: no fixed point
+through the network), and the prediction adds the correction at that soil, where it was trained.
 
 The network is one ``tanh`` hidden layer on standardised inputs, each input clipped to its training range
 first (:attr:`LearnedModel.low`, :attr:`LearnedModel.high`, the 0.5th and 99.5th percentiles of the training
@@ -46,7 +52,7 @@ from .payload import PayloadOptions, payload_contact_state
 from .soil import SoilParams
 
 __all__ = ["CALIBRATION_PASSES", "CONTACT_DEPTH", "DEFAULT_ARTIFACT", "FORMAT", "INPUT_NAMES", "LearnedForces",
-           "LearnedModel", "casadi_correction", "corrected_log", "default_learned_model", "force_scale",
+           "LearnedModel", "casadi_correction", "contact_gate", "corrected_log", "default_learned_model", "force_scale",
            "learned_forces", "learned_inputs"]
 
 #: Names of the network's inputs, in order.
@@ -56,10 +62,19 @@ INPUT_NAMES: tuple[str, ...] = ("depth_over_length", "contact_ramp", "rho", "alp
 #: Depth over which the contact ramp goes from 0 to 1 [m].
 CONTACT_DEPTH = 0.02
 #: Fixed-point passes of the calibration (fit the FEE to the forces minus the correction at the current soil).
-CALIBRATION_PASSES = 2
+#: 0: the correction is trained at the soil a plain ``fee-payload`` fit of one cycle finds (module docstring).
+CALIBRATION_PASSES = 0
 FORMAT = "wheelloader.fee-learned"
 #: The shipped weights (package data).
 DEFAULT_ARTIFACT = Path(__file__).with_name("learned_weights") / "fee-learned.json"
+
+
+def contact_gate(ramp: np.ndarray) -> np.ndarray:
+    """The correction's gate from the contact ramp ``depth / CONTACT_DEPTH`` (any real): the smoothstep
+    ``t^2 (3 - 2 t)`` of ``t = clip(ramp, 0, 1)``; C1, exactly 0 at and above the surface, 1 from
+    :data:`CONTACT_DEPTH` deep."""
+    t = np.clip(ramp, 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
 
 
 def force_scale(gamma: float, bucket: Bucket) -> float:
@@ -140,7 +155,12 @@ class LearnedModel:
         return DEFAULT_PAYLOAD if stored is None else PayloadOptions(**stored)
 
     def correction(self, x: np.ndarray) -> np.ndarray:
-        """Dimensionless corrections (samples x 2: F_T, F_N over ``s``) at inputs ``x`` (samples x inputs)."""
+        """Dimensionless corrections (samples x 2: F_T, F_N over ``s``) at inputs ``x`` (samples x inputs), gated
+        by :func:`contact_gate` of the contact ramp (input 1): exactly 0 out of the soil."""
+        return contact_gate(x[:, 1])[:, None] * self.ungated(x)
+
+    def ungated(self, x: np.ndarray) -> np.ndarray:
+        """The network alone (no gate): inputs clipped to the trusted range, standardised, two layers."""
         z = (np.clip(x, self.low, self.high) - self.mean) / self.std
         return np.tanh(z @ self.w1 + self.b1) @ self.w2 + self.b2
 
@@ -213,11 +233,13 @@ def corrected_log(model: LearnedModel, log: CycleLog, soil: SoilParams, payload:
 def casadi_correction(model: LearnedModel, x: Any) -> Any:
     """The network in CasADi symbols: ``x`` a (1 x inputs) row (SX/MX/DM) -> (1 x 2) corrections over ``s``.
 
-    The same clip, standardisation and layers as :meth:`LearnedModel.correction` (the planner's twin).
+    The same clip, standardisation, layers and gate as :meth:`LearnedModel.correction` (the planner's twin; the
+    gate's smoothstep of the clipped ramp is C1, so its derivatives are continuous at the surface).
     """
     import casadi as ca
 
     lo, hi = ca.DM(model.low).T, ca.DM(model.high).T
     z = (ca.fmin(ca.fmax(x, lo), hi) - ca.DM(model.mean).T) / ca.DM(model.std).T
     h = ca.tanh(ca.mtimes(z, ca.DM(model.w1)) + ca.DM(model.b1).T)
-    return ca.mtimes(h, ca.DM(model.w2)) + ca.DM(model.b2).T
+    t = ca.fmin(ca.fmax(x[:, 1], 0.0), 1.0)
+    return (t * t * (3.0 - 2.0 * t)) * (ca.mtimes(h, ca.DM(model.w2)) + ca.DM(model.b2).T)

@@ -5,11 +5,13 @@ state. The env needs it one sample per step, at a cost that keeps the step withi
 same network (:meth:`~wheelloader.estimator.learned.LearnedModel.correction`), with its standardisation folded
 into the first layer and the soil's inputs (constant over an episode) folded into its biases::
 
-    W1' = W1 / std,   b1' = b1 - (mean / std) W1 + clip(x_soil) W1'_soil,   F = s (tanh(clip(x) W1' + b1') W2 + b2)
+    W1' = W1 / std,   b1' = b1 - (mean / std) W1 + clip(x_soil) W1'_soil,   F = g s (tanh(clip(x) W1' + b1') W2 + b2)
 
 with ``x`` the contact inputs of :data:`~wheelloader.estimator.learned.INPUT_NAMES` (depth / L, the contact ramp,
 rho, alpha, the blade angle, the carved and kept fill fractions, the Froude number of the tip speed) and
-``s = gamma g w L^2``. The two agree to rounding (``tests/test_force_model_everywhere.py``).
+``s = gamma g w L^2``, ``g`` the contact gate (:func:`~wheelloader.estimator.learned.contact_gate`: exactly 0 out
+of the soil, where :meth:`LearnedCorrection.single` returns at once). The two agree to rounding
+(``tests/test_force_model_everywhere.py``).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import math
 import numpy as np
 
 from .force_model import GRAVITY
-from .learned import CONTACT_DEPTH, LearnedModel, default_learned_model, force_scale
+from .learned import CONTACT_DEPTH, LearnedModel, contact_gate, default_learned_model, force_scale
 from .machine import Bucket
 from .soil import SoilParams
 
@@ -64,10 +66,15 @@ class LearnedCorrection:
     def single(self, depth: float, rho: float, alpha: float, blade_angle: float, carved: float, kept: float,
                speed: float) -> tuple[float, float]:
         """The correction ``(F_T, F_N)`` [N] at one sample (depth [m], angles [rad], fills [m^3], speed [m/s])."""
-        d = depth if depth > 0.0 else 0.0
-        ramp = d / CONTACT_DEPTH
+        if depth <= 0.0:  # the gate: exactly 0 out of the soil
+            return 0.0, 0.0
+        ramp = depth / CONTACT_DEPTH
+        if ramp > 1.0:
+            ramp = gate = 1.0
+        else:
+            gate = ramp * ramp * (3.0 - 2.0 * ramp)
         x = self._x
-        x[:] = (d * self._inv_length, ramp if ramp < 1.0 else 1.0, rho, alpha, blade_angle, carved * self._inv_capacity,
+        x[:] = (depth * self._inv_length, ramp, rho, alpha, blade_angle, carved * self._inv_capacity,
                 kept * self._inv_capacity, speed * self._inv_froude)
         np.maximum(x, self._low, out=x)
         np.minimum(x, self._high, out=x)
@@ -75,7 +82,7 @@ class LearnedCorrection:
         h += self._b1
         np.tanh(h, out=h)
         f_t, f_n = (h @ self._w2 + self._b2).tolist()
-        return f_t, f_n
+        return gate * f_t, gate * f_n
 
     def inputs(self, depth, rho, alpha, blade_angle, carved, kept, speed) -> np.ndarray:
         """The contact inputs (rows x :data:`CONTACT_INPUTS`), not clipped."""
@@ -86,8 +93,10 @@ class LearnedCorrection:
 
     def rows(self, depth, rho, alpha, blade_angle, carved, kept, speed) -> tuple[np.ndarray, np.ndarray]:
         """The correction ``(F_T, F_N)`` [N] at many samples (arrays as in :meth:`single`)."""
-        x = np.clip(self.inputs(depth, rho, alpha, blade_angle, carved, kept, speed), self._low, self._high)
-        r = np.tanh(x @ self._w1 + self._b1) @ self._w2 + self._b2
+        x = self.inputs(depth, rho, alpha, blade_angle, carved, kept, speed)
+        gate = contact_gate(x[:, 1])[:, None]
+        x = np.clip(x, self._low, self._high)
+        r = gate * (np.tanh(x @ self._w1 + self._b1) @ self._w2 + self._b2)
         return r[:, 0], r[:, 1]
 
     def outside(self, depth, rho, alpha, blade_angle, carved, kept, speed) -> np.ndarray:

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wheelloader.estimator.learned import INPUT_NAMES, default_learned_model
+from wheelloader.estimator.learned import INPUT_NAMES, contact_gate, default_learned_model
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -25,7 +25,8 @@ def test_training_is_seeded_and_learns_a_known_function():
     fl = _load()
     rng = np.random.default_rng(1)
     x = rng.uniform(-1.0, 1.0, (400, len(INPUT_NAMES)))
-    r = np.column_stack([np.tanh(x[:, 0] - 0.5 * x[:, 8]), 0.3 * x[:, 2]])
+    x[:, 1] = rng.uniform(0.05, 2.0, len(x))  # the contact ramp: the gate is below 1 under 1
+    r = contact_gate(x[:, 1])[:, None] * np.column_stack([np.tanh(x[:, 0] - 0.5 * x[:, 8]), 0.3 * x[:, 2]])
     w = np.full(len(x), 1.0 / len(x))
     a = fl.train_mlp(x, r, w, hidden=6, l2=1e-6, max_iter=400)
     b = fl.train_mlp(x, r, w, hidden=6, l2=1e-6, max_iter=400)

@@ -17,8 +17,12 @@ from wheelloader.estimator.learned import (
     INPUT_NAMES,
     LearnedModel,
     casadi_correction,
+    contact_gate,
     default_learned_model,
 )
+from wheelloader.estimator.learned_plant import learned_correction
+from wheelloader.estimator.machine import Bucket
+from wheelloader.estimator.soil import preset
 
 LOG = Path(__file__).resolve().parents[1] / "data" / "mpm" / "sand_path2.csv"
 
@@ -66,6 +70,38 @@ def test_casadi_twin_agrees_with_numpy(u):
     np.testing.assert_allclose(np.asarray(fn(x[None, :])), model.correction(x[None, :]), rtol=1e-12, atol=1e-12)
 
 
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.floats(-3.0, 3.0), min_size=len(INPUT_NAMES), max_size=len(INPUT_NAMES)),
+       st.floats(-5.0, 0.0))
+def test_the_correction_is_exactly_zero_out_of_the_soil(u, ramp):
+    """At and above the surface (contact ramp <= 0) the correction is 0 whatever the other inputs."""
+    model = default_learned_model()
+    x = model.low + (np.asarray(u) + 1.0) / 2.0 * (model.high - model.low)
+    x[1] = ramp
+    assert np.all(model.correction(x[None, :]) == 0.0)
+    x[1] = 1.0 + abs(ramp)  # from CONTACT_DEPTH deep the gate is 1: the network alone
+    np.testing.assert_array_equal(model.correction(x[None, :]), model.ungated(x[None, :]))
+
+
+def test_the_gate_is_a_c1_smoothstep():
+    t = np.array([-1.0, 0.0, 0.25, 0.5, 1.0, 2.0])
+    np.testing.assert_allclose(contact_gate(t), [0.0, 0.0, 0.15625, 0.5, 1.0, 1.0])
+    h = 1e-6  # one-sided slopes at both ends of the ramp are 0 (continuous derivative)
+    assert contact_gate(np.array([h]))[0] / h < 1e-5
+    assert (1.0 - contact_gate(np.array([1.0 - h]))[0]) / h < 1e-5
+
+
+def test_the_env_correction_is_zero_out_of_the_soil_and_equals_its_rows(model):
+    corr = learned_correction(preset("gravel"), Bucket(), model)
+    assert corr.single(0.0, 0.3, 0.5, 0.1, 0.0, 0.0, 0.5) == (0.0, 0.0)
+    assert corr.single(-0.1, 0.3, 0.5, 0.1, 0.05, 0.05, 0.5) == (0.0, 0.0)
+    depth = np.array([-0.1, 0.0, 0.005, 0.01, 0.05, 0.2])
+    rows = corr.rows(depth, *(np.full(depth.size, v) for v in (0.3, 0.5, 0.1, 0.05, 0.04, 0.5)))
+    single = np.array([corr.single(d, 0.3, 0.5, 0.1, 0.05, 0.04, 0.5) for d in depth])
+    np.testing.assert_allclose(np.column_stack(rows), single, rtol=1e-12, atol=1e-9)
+    assert np.all(single[:2] == 0.0) and np.all(single[2:] != 0.0)
+
+
 def test_inputs_outside_the_training_range_are_flagged_and_clipped(model):
     inside = np.tile((model.low + model.high) / 2.0, (2, 1))
     beyond = inside.copy()
@@ -100,6 +136,14 @@ def test_calibration_carries_the_learned_model_and_predict_reproduces_it(log, le
     # the correction is what sets it apart from the payload FEE at the same soil
     plain = predict(learned_cal.params, log, force_model="fee-payload", payload=model.payload)
     assert not np.allclose(plain.tangential, pred.tangential)
+
+
+def test_the_soil_is_the_payload_fee_s_own_fit(log, learned_cal, model):
+    """No fixed point through the network (CALIBRATION_PASSES 0): fee-learned fits the soil fee-payload fits,
+    the soil its correction was trained at."""
+    plain = calibrate(log, options=CalibrationOptions(force_model="fee-payload", payload=model.payload,
+                                                      grid=(4, 4, 3), n_starts=1))
+    assert learned_cal.params.to_dict() == plain.params.to_dict()
 
 
 def test_other_models_have_no_range_flags(log, learned_cal):

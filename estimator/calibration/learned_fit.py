@@ -19,9 +19,10 @@ __all__ = ["calibrate_learned"]
 
 def calibrate_learned(logs: list[CycleLog], opts: CalibrationOptions, calibrate: Callable[..., Calibration]
                       ) -> Calibration:
-    """``force_model="fee-learned"``: the payload FEE fitted to the forces minus the learned correction at the
-    current soil, :data:`~wheelloader.estimator.learned.CALIBRATION_PASSES` times after a plain ``fee-payload``
-    fit (a fixed point; :mod:`wheelloader.estimator.learned`). The result's forces, quality and settings are the
+    """``force_model="fee-learned"``: a plain ``fee-payload`` fit (the soil the correction was trained at: the
+    soil a one-cycle ``fee-payload`` calibration finds, :mod:`wheelloader.estimator.learned`), then
+    :data:`~wheelloader.estimator.learned.CALIBRATION_PASSES` fits of the payload FEE to the forces minus the
+    correction at the current soil (a fixed point; 0 for the shipped weights). The result's forces, quality and settings are the
     whole model's; its band is the FEE part's, shifted by the correction. ``calibrate`` is
     :func:`~.api.calibrate` (passed in: this module is imported by it)."""
     model = default_learned_model()
