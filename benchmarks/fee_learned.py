@@ -30,7 +30,8 @@ The own path and the other paths weigh half each per calibration cycle; groups (
 one ``data/learn`` group) by the square root of their size. So the soil inputs span the soils one-cycle fits
 find (one per training cycle, not one per group), and the network is used at prediction where it was trained.
 
-Forms compared (``report.json``): the network (tanh, :data:`HIDDEN` units, L2 :data:`L2`, L-BFGS) and the same
+Forms compared (``report.json``): the network (tanh, :data:`HIDDEN` units, L2 :data:`L2`, :data:`MAX_ITER`
+L-BFGS iterations) as the mean of :data:`ENSEMBLE` seeds (packed into one network), one seed alone, and one seed
 without the soil inputs; figures: calibrate-then-predict on the validation families (each cycle from each other
 one, the F_R RMSE in soil, median, % of the mean observed |F_R|; ``fee-payload`` beside), and the R2 of the
 transfer residual on the validation and test families. The form with the lower validation median ships.
@@ -49,7 +50,15 @@ import numpy as np
 
 from wheelloader.estimator import CycleLog
 from wheelloader.estimator.calibration import CalibrationOptions, calibrate, predict
-from wheelloader.estimator.learned import INPUT_NAMES, LearnedModel, contact_gate, force_scale, learned_inputs
+from wheelloader.estimator.learned import (
+    CALIBRATION_PASSES,
+    INPUT_NAMES,
+    LearnedModel,
+    contact_gate,
+    corrected_log,
+    force_scale,
+    learned_inputs,
+)
 from wheelloader.estimator.payload import PayloadOptions, fit_payload, payload_contact_state
 from wheelloader.provenance import machine_info
 from wheelloader.references.filtering import filtered
@@ -57,10 +66,11 @@ from wheelloader.references.filtering import filtered
 SIGMA = 0.1
 STRIDE = 3
 CROSS = 3
-HIDDEN = 16
-L2 = 1e-3
-MAX_ITER = 1000
+HIDDEN = 8
+L2 = 1e-2
+MAX_ITER = 300
 SEED = 0
+ENSEMBLE = 3
 VERSION = "2"
 COMMAND = "python benchmarks/fee_learned.py --out estimator/learned_weights"
 TEST_ROWS = {"gravel": "gravel", "sand": "sand", "modified_sand": "modified_sand (unseen soil)",
@@ -229,25 +239,40 @@ def train_mlp(x: np.ndarray, r: np.ndarray, w: np.ndarray, hidden: int = HIDDEN,
     return LearnedModel(w1, b1, w2, b2, mean, std, low, high)
 
 
+def mean_network(ms: list[LearnedModel]) -> LearnedModel:
+    """The mean of networks trained on the same samples (:func:`train_mlp`, other seeds) as one network: their
+    hidden units side by side, their output weights over their number (exact: same range and standardisation)."""
+    members = len(ms)
+    return LearnedModel(np.hstack([m.w1 for m in ms]), np.concatenate([m.b1 for m in ms]),
+                        np.vstack([m.w2 for m in ms]) / members, sum(m.b2 for m in ms) / members,
+                        ms[0].mean, ms[0].std, ms[0].low, ms[0].high)
+
+
 def r2(pred: np.ndarray, r: np.ndarray) -> list[float]:
     return [float(1.0 - np.sum((pred[:, k] - r[:, k]) ** 2) / np.sum((r[:, k] - r[:, k].mean()) ** 2))
             for k in range(2)]
 
 
-def transfer_errors(groups: list[dict], payload: PayloadOptions, correction) -> dict[str, float]:
+def transfer_errors(groups: list[dict], payload: PayloadOptions, model: LearnedModel | None = None,
+                    passes: int = 0) -> dict[str, float]:
     """Calibrate-then-predict within each group (each cycle from each other one): the median in-soil F_R RMSE
     [% of the mean observed |F_R|] of the other paths (``one_cycle``) and of the cycle itself (``floor``), with
-    ``correction`` (inputs -> corrections over ``s``; None: ``fee-payload`` alone)."""
+    ``model``'s correction (None: ``fee-payload`` alone) after ``passes`` fixed-point fits of the calibration
+    (:data:`~wheelloader.estimator.learned.CALIBRATION_PASSES`)."""
     out: dict[str, list[float]] = {"one_cycle": [], "floor": []}
+    opts = CalibrationOptions(force_model="fee-payload", payload=payload)
     for g in groups:
         for c in g["cycles"]:
             if c.soil is None:
                 continue
+            soil = c.soil
+            for _ in range(passes if model is not None else 0):
+                soil = calibrate(corrected_log(model, c.log, soil, payload)[0], options=opts).params
             for o in g["cycles"]:
-                x, r, fee = samples(o, c.soil, payload, stride=1)
+                x, r, fee = samples(o, soil, payload, stride=1)
                 if not len(x):
                     continue
-                pred = fee + (0.0 if correction is None else correction(x))
+                pred = fee + (0.0 if model is None else model.correction(x))
                 obs = fee + r
                 fr_p, fr_o = np.hypot(pred[:, 0], pred[:, 1]), np.hypot(obs[:, 0], obs[:, 1])
                 err = 100.0 * math.sqrt(float(np.mean((fr_p - fr_o) ** 2))) / float(np.mean(fr_o))
@@ -278,7 +303,9 @@ def main(argv: list[str] | None = None) -> int:
     test = collect(parts["test"], payload, "test")
     x, r, w = stack(train)
     no_soil = np.array([0.0 if n in SOIL_INPUTS else 1.0 for n in INPUT_NAMES])
-    models = {"mlp": train_mlp(x, r, w), "mlp without soil inputs": train_mlp(x, r, w, mask=no_soil)}
+    seeds = [train_mlp(x, r, w, seed=SEED + k) for k in range(ENSEMBLE)]
+    models = {f"mlp, mean of {ENSEMBLE} seeds": mean_network(seeds), "mlp, one seed": seeds[0],
+              "mlp without soil inputs, one seed": train_mlp(x, r, w, mask=no_soil)}
     forms: dict[str, dict] = {"fee-payload (no correction)": {"validation": transfer_errors(val, payload, None)}}
     for name, m in models.items():
         rows = {"train": r2(m.correction(x), r)}
@@ -286,13 +313,14 @@ def main(argv: list[str] | None = None) -> int:
             gx, gr, _ = stack(groups, ("cross",))
             rows[label] = r2(m.correction(gx), gr) if gx is not None else None
         forms[name] = {"r2_tangential_normal_transfer": rows,
-                       "validation": transfer_errors(val, payload, m.correction)}
+                       "validation": transfer_errors(val, payload, m, CALIBRATION_PASSES)}
         print(f"{name}: {json.dumps(forms[name])}", flush=True)
     print(f"fee-payload: {json.dumps(forms['fee-payload (no correction)'])}", flush=True)
     chosen = min(models, key=lambda k: forms[k]["validation"]["one_cycle"])
     model = models[chosen]
     manifest = {"version": VERSION, "command": COMMAND,
-                "form": f"{chosen}: tanh, {HIDDEN} hidden units, L2 {L2}, gated by the contact smoothstep",
+                "form": f"{chosen}: tanh, {HIDDEN} hidden units a seed, L2 {L2}, {MAX_ITER} L-BFGS iterations, gated "
+                        "by the contact smoothstep",
                 "chosen_by": "the lower validation median F_R RMSE from one cycle (forms)",
                 "inputs": list(INPUT_NAMES), "trusted_range": {"low": model.low.tolist(), "high": model.high.tolist()},
                 "payload": payload.to_dict(), "split": parts,

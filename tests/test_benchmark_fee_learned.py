@@ -66,3 +66,17 @@ def test_a_missing_folder_is_one_line_exit_2(tmp_path, capsys):
 def test_r2_of_a_perfect_prediction_is_one(count):
     r = np.arange(2.0 * 5 * count).reshape(-1, 2) ** 1.5
     assert _load().r2(r, r) == [1.0, 1.0]
+
+
+def test_the_mean_network_is_the_mean_of_its_members():
+    fl = _load()
+    rng = np.random.default_rng(3)
+    x = rng.uniform(-1.0, 1.0, (150, len(INPUT_NAMES)))
+    x[:, 1] = rng.uniform(0.0, 1.5, len(x))
+    r = np.column_stack([x[:, 0] ** 2, x[:, 3]])
+    w = np.full(len(x), 1.0 / len(x))
+    members = [fl.train_mlp(x, r, w, hidden=3, max_iter=50, seed=s) for s in range(3)]
+    mean = fl.mean_network(members)
+    assert mean.hidden == 9
+    np.testing.assert_allclose(mean.correction(x), np.mean([m.correction(x) for m in members], axis=0),
+                               rtol=1e-12, atol=1e-12)
