@@ -15,9 +15,10 @@ is exactly zero out of the soil (before entry, in the air, after exit: the paylo
 
 The soil inputs are the soil a one-cycle ``fee-payload`` calibration finds, not the true soil: the network is
 trained on the residual of each training cycle's own path and of other paths of its family at the soil fitted
-to one cycle (``benchmarks/fee_learned.py``). So :func:`~wheelloader.estimator.calibration.calibrate` fits the
-payload FEE's physical parameters as ``"fee-payload"`` does (:data:`CALIBRATION_PASSES` = 0: no fixed point
-through the network), and the prediction adds the correction at that soil, where it was trained.
+to one cycle (``benchmarks/fee_learned.py``). So :func:`~wheelloader.estimator.calibration.calibrate` starts
+from the payload FEE's own fit, refits it once to the forces less the correction at that soil
+(:data:`CALIBRATION_PASSES`), and the prediction adds the correction at the soil found, near where it was
+trained.
 
 The network is one ``tanh`` hidden layer on standardised inputs, each input clipped to its training range
 first (:attr:`LearnedModel.low`, :attr:`LearnedModel.high`, the 0.5th and 99.5th percentiles of the training
@@ -62,8 +63,10 @@ INPUT_NAMES: tuple[str, ...] = ("depth_over_length", "contact_ramp", "rho", "alp
 #: Depth over which the contact ramp goes from 0 to 1 [m].
 CONTACT_DEPTH = 0.02
 #: Fixed-point passes of the calibration (fit the FEE to the forces minus the correction at the current soil).
-#: 0: the correction is trained at the soil a plain ``fee-payload`` fit of one cycle finds (module docstring).
-CALIBRATION_PASSES = 0
+#: 1: the correction is trained at the soil a plain ``fee-payload`` fit of one cycle finds (module docstring); one
+#: pass refits the FEE to the forces less the correction there (a log of the fee-learned env then recovers a
+#: converged fit; with 0 passes its plain fit ran out of evaluations).
+CALIBRATION_PASSES = 1
 FORMAT = "wheelloader.fee-learned"
 #: The shipped weights (package data).
 DEFAULT_ARTIFACT = Path(__file__).with_name("learned_weights") / "fee-learned.json"

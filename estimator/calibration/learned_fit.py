@@ -22,8 +22,8 @@ def calibrate_learned(logs: list[CycleLog], opts: CalibrationOptions, calibrate:
     """``force_model="fee-learned"``: a plain ``fee-payload`` fit (the soil the correction was trained at: the
     soil a one-cycle ``fee-payload`` calibration finds, :mod:`wheelloader.estimator.learned`), then
     :data:`~wheelloader.estimator.learned.CALIBRATION_PASSES` fits of the payload FEE to the forces minus the
-    correction at the current soil (a fixed point; 0 for the shipped weights). The result's forces, quality and settings are the
-    whole model's; its band is the FEE part's, shifted by the correction. ``calibrate`` is
+    correction at the current soil (a fixed point; 1 for the shipped weights). The result's forces, quality and
+    settings are the whole model's; its band is the FEE part's, shifted by the correction. ``calibrate`` is
     :func:`~.api.calibrate` (passed in: this module is imported by it)."""
     model = default_learned_model()
     base = dataclasses.replace(opts, force_model="fee-payload")
