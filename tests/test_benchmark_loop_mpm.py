@@ -84,6 +84,37 @@ def test_one_cycle_loops_have_no_between_cycles_time():
     assert report.summarise({"rows": rows, "fixed_on_ours": []})["loops"]["ours"]["between_cycles_s_median"] == \
         pytest.approx(0.5)
 
+def test_policy_rows_failures_and_the_closed_loops_gap():
+    """Policies' rows follow the planned strategies in the tables; stalls, cycles above the loader's limits and the
+    closed loops' ends are counted; a closed-loop row's FEE-env side is its policy's path there."""
+    import numpy as np
+
+    from wheelloader.estimator import BucketPath, CycleLog, Pile
+
+    report = _load()
+    rows = [_row("rl_closed (fee-payload)", 1, 0.10, 5000.0), _row("ours", 1, 0.10, 4000.0),
+            _row("rl_path", 1, 0.10, 9000.0)]
+    rows[0].update(end="stall", stalled=True, above_limits=True)
+    rows[2].update(above_limits=True)
+    assert report.strategies(rows) == ["ours", "rl_closed (fee-payload)", "rl_path"]
+    loops = report.summarise({"rows": rows, "fixed_on_ours": []})["loops"]
+    assert list(loops) == ["ours", "rl_closed (fee-payload)", "rl_path"]
+    closed = loops["rl_closed (fee-payload)"]
+    assert (closed["stalled"], closed["above_limits"], closed["ends"]) == (1, 1, {"stall": 1})
+    assert loops["rl_path"]["above_limits"] == 1 and loops["rl_path"]["ends"] == {}
+    text = report.markdown({"rows": rows, "fixed_on_ours": [], "z_ref_m": 1.2,
+                            "settings": {"resolution": 0.02, "threads": 2, "cycles": 1}, "machine": {}},
+                           {"loops": loops})
+    assert "| rl_closed (fee-payload) | 0 | 1 | 0 |" in text and "| 0 / 0 / 1 / 1 |" in text
+    t = np.linspace(0.0, 1.0, 5)
+    path = BucketPath(t, t, 0 * t, 0 * t)
+    log = CycleLog(path, np.array([0.0, 1e3, 2.1e4, 0.0, 0.0]), np.zeros(5), Pile.trapezoid(),
+                   metadata={"closed_loop": {"end": "exit"}})
+    assert report.plant_failures(log) == {"above_limits": True, "end": "exit"}
+    log = CycleLog(path, np.full(5, 1e3), np.full(5, 2.4e4), Pile.trapezoid())
+    assert report.plant_failures(log) == {"above_limits": False, "end": None}
+
+
 def _need_taichi():
     try:
         import taichi  # noqa: F401
