@@ -238,11 +238,14 @@ class CycleLog:
         return csv_path
 
     @classmethod
-    def load(cls, csv_path: str | Path) -> CycleLog:
+    def load(cls, csv_path: str | Path, *, check: bool = True) -> CycleLog:
         """Read a cycle log (CSV + JSON sidecar) with clear errors for bad files.
 
         ``LOG.csv.xz`` (with ``LOG.json.xz``) is read through xz; ``LOG.csv`` that is absent while
-        ``LOG.csv.xz`` is present reads the compressed log.
+        ``LOG.csv.xz`` is present reads the compressed log. ``check=False`` skips the checks of the forces' sign
+        convention, the fill's unit and the plausibility warnings (for a plant's own logs, whose convention is
+        known: e.g. an MPM cycle whose bucket scraped the soil bed below the pile's ground, where the bed pushes
+        the bucket up and F_N is negative in most samples); the file's format is checked either way.
         """
         csv_path = Path(csv_path)
         if not csv_path.exists() and csv_path.name.endswith(".csv"):
@@ -267,7 +270,8 @@ class CycleLog:
         metadata = meta.get("metadata") or {}
         log = cls(path, columns["F_T"], columns["F_N"], pile, bucket, columns.get("fill_volume"),
                   columns.get("W_load"), pile_after, metadata)
-        _check_geometry(csv_path, log)
+        if check:
+            _check_geometry(csv_path, log)
         return log
 
 

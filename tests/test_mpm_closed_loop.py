@@ -145,3 +145,22 @@ def test_a_policy_is_rolled_out_in_the_env_its_config_names(tmp_path):
     assert policy_env_kwargs(zip_path) == {}  # no config.json: the env's defaults
     (tmp_path / "config.json").write_text(json.dumps({"env_kwargs": {"force_model": "fee-payload", "other": 1}}))
     assert policy_env_kwargs(zip_path) == policy_env_kwargs(str(zip_path)) == {"force_model": "fee-payload"}
+
+
+def test_a_plants_own_log_with_the_bed_pushing_up_is_read_back_unchecked(tmp_path):
+    """A closed-loop bucket that scrapes the MPM bed below the pile's ground feels the bed push it up: F_N < 0 in
+    most samples in soil. CycleLog.load refuses that as a likely sign flip; the loop's own saved cycles are read
+    with check=False."""
+    from wheelloader.estimator import CycleLog, CycleLogError
+    from wheelloader.saved_loops import load_saved_cycle, save_cycle
+
+    t = np.linspace(0.0, 1.0, 11)
+    path = BucketPath(t, 0.5 + 0.1 * t, 0.01 + 0 * t, 0 * t)
+    normal = np.full(11, -1e3)
+    normal[0] = 50.0  # positive out of the soil, before the cut
+    log = CycleLog(path, np.full(11, 2e3), normal, Pile.trapezoid(), fill_volume=np.linspace(0, 0.02, 11))
+    save_cycle(tmp_path, 1, log)
+    with pytest.raises(CycleLogError, match="F_N is negative"):
+        load_saved_cycle(tmp_path, 1)
+    back = load_saved_cycle(tmp_path, 1, check=False)
+    np.testing.assert_array_equal(back.normal, log.normal)

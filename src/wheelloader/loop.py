@@ -177,7 +177,8 @@ def _dig_or_resume(plant: Plant, strategy: Strategy, plan: PlanOutcome, pile: Pi
         cycle = SavedCycle(None, record, "path end")
     else:
         where = "" if folder is None else str(cycle_file(folder, k))
-        cycle = resolve_saved_cycle(load_saved_cycle(folder, k), plan.path, stale, record, where)
+        # the plant's own saved cycle: no sign-convention heuristics (a bucket scraping the MPM bed has F_N < 0)
+        cycle = resolve_saved_cycle(load_saved_cycle(folder, k, check=False), plan.path, stale, record, where)
     if cycle.log is not None:
         return cycle
     start = time.perf_counter()

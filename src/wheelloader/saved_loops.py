@@ -33,12 +33,13 @@ def cycle_file(folder: str | Path, k: int) -> Path:
     return find_cycle_log(folder, f"cycle{k}") or Path(folder) / f"cycle{k}{COMPRESSED_LOG}"
 
 
-def load_saved_cycle(folder: str | Path | None, k: int) -> CycleLog | None:
-    """Cycle ``k`` of the loop saved in ``folder``; None without a folder or without that cycle."""
+def load_saved_cycle(folder: str | Path | None, k: int, *, check: bool = True) -> CycleLog | None:
+    """Cycle ``k`` of the loop saved in ``folder``; None without a folder or without that cycle. ``check``: as
+    :meth:`CycleLog.load`'s (False for a plant's own cycles whose forces may trip its sign-convention check)."""
     if folder is None:
         return None
     saved = find_cycle_log(folder, f"cycle{k}")
-    return None if saved is None else CycleLog.load(saved)
+    return None if saved is None else CycleLog.load(saved, check=check)
 
 
 def save_cycle(folder: str | Path, k: int, log: CycleLog) -> Path:
