@@ -109,14 +109,16 @@ def _latest_loops(out: Path) -> dict[str, Any]:
 
 
 def policy_loops(policies: list[tuple[str, Path, Path]]) -> list[tuple[dict[str, Any], Path, str]]:
-    """Each ``--policy``'s loop rows (``DIR/rl``, ``DIR/rl_closed``) with its saved cycles' folder and label."""
+    """Each ``--policy``'s loop rows (``DIR/rl``, ``DIR/rl_closed`` or its parts ``DIR/rl_closed_*``) with its saved
+    cycles' folder and label."""
     found = []
     for label, folder, cycles in policies:
-        for name in ("rl", "rl_closed"):
-            path = folder / name / "plant_adaptation.json"
+        # a loop run in parts (one invocation per soil, e.g. rl_closed_gravel) counts as the loop
+        for path in [folder / "rl" / "plant_adaptation.json", *sorted(folder.glob("rl_closed*/plant_adaptation.json"))]:
             if path.is_file():
                 found += [(r, cycles / "loops", label) for r in json.loads(path.read_text())["rows"]]
-    return found
+    unique = {(label, r["soil"], r["seed"], r["strategy"], r["cycle"]): (r, c, label) for r, c, label in found}
+    return list(unique.values())
 
 
 def collect(out: Path, cycles: Path, policies: list[tuple[str, Path, Path]] | None = None) -> dict[str, Any]:
