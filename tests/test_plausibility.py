@@ -117,7 +117,13 @@ def test_no_shipped_log_trips_the_limits():
     logs = [f for f in files if sidecar_path(f).is_file() and "F_N" in _header(f)]
     assert len(logs) > 300
     for f in logs:
-        loaded = CycleLog.load(f)  # refusals raise
+        try:
+            loaded = CycleLog.load(f)  # refusals raise
+        except CycleLogError as exc:
+            # the one refusal allowed: a closed-loop MPM cycle whose bucket scraped the soil bed below the pile's
+            # ground, which pushes it up (F_N < 0 in most samples in soil); the loop reads its cycles with check=False
+            assert "F_N is negative" in str(exc) and "closed_loop" in CycleLog.load(f, check=False).metadata, (f, exc)
+            continue
         warnings = plausibility_warnings(loaded)
         if {"loop_mpm", "loop_mpm_held"} & set(f.parts):
             # the #33 loop runs log a cycle from the pile face on, several of them (the fixed path and the RL path
