@@ -32,6 +32,7 @@ from wheelloader.estimator.checks import check_finite, check_int, check_range
 from wheelloader.estimator.force_models import DEFAULT_FORCE_MODEL, check_force_model, model_options_for
 from wheelloader.estimator.payload import as_payload
 
+from .piles import nominal_start_pose, parse_pile, pile_toe
 from .soils import SoilRandomization, SoilSpec, drift_soil, parse_soil
 from .truth import TruthOptions, as_truth, stone_decay
 
@@ -131,52 +132,6 @@ def as_reward_weights(value: RewardWeights | Mapping[str, float] | None) -> Rewa
             raise ParameterError(f"reward_weights: unknown key(s) {unknown}")
         return RewardWeights(**value)
     raise ParameterError(f"reward_weights must be a RewardWeights or a dict, got {type(value).__name__}")
-
-
-# ------------------------------------------------------------------ pile
-def parse_pile(pile: Any) -> Pile:
-    """Parse the ``pile`` argument: ``None`` (default trapezoid), a :class:`Pile`, or a dict
-    ``{"shape": "trapezoid" | "ideal_slope", **builder_kwargs}`` (angles in radians)."""
-    if pile is None:
-        return Pile.trapezoid()
-    if isinstance(pile, Pile):
-        return pile
-    if isinstance(pile, Mapping):
-        kwargs = dict(pile)
-        shape = kwargs.pop("shape", "trapezoid")
-        builders = {"trapezoid": Pile.trapezoid, "ideal_slope": Pile.ideal_slope}
-        if shape not in builders:
-            raise ParameterError(f"pile shape must be one of {sorted(builders)}, got {shape!r}")
-        try:
-            return builders[shape](**kwargs)
-        except TypeError as exc:
-            raise ParameterError(f"pile: bad arguments for {shape!r}: {exc}") from None
-    raise ParameterError(f"pile must be None, a Pile or a dict, got {type(pile).__name__}")
-
-
-def pile_toe(pile: Pile) -> float:
-    """x of the pile toe: the last node before the surface first rises above its minimum [m]."""
-    z = pile.heights
-    rising = np.nonzero(z > z.min() + 1e-9)[0]
-    first = int(rising[0]) if rising.size else 0
-    return pile.x0 + pile.spacing * max(first - 1, 0)
-
-
-def nominal_start_pose(pile: Pile) -> tuple[float, float, float]:
-    """The env's default start pose on ``pile``: 0.10 m before the toe, 0.03 m above the ground, blade
-    at -5 deg (x [m], z [m], blade angle [rad]).
-
-    The ground is the surface's minimum, or the highest surface from the pile's first node to the toe where
-    that is higher: a carved pile whose floor dips below its first node (a plant's measured surface: a few
-    mm of spill at the first node, a dip of one grid cell further on; the toe is then the first node) would
-    otherwise start the tip inside the soil with the blade flat to it, outside the model's validity domain,
-    and every plan on that pile failed its check (the MPM loop's sand piles 3-5, ``docs/results/loop_mpm.md``).
-    """
-    z = pile.heights
-    rising = np.nonzero(z > z.min() + 1e-9)[0]
-    first = int(rising[0]) if rising.size else 0
-    ground = max(float(z.min()), float(z[: max(first, 1)].max()))
-    return pile_toe(pile) - 0.10, ground + 0.03, math.radians(-5.0)
 
 
 def _as_obj(value: Any, cls: type, name: str):

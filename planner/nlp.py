@@ -57,7 +57,6 @@ from collections.abc import Callable
 from dataclasses import replace
 
 import casadi as ca
-import numpy as np
 
 from wheelloader.envs.bookkeeping import step_work
 from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, Loader, PlanningError
@@ -67,6 +66,7 @@ from wheelloader.estimator.validity import alpha_lower_limit
 from . import codegen, nlp_cache
 from .casadi_model import casadi_forces, casadi_learned, learned_trust, smooth_max, smooth_min, smooth_pos
 from .interrupt import guarded
+from .iteration_monitor import IterationMonitor
 from .kept import KEPT_OBJECTIVE_SCALE, kept_terms, smooth_lift
 from .options import PlannerOptions
 
@@ -460,45 +460,3 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
         layout["kept_end"] = n_eq + n_ineq + 1
     constraints = ca.Function("constraints", [w, p], [g])
     return problem, {"forces": forces, "outputs": outputs, "constraints": constraints, **extra}, layout
-
-
-class IterationMonitor(ca.Callback):
-    """IPOPT's iteration callback: hands every iterate to :attr:`watch` (a function of the decision vector
-    returning True to stop the solve, or None: run on).
-
-    A stop is IPOPT's ``User_Requested_Stop`` at that iterate; it depends on the iterates only, so a solve
-    watched this way is as deterministic as one that is not.
-    """
-
-    def __init__(self, nx: int, ng: int) -> None:
-        ca.Callback.__init__(self)
-        self.nx, self.ng = nx, ng
-        self.watch = None
-        self.construct("iteration_monitor", {})
-
-    def get_n_in(self):
-        return ca.nlpsol_n_out()
-
-    def get_n_out(self):
-        return 1
-
-    def get_name_in(self, i):
-        return ca.nlpsol_out(i)
-
-    def get_name_out(self, i):
-        return "stop"
-
-    def get_sparsity_in(self, i):
-        name = ca.nlpsol_out(i)
-        if name == "f":
-            return ca.Sparsity.scalar()
-        if name in ("x", "lam_x"):
-            return ca.Sparsity.dense(self.nx)
-        if name in ("g", "lam_g"):
-            return ca.Sparsity.dense(self.ng)
-        return ca.Sparsity(0, 0)
-
-    def eval(self, arg):
-        if self.watch is None:
-            return [0]
-        return [1 if self.watch(np.array(arg[0]).ravel()) else 0]
