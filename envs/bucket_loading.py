@@ -556,8 +556,8 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         vals = [x, z, self._th, self._vx, self._vz, self._om, self._depth, self._rho, self._alpha,
                 self._fill / cfg.bucket.capacity, m_t * 1e-3, m_n * 1e-3]
         vals += node_heights(carver.nodes, carver.x0, carver.spacing, x, cfg.lookahead, z)  # surface minus tip z
-        obs = np.array(vals, dtype=np.float32)
         low, high = cfg.observation_limits  # float32 bounds: clipping after the cast equals clipping before it
+        obs = np.fromiter(vals, np.float32, len(vals))  # np.array(vals, dtype=np.float32), the same values, faster
         np.maximum(obs, low, out=obs)
         return np.minimum(obs, high, out=obs)
 

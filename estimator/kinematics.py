@@ -34,7 +34,7 @@ import numpy as np
 from .checks import check_range
 from .errors import ParameterError
 from .machine import Bucket
-from .pile import CarveResult, Pile, node_height
+from .pile import CarveResult, Pile
 
 GRAVITY = 9.81
 
@@ -219,9 +219,36 @@ def surface_contact(pile: Pile, x: float, z: float, blade_angle: float, floor_le
     the surface height is what the env's cycle-end rule measures the tip's clearance to.
     """
     nodes, x0, sp = pile.nodes, pile.x0, pile.spacing
-    alpha = math.atan((node_height(nodes, x0, sp, x + slope_window) - node_height(nodes, x0, sp, x - slope_window))
-                      / (2.0 * slope_window))
-    height = node_height(nodes, x0, sp, x)
+    last = len(nodes) - 1
+    # node_height at x + window, x - window and x, inlined (the single env's hot path; the same arithmetic)
+    u = (x + slope_window - x0) / sp
+    if u <= 0.0:
+        ahead = nodes[0]
+    elif u >= last:
+        ahead = nodes[last]
+    else:
+        i = int(u)
+        a = nodes[i]
+        ahead = a + (u - i) * (nodes[i + 1] - a)
+    u = (x - slope_window - x0) / sp
+    if u <= 0.0:
+        behind = nodes[0]
+    elif u >= last:
+        behind = nodes[last]
+    else:
+        i = int(u)
+        a = nodes[i]
+        behind = a + (u - i) * (nodes[i + 1] - a)
+    alpha = math.atan((ahead - behind) / (2.0 * slope_window))
+    u = (x - x0) / sp
+    if u <= 0.0:
+        height = nodes[0]
+    elif u >= last:
+        height = nodes[last]
+    else:
+        i = int(u)
+        a = nodes[i]
+        height = a + (u - i) * (nodes[i + 1] - a)
     vertical = height - z
     if vertical <= 0.0:
         return 0.0, alpha - blade_angle, alpha, 0.0, height
