@@ -423,15 +423,16 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
         if self._samples is not None:  # stepping after the end of an episode: nothing is logged
             self._samples.append((self._cycle_t * cfg.dt, xn, zn, thn, m_t, m_n, fill, f_t, f_n, flags))
         cap = cfg.bucket.capacity
-        terms = reward_terms(cfg.reward_weights, cap, ld.max_push_force, ld.max_lift_force, fill - fill0,
-                             e_soil + e_pay, outside_validity(depth, flags), stalled, f_t, f_n)
+        r_fill, r_energy, r_valid, r_stall, r_force = reward_terms(  # RewardTerms, unpacked once
+            cfg.reward_weights, cap, ld.max_push_force, ld.max_lift_force, fill - fill0, e_soil + e_pay,
+            outside_validity(depth, flags), stalled, f_t, f_n)
         # cycle end (one rule for every backend): out of the soil after loading
         self._touched, self._entered = cycle_progress(self._touched, self._entered, depth > 0.0, fill,
                                                       cfg.exit_fill_volume)
         done = cycle_done(self._touched, self._entered, zn, zn - height, self._crest, cfg.exit_clearance)
         info = {
-            "reward_fill": terms.fill, "reward_energy": terms.energy, "reward_validity": terms.validity,
-            "reward_stall": terms.stall, "reward_force": terms.force,
+            "reward_fill": r_fill, "reward_energy": r_energy, "reward_validity": r_valid,
+            "reward_stall": r_stall, "reward_force": r_force,
             "fill_volume": fill, "fill_fraction": fill / cap, "carved_volume": carver.fill, "spilled": carver.spilled,
             "force_tangential": f_t, "force_normal": f_n, "measured_tangential": m_t, "measured_normal": m_n,
             "energy_soil": self._energy_soil, "energy_payload": self._energy_payload,
@@ -444,7 +445,7 @@ class BucketLoadingEnv(gym.Env[np.ndarray, np.ndarray]):
             self.render()
         truncated = (not terminated and self.max_episode_steps is not None
                      and self._k >= self.max_episode_steps)
-        return obs, terms[0] + terms[1] + terms[2] + terms[3] + terms[4], terminated, truncated, info  # total()
+        return obs, r_fill + r_energy + r_valid + r_stall + r_force, terminated, truncated, info  # terms.total()
 
     def _move(self, action: np.ndarray) -> tuple[float, float, float, float, float, float]:
         """Kinematics: the action (clipped to [-1, 1], NaN counts as 0) moves the rate-limited velocity;
