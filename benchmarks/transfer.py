@@ -123,6 +123,24 @@ PAYLOAD_CANDIDATES = [{"cycles": cycles, "samples": samples, "curl": curl, "max_
                       for curl in (False, True) for ratio in (None, 0.9)]
 
 
+#: Folders under the loop_mpm run's cycles that hold the RL runs dug beside it after the shipped split was made
+#: (the fee-payload policy, the closed-loop policies): not payload candidates until the next regeneration.
+EXTRA_EXCLUDED = ("rl_payload", "rl_closed")
+
+
+def _is_payload_extra(path: Path) -> bool:
+    """Whether a saved cycle is a payload candidate: not in :data:`EXTRA_EXCLUDED`, and a learning-set cycle only
+    once its generator's ``manifest.json`` lists it (a cycle still being dug, or copied without its entry, is not
+    part of the set)."""
+    if any(part in EXTRA_EXCLUDED for part in path.parts):
+        return False
+    manifest = path.parent / "manifest.json"
+    if path.parent.name == "learn" and manifest.is_file():
+        listed = {Path(c["csv"]).name for c in json.loads(manifest.read_text())["cycles"]}
+        return path.name in listed
+    return True
+
+
 def split(data: Path, results: Path) -> dict:
     """The train/validation/test split by case family (module docstring)."""
     train = sorted(str(p) for run in ("adaptation_mpm", "adaptation_mpm_curlout")
@@ -136,7 +154,7 @@ def split(data: Path, results: Path) -> dict:
     test_digests = {CycleLog.load(f).content_digest() for files in test.values() for f in files}
     dropped = [f for f in train + validation if CycleLog.load(f).content_digest() in test_digests]
     extra = sorted(str(p) for folder in PAYLOAD_EXTRA for p in Path(folder.format(data=data.parent, results=results))
-                   .glob("**/*.csv.xz"))
+                   .glob("**/*.csv.xz") if _is_payload_extra(p))
     dropped += [f for f in extra if CycleLog.load(f).content_digest() in test_digests]
     train = [f for f in train if f not in dropped]
     validation = [f for f in validation if f not in dropped]
