@@ -51,6 +51,7 @@ passes new parameters, bounds and the initial guess.
 
 from __future__ import annotations
 
+import atexit
 import math
 import weakref
 from collections.abc import Callable
@@ -249,6 +250,12 @@ def release() -> int:
     dropped = len(_CACHE)
     _CACHE.clear()
     return dropped
+
+
+# The NLPs go while the interpreter is whole: a solver (its IPOPT callback is a Python object) destroyed when the
+# module's globals are torn down at the interpreter's finalisation can abort the process (seen after Ctrl-C of
+# `wheelloader plan --pareto`: "PyThreadState_Get ... finalizing", rc -6 instead of 130).
+atexit.register(release)
 
 
 def _solver_settings(options: PlannerOptions) -> tuple[tuple[str, object], ...]:
