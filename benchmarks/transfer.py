@@ -74,6 +74,7 @@ Run: ``python benchmarks/transfer.py --out docs/results/transfer`` (about 20 min
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import time
@@ -134,11 +135,17 @@ def _is_payload_extra(path: Path) -> bool:
     part of the set)."""
     if any(part in EXTRA_EXCLUDED for part in path.parts):
         return False
-    manifest = path.parent / "manifest.json"
-    if path.parent.name == "learn" and manifest.is_file():
-        listed = {Path(c["csv"]).name for c in json.loads(manifest.read_text())["cycles"]}
-        return path.name in listed
-    return True
+    listed = _learning_set_listed(path.parent) if path.parent.name == "learn" else None
+    return listed is None or path.name in listed
+
+
+@functools.cache
+def _learning_set_listed(folder: Path) -> frozenset[str] | None:
+    """The cycle files a learning set's ``manifest.json`` lists (read once per folder), or None without one."""
+    manifest = folder / "manifest.json"
+    if not manifest.is_file():
+        return None
+    return frozenset(Path(c["csv"]).name for c in json.loads(manifest.read_text())["cycles"])
 
 
 def split(data: Path, results: Path) -> dict:
