@@ -39,10 +39,7 @@ def parse_pile(pile: Any) -> Pile:
 
 def pile_toe(pile: Pile) -> float:
     """x of the pile toe: the last node before the surface first rises above its minimum [m]."""
-    z = pile.heights
-    rising = np.nonzero(z > z.min() + 1e-9)[0]
-    first = int(rising[0]) if rising.size else 0
-    return pile.x0 + pile.spacing * max(first - 1, 0)
+    return pile.x0 + pile.spacing * max(_first_rising(pile.heights) - 1, 0)
 
 
 def nominal_start_pose(pile: Pile) -> tuple[float, float, float]:
@@ -56,7 +53,11 @@ def nominal_start_pose(pile: Pile) -> tuple[float, float, float]:
     and every plan on that pile failed its check (the MPM loop's sand piles 3-5, ``docs/results/loop_mpm.md``).
     """
     z = pile.heights
-    rising = np.nonzero(z > z.min() + 1e-9)[0]
-    first = int(rising[0]) if rising.size else 0
-    ground = max(float(z.min()), float(z[: max(first, 1)].max()))
+    ground = max(float(z.min()), float(z[: max(_first_rising(z), 1)].max()))
     return pile_toe(pile) - 0.10, ground + 0.03, math.radians(-5.0)
+
+
+def _first_rising(z: np.ndarray) -> int:
+    """Index of the first node above the surface's minimum (0 on a flat surface)."""
+    rising = np.nonzero(z > z.min() + 1e-9)[0]
+    return int(rising[0]) if rising.size else 0
