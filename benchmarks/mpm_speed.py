@@ -269,6 +269,7 @@ def table(results: dict[str, Any]) -> str:
     """The Markdown tables of a report (the result page includes them; ``benchmarks/readme_tables.py``)."""
     lines = ["| cycle | variant | threads | wall [s] | CPU [s] | CPU to first sample / after [s] | settling | "
              "filtered F_R vs prev | vs old | vs data/mpm | load at start |", "|---" * 11 + "|"]
+    notes: list[str] = []
     for case, rows in results["cycles"].items():
         for name, r in rows.items():
             if not isinstance(r, dict):
@@ -282,9 +283,10 @@ def table(results: dict[str, Any]) -> str:
                          f"{'–' if committed is None else f'{committed:.2f} %'} | {r['loadavg_start'][0]:.1f} |")
         same = [name for name, r in rows.items() if isinstance(r, dict) and r.get("bit_identical_to_prev")]
         if "prev-2t" in rows:
-            lines.append(f"\nBit-identical forces to prev-2t ({case}): {', '.join(same)}.")
+            notes.append(f"\nBit-identical forces to prev-2t ({case}): {', '.join(same)}.")
         if "cache_hit_bit_identical" in rows:
-            lines.append(f"\nSettle-cache hit bit-identical to the miss ({case}): {rows['cache_hit_bit_identical']}.")
+            notes.append(f"\nSettle-cache hit bit-identical to the miss ({case}): {rows['cache_hit_bit_identical']}.")
+    lines += notes  # after the table: a note between rows would end the Markdown table
     for scene, rows in results["verification"].items():
         lines += ["", f"| {scene} | threads | wall [s] | CPU [s] | values [N/m] | vs prev | vs old |",
                   "|---|---|---|---|---|---|---|"]
