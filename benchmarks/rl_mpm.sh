@@ -17,6 +17,8 @@
 # policy), OUT/rl_gap/acceptance.{md,json,png} (the table) and saved cycles under CYCLES/loops/SOIL/seedN/rl_closed
 # and CYCLES/rl_payload.
 #   STEPS    which steps to run (default "1 2 3 4 5")
+#   STALE    what a saved cycle dug along another plan gets (plant_adaptation.py --stale: error, redig, keep;
+#            default error)
 set -euo pipefail
 PY=${PY:-python}
 RES=${RES:-0.02}
@@ -32,7 +34,7 @@ P2CYCLES=$CYCLES/rl_payload
 STEPS=${STEPS:-1 2 3 4 5}
 SETTINGS=(--cycles "$N" --failure-angle min_weight_force --heel-clearance 0 --end-blade-angle 55 --curl-out-intervals 8
           --midpoints off --objective kept_per_energy --ray off --soils gravel sand)
-mpm() { "$PY" benchmarks/plant_adaptation.py --plant mpm --resolution "$RES" --threads 2 --stale error \
+mpm() { "$PY" benchmarks/plant_adaptation.py --plant mpm --resolution "$RES" --threads 2 --stale "${STALE:-error}" \
     --seeds "$SEEDS" "${SETTINGS[@]}" "$@"; }
 for step in $STEPS; do
   case $step in
