@@ -17,6 +17,9 @@
 #   PY      the Python to run (default python)
 #   RES, N  MPM grid spacing [m] and cycles per loop (defaults 0.02 and 5; the smoke test: RES=0.06 N=2)
 #   PRIOR   ours' calibration prior (plant_adaptation.py --prior: none, nominal or held; default none)
+#   DESCEND the planner's --descend-clearance [m] (the tip moves down only this near the surface; default off)
+#   PAYLOAD the kept objective's payload (--payload JSON, e.g. docs/results/transfer/transfer.json; default off)
+#   FORCE_MODEL ours' force model (--force-model: fee, fee-payload or fee-payload-depth; default fee)
 #   RL_POLICY  a PPO model.zip (train/ppo.py): after phase 2, its path (rolled out in the FEE env of the
 #           nominal soil on each pile, adaptation.PolicyPath) dug in the plant, seed 0 of both soils (OUT/rl)
 set -euo pipefail
@@ -28,7 +31,8 @@ N=${N:-5}
 PRIOR=${PRIOR:-none}
 COMMON=(--plant mpm --resolution "$RES" --threads 2 --ray off --cycles "$N" --failure-angle min_weight_force
         --heel-clearance 0 --end-blade-angle 55 --curl-out-intervals 8 --midpoints off
-        --objective kept_per_energy --stale error --prior "$PRIOR")
+        --objective kept_per_energy --stale error --prior "$PRIOR" --force-model "${FORCE_MODEL:-fee}"
+        ${DESCEND:+--descend-clearance "$DESCEND"} ${PAYLOAD:+--payload "$PAYLOAD"})
 adapt() { "$PY" benchmarks/plant_adaptation.py "${COMMON[@]}" --cycles-dir "$CYCLES/loops" "$@"; }
 paired() { "$PY" benchmarks/plant_paired.py --plant mpm --resolution "$RES" --threads 2 --ray off \
     --cycles "$CYCLES/loops" --cycles-dir "$CYCLES/paired" --out "$OUT/paired"; }

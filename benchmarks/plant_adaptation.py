@@ -84,6 +84,22 @@ def planned_fill_limit(plant: Any, setting: str) -> float | None:
     return value
 
 
+def payload_from(source: str | None) -> dict[str, float] | None:
+    """The payload state of ``--payload``: None (the model's default), or the fields of a JSON file: its
+    ``"payload"`` (``benchmarks/transfer.py``'s ``transfer.json``: the recipe chosen on validation, with its curl
+    gain) or the file itself (``PayloadOptions.to_dict``'s form)."""
+    if source is None:
+        return None
+    from wheelloader.estimator import PayloadOptions
+
+    try:
+        data = json.loads(Path(source).read_text())
+        fields = data.get("payload", data) if isinstance(data, dict) else data
+        return PayloadOptions.from_dict(fields).to_dict()
+    except (OSError, ValueError, TypeError, AttributeError) as exc:
+        raise SystemExit(f"wheelloader: error: --payload {source}: {exc}") from None
+
+
 def cycles_dir(args: argparse.Namespace) -> Path:
     """Where the saved cycles are: ``--cycles-dir``, else ``OUT/cycles``."""
     return Path(args.cycles_dir) if args.cycles_dir is not None else Path(args.out) / "cycles"
@@ -102,7 +118,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     loop_kwargs = {"plant": plant, "cycles": args.cycles, "planner": not args.no_planner, "fill_limit": fill_limit,
                    "failure_angle": args.failure_angle, "objective": args.objective, "lookahead": args.lookahead,
                    "rl_policy": args.rl_policy, "prior": args.prior,
-                   **planner_physics(args)}
+                   "descend_clearance": args.descend_clearance, "payload": payload_from(args.payload),
+                   "force_model": args.force_model, **planner_physics(args)}
     learning = [s for s in args.strategies if s != "oracle"]
     keys = [(soil, seed, name) for soil in args.soils for seed in range(args.seeds) for name in learning]
     units = [Unit(plant_loop_unit, {**loop_kwargs, "strategy": name, "soil": soil, "seed": seed, "stale": args.stale,
@@ -261,6 +278,9 @@ def markdown(result: dict[str, Any], cycles: Path | None = None) -> str:
               + ("" if s.get("objective", "fill_energy") == "fill_energy" else f"; `--objective {s['objective']}`")
               + ("" if not s.get("lookahead") else "; `--lookahead`")
               + ("" if s.get("prior", "none") == "none" else f"; ours with `--prior {s['prior']}`")
+              + ("" if s.get("force_model", "fee") == "fee" else f"; ours with `--force-model {s['force_model']}`")
+              + ("" if s.get("descend_clearance") is None else f"; `--descend-clearance {s['descend_clearance']:g}`")
+              + ("" if s.get("payload") is None else f"; `--payload {s['payload']}`")
               + ("" if s.get("fill_limit_used") is None else f", planned fill ≤ {s['fill_limit_used']:.0%} of 0.2 m³")
               + ") at "
               f"{commit_label(result['machine'])}; loops run with `--ray {s.get('ray', 'off')}`; the last "
@@ -319,6 +339,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--prior", choices=("none", "nominal", "held"), default="none",
                         help="ours' calibration prior at its nominal soil (wheelloader.loop_prior.LOOP_PRIORS): none "
                              "(default), nominal (gamma, K, n held softly) or held (all seven held softly)")
+    parser.add_argument("--descend-clearance", type=float, default=None, metavar="M",
+                        help="the planner's opt-in height above the surface above which the tip may not move down "
+                             "[m], for every strategy that plans (default: off)")
+    parser.add_argument("--payload", default=None, metavar="JSON",
+                        help="the payload state of the kept objective, for every strategy that plans: a JSON file "
+                             "with the PayloadOptions fields or transfer.json's 'payload' (e.g. "
+                             "docs/results/transfer/transfer.json: kept fill with the curl term; default: the "
+                             "force model's default payload)")
+    parser.add_argument("--force-model", choices=("fee", "fee-payload", "fee-payload-depth"), default="fee",
+                        help="the force model ours calibrates and plans with (default fee)")
     add_ray_arguments(parser)
     parser.add_argument("--report", action="store_true",
                         help="only rewrite the Markdown and the figure from OUT/plant_adaptation.json")

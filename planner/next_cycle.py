@@ -22,6 +22,7 @@ import numpy as np
 
 from wheelloader.estimator import Bucket, BucketPath, Loader, PayloadOptions, Pile, SoilParams, as_soil
 from wheelloader.estimator.errors import PlanningError
+from wheelloader.estimator.payload import exit_angle_profile
 from wheelloader.estimator.quantise import better, quantise_pile, quantise_soil
 
 from .cycle import cautious_options, cycle_duration, default_start, optimizer_for
@@ -189,7 +190,7 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
                                    control_rate=control_rate, replan_every=replan_every, initial_plan=plan,
                                    options=opt.options, exit_min_fill=exit_min_fill)
     path = plan.path(control_rate, name="planned")
-    kept = _kept_note(plan, check, params, opt, min_kept) if kept_objective else ""
+    kept = _kept_note(plan, check, params, pile, opt, min_kept) if kept_objective else ""
     return PlanOutcome(path, True, f"{head}{note}{retried}; predicted fill "
                        f"{check.fill / opt.bucket.capacity:.0%}, {check.energy / 1e3:.1f} kJ{kept}", seconds,
                        controller, plan=plan, check=check, first_failures=first_failures)
@@ -234,7 +235,7 @@ def _search(opt: TrajectoryOptimizer, options: PlannerOptions | None, params: So
         score = -check.fill / opt.bucket.capacity + lam * check.energy / 1000.0
         useful = _dug(check) >= (ITERATE_MIN_FILL if iterate else MIN_FILL) * opt.bucket.capacity
         if kept_objective:  # the kept objective (planner.kept) by the NumPy check, its kept fill on target
-            terms = _kept_terms(plan, check, params, opt)
+            terms = _kept_terms(plan, check, params, pile, opt)
             score = terms.per_kept * opt.bucket.capacity / KEPT_OBJECTIVE_SCALE
             useful = useful and terms.kept >= min_kept - KEPT_TOLERANCE * opt.bucket.capacity
         if check.ok and useful and ("score" not in best or better(score, best["score"])):
@@ -273,9 +274,10 @@ def _search(opt: TrajectoryOptimizer, options: PlannerOptions | None, params: So
     return _Search(opt, plan, check, best, spent, retried, first_failures)
 
 
-def _kept_note(plan: Plan, check: PlanCheck, params: SoilParams, opt: TrajectoryOptimizer, min_kept: float) -> str:
+def _kept_note(plan: Plan, check: PlanCheck, params: SoilParams, pile: Pile, opt: TrajectoryOptimizer,
+               min_kept: float) -> str:
     """The kept objective's part of the outcome's message: kept fill against its target, energy per m^3 kept."""
-    terms = _kept_terms(plan, check, params, opt)
+    terms = _kept_terms(plan, check, params, pile, opt)
     return (f"; kept {terms.kept / opt.bucket.capacity:.0%} (target {min_kept / opt.bucket.capacity:.0%}), "
             f"{terms.per_kept / 1e3:.1f} kJ/m^3 kept with the lift to {opt.options.kept_dump_height:.2f} m")
 
@@ -289,8 +291,13 @@ def _kept_target(pile: Pile, opt, rate: float, exit_min_fill: float) -> float:
     return fixed_kept_fill(pile, opt.bucket, options.kept_payload, rate, exit_min_fill)
 
 
-def _kept_terms(plan: Plan, check: PlanCheck, params: SoilParams, opt) -> KeptTerms:
-    """The kept objective's terms of ``plan`` by the NumPy check (its carved fill and energy, exact lift)."""
+def _kept_terms(plan: Plan, check: PlanCheck, params: SoilParams, pile: Pile, opt) -> KeptTerms:
+    """The kept objective's terms of ``plan`` by the NumPy check (its carved fill and energy, exact lift); the
+    payload's heap sees the blade angle as the tip leaves ``pile`` (``exit_angle_profile``, as
+    :func:`~wheelloader.planner.kept.fixed_kept_fill` for the target), where its ``curl_gain`` is not 0."""
     options = opt.options
+    exit_angle = float(plan.blade_angle[-1])
+    if options.kept_payload.curl_gain != 0.0:
+        exit_angle = float(exit_angle_profile(plan.blade_angle, pile.surface_height(plan.x) - plan.z)[-1])
     return evaluate(check.carved, check.energy, float(plan.z[-1]), params.gamma, opt.bucket.capacity,
-                    options.kept_payload, options.kept_dump_height, float(plan.blade_angle[-1]))
+                    options.kept_payload, options.kept_dump_height, exit_angle)

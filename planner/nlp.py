@@ -82,6 +82,18 @@ _CACHE: dict[tuple, dict] = {}
 VALIDITY_RELAX = 30.0
 
 
+#: Width of the smooth switch that follows the blade angle as the tip leaves the soil [m of depth]: under a payload
+#: with a ``curl_gain`` and a curl-out phase (``PlannerOptions.curl_out_intervals``) the heaped capacity sees the
+#: blade angle at the last node in soil (:func:`~wheelloader.estimator.payload.exit_angle_profile`), not the end
+#: node's: the end node is then well above the soil, curled to the end blade angle whatever angle the tip left the
+#: soil at. (Without a curl-out the end node is the one just out of the soil.)
+EXIT_ANGLE_WIDTH = 0.005
+#: Width of the smooth switch of the opt-in ``descend_clearance`` (the tip moves down only near the surface) [m],
+#: and the slack on the tip's vertical speed where it is off [m/s] (above any loader's speed).
+DESCEND_WIDTH = 0.01
+DESCEND_SLACK = 10.0
+
+
 #: Smoothing of the removed volume before the payload's kept soil [m^3]: ``kept_volume``'s second derivative is
 #: infinite at 0 for a sharpness below 2 (the start node's V is 0), so V enters through a smooth positive part
 #: (5e-7 m^3 at V = 0).
@@ -90,9 +102,8 @@ KEPT_SMOOTHING = 1e-6
 
 def _kept_of(bucket: Bucket, payload):
     """The fill the NLP counts for a carved volume ``V``: ``V`` itself, or under ``"fee-payload"`` the payload's
-    kept soil of it (:func:`~wheelloader.estimator.payload.kept_volume`) at the node's blade angle ``th`` (the
-    heaped capacity's exit angle where the payload has a ``curl_gain``: the end node is the one just out of the
-    soil)."""
+    kept soil of it (:func:`~wheelloader.estimator.payload.kept_volume`) at the blade angle ``th`` the heap sees
+    (where the payload has a ``curl_gain``: the angle at the last node in soil, :data:`EXIT_ANGLE_WIDTH`)."""
     if payload is None:
         return lambda v, th=0.0: v
     return lambda v, th=0.0: kept_volume(smooth_pos(v, KEPT_SMOOTHING), bucket.capacity, payload, 0.0, th)
@@ -366,6 +377,12 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     acc = loader.max_acceleration
     tilt_acc = options.max_tilt_acceleration
     prev_u = p_vel0
+    # the blade angle the payload's heap sees (exit_angle_profile): the node's while in soil, held after the exit;
+    # followed over the curl-out phase only (before it the tip stays in or just above the soil, and a switch over
+    # every node would couple all the nodes' angles and depths in the Hessian: 3x the CPU per plan)
+    track_exit = options.kept_payload.curl_gain != 0.0 and options.curl_out > 0
+    exit_from = n - 1 - options.curl_out
+    exit_angle = X[2, 0]
     trust_depth, trust_speed = learned_trust(bucket) if velocity else (0.0, 0.0)
     for k in range(n):
         xk, zk, tk, vk = X[0, k], X[1, k], X[2, k], X[3, k]
@@ -392,7 +409,17 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
         else:
             removed = bucket.width * dx * smooth_pos(0.5 * (vertical_prev + vertical), 1e-3)
         vertical_prev = vertical
+        if track_exit and k + 1 > exit_from:
+            in_soil = 0.5 * (1.0 + ca.tanh(vertical / EXIT_ANGLE_WIDTH))
+            exit_angle = in_soil * tn + (1.0 - in_soil) * exit_angle
+        else:
+            exit_angle = tn
         g_eq.append(vn - vk - removed)
+        if options.descend_clearance is not None:
+            # opt-in: the tip moves down only while it starts the interval near the surface (or in soil); the
+            # force model has no force for the bucket coming down onto the pile on its floor
+            near = 0.5 * (1.0 + ca.tanh((vertical_start + options.descend_clearance) / DESCEND_WIDTH))
+            g_ineq.append(u[1] + DESCEND_SLACK * near)
         # acceleration limits
         du = u - prev_u
         g_ineq += [acc * h - du[0], acc * h + du[0], acc * h - du[1], acc * h + du[1],
@@ -434,7 +461,7 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
                 along = u[0] * ca.cos(blade) + u[1] * ca.sin(blade)
                 g_ineq.append(along - math.cos(cone) * speed + 10.0 * shallow)
         # energy: the env's bookkeeping, with a smooth positive part (1 J wide)
-        e_soil, e_payload = step_work(f_t, f_n, dx, dz, tn, p_soil[0] * GRAVITY * kept_of(vn, tn), cos=ca.cos,
+        e_soil, e_payload = step_work(f_t, f_n, dx, dz, tn, p_soil[0] * GRAVITY * kept_of(vn, exit_angle), cos=ca.cos,
                                       sin=ca.sin, pos=_smooth_work)
         energy = energy + e_soil + e_payload
     # end out of the pile
@@ -442,14 +469,15 @@ def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
     g_ineq.append(end_clear)
     if options.end_blade_angle is not None:  # opt-in: end curled, carrying the load
         g_ineq.append(X[2, n] - options.end_blade_angle)
-    fill_end = kept_of(X[3, n], X[2, n])
+    exit_end = exit_angle if track_exit else X[2, n]
+    fill_end = kept_of(X[3, n], exit_end)
     extra: dict[str, ca.Function] = {}
     if options.objective == "kept_per_energy":
         # opt-in (planner.kept): energy per m^3 of kept soil, the load lifted on to the dump height; the kept
         # fill (the payload state of the carved volume) is constrained from below by the solve's bounds
         kept, lift, total, per_kept = kept_terms(X[3, n], energy, X[1, n], p_soil[0], bucket.capacity,
                                                  options.kept_payload, options.kept_dump_height,
-                                                 pos=lambda v: smooth_lift(v, sqrt=ca.sqrt), exit_angle=X[2, n])
+                                                 pos=lambda v: smooth_lift(v, sqrt=ca.sqrt), exit_angle=exit_end)
         main = per_kept * bucket.capacity / KEPT_OBJECTIVE_SCALE
         g_kept = [kept]
         extra["kept"] = ca.Function("kept", [w, p], [kept, lift, total, per_kept])

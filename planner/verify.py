@@ -39,6 +39,11 @@ from .plan import Plan
 
 #: How far below its clearance the NumPy check lets the heel go [m] (the NLP sees a smoothed surface).
 HEEL_TOLERANCE = 0.02
+#: Height [m] and downward speed [m/s] within which the check lets the tip come down from above the opt-in
+#: ``descend_clearance``: the NLP's switch is smooth over about 2 cm, and the surface under a descending interval
+#: can drop.
+DESCEND_TOLERANCE = 0.04
+DESCEND_SPEED_TOLERANCE = 0.05
 
 
 @dataclass(frozen=True)
@@ -170,6 +175,7 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
     slack = 1.0 + tolerance
     off_blade = _off_blade_steps(path, state.depth, vx, vz, options)
     heel_buried = _heel_buried_steps(path, pile, bucket, options)
+    from_above = _descend_steps(path, pile, vz, options)
     checks = {
         "tangential force above the loader's push limit": float(forces.tangential.max()) > loader.max_push_force,
         "normal force above the loader's lift limit": float(forces.normal.max()) > loader.max_lift_force,
@@ -183,6 +189,7 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
         "tip leaves the soil before the end (the env would end the cycle there)": early_exit is not None,
         "bucket moves off its blade in soil (outside the cutting cone)": off_blade > 0,
         "bucket's heel in the soil (below the heel clearance)": heel_buried > 0,
+        "tip comes down onto the pile from above (above the descend clearance)": from_above > 0,
         "bucket not curled at the end (below the end blade angle)": (
             options.end_blade_angle is not None and float(path.blade_angle[-1]) < options.end_blade_angle - 0.02),
     }
@@ -197,7 +204,8 @@ def verify_plan(plan: Plan | BucketPath, soil: SoilParams | str | dict, pile: Pi
         fill=sim["fill"], spilled=sim["spilled"], energy=sim["energy"], end_clearance=end_clear,
         backward_steps=int(np.count_nonzero(vx < -1e-6)), carved=sim["carved"],
         details={"flags": forces.flag_summary(), "samples": len(path), "early_exit_s": early_exit,
-                 "off_blade_steps": off_blade, "heel_buried_steps": heel_buried},
+                 "off_blade_steps": off_blade, "heel_buried_steps": heel_buried,
+                 "descend_steps": from_above},
     )
 
 
@@ -283,3 +291,12 @@ def _interval_acceleration(plan: Plan) -> float:
     v0 = np.array([[start.vx, start.vz]]) if start is not None else np.zeros((1, 2))
     v = np.vstack([v0, np.column_stack([plan.vx, plan.vz])])
     return float(np.max(np.abs(np.diff(v, axis=0))) / h)
+
+
+def _descend_steps(path: BucketPath, pile: Pile, vz: np.ndarray, options: PlannerOptions) -> int:
+    """Steps that move the tip down while it starts them more than the opt-in ``descend_clearance`` (plus
+    :data:`DESCEND_TOLERANCE`) above the surface (``PlannerOptions.descend_clearance``); 0 without it."""
+    if options.descend_clearance is None:
+        return 0
+    above = (path.z - pile.surface_height(path.x))[:-1] > options.descend_clearance + DESCEND_TOLERANCE
+    return int(np.count_nonzero(above & (vz < -DESCEND_SPEED_TOLERANCE)))

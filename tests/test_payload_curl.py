@@ -172,3 +172,25 @@ def test_planner_plans_with_the_curled_payload_and_its_check_agrees():
                                            rel=1e-9)
     nlp_end = float(kept_volume(out.plan.fill[-1], cap, CURL, 0.0, out.plan.blade_angle[-1]))
     assert out.check.fill == pytest.approx(nlp_end, rel=0.1)
+
+
+def test_the_kept_objective_sees_the_blade_angle_as_the_tip_leaves_the_soil():
+    """With the MPM loop's curl-out phase (end blade angle 55 deg, 8 intervals) the end node is curled well above
+    the soil: the NLP's and the check's kept soil take the angle at the last node in soil, as the payload's
+    exit-angle profile does (and the fixed path's kept target), not the end node's."""
+    from wheelloader.loop_planner import default_planner
+
+    pile, cap = Pile.trapezoid(), 0.2
+    plan = default_planner(failure_angle="min_weight_force", heel_clearance=0.0, end_blade_angle=math.radians(55.0),
+                           curl_out_intervals=8, midpoints=False, objective="kept_per_energy", payload=CURL)
+    out = plan("gravel", pile)
+    assert out.success, out.message
+    nodes = out.plan
+    exit_angle = float(exit_angle_profile(nodes.blade_angle, pile.surface_height(nodes.x) - nodes.z)[-1])
+    assert exit_angle < nodes.blade_angle[-1] - math.radians(10.0)
+    nlp_kept = nodes.raw["kept_terms"]["kept"]
+    assert nlp_kept == pytest.approx(float(kept_volume(nodes.fill[-1], cap, CURL, 0.0, exit_angle)), rel=0.05)
+    at_end = float(kept_volume(nodes.fill[-1], cap, CURL, 0.0, nodes.blade_angle[-1]))
+    assert abs(nlp_kept / at_end - 1.0) > 0.05
+    kept_percent = round(100 * float(kept_volume(out.check.carved, cap, CURL, 0.0, exit_angle)) / cap)
+    assert f"kept {kept_percent}%" in out.message

@@ -54,6 +54,7 @@ from wheelloader.estimator import (
     predict,
     preset,
 )
+from wheelloader.estimator.payload import as_payload
 from wheelloader.planner import PlanOutcome
 from wheelloader.references.filtering import DEFAULT_FILTER, filtered
 from wheelloader.references.metrics import cycle_work
@@ -260,7 +261,8 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
                     end_blade_angle: float | None = None, curl_out_intervals: int = 0,
                     midpoints: bool | None = None, objective: str = "fill_energy",
                     lookahead: bool = False, rl_policy: str | None = None,
-                    prior: str = "none") -> dict[str, Any]:
+                    prior: str = "none", descend_clearance: float | None = None,
+                    payload: Mapping[str, float] | None = None, force_model: str = "fee") -> dict[str, Any]:
     """One loop of :func:`run_loop` on the trapezoid pile as a unit of :mod:`wheelloader.sweep` (picklable
     arguments only).
 
@@ -281,23 +283,31 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
     plans. ``rl_policy``: the PPO ``.zip`` of the ``rl`` (a controller: the FEE env plant only) and ``rl_path``
     strategies (:class:`~wheelloader.adaptation.PolicyPath`: the policy's path in the FEE env, dug in the plant).
     ``prior``: the calibration prior of ``ours`` (a name of :data:`~wheelloader.loop_prior.LOOP_PRIORS`,
-    centred on ``ours``' nominal soil).
+    centred on ``ours``' nominal soil). ``descend_clearance``: the planner's opt-in height above the surface
+    above which the tip may not move down [m]; ``payload`` (a :class:`~wheelloader.estimator.PayloadOptions`'
+    fields): the payload state of the kept objective, e.g. one with a ``curl_gain`` fitted to the plant's kept
+    fill (``benchmarks/transfer.py``), for every strategy that plans; ``force_model``: the model ``ours``
+    calibrates and plans with (:data:`~wheelloader.estimator.FORCE_MODELS`; under the payload models with
+    ``payload``).
     """
     from wheelloader.adaptation import default_planner, make_strategy
 
     model = ModelOptions(failure_angle=failure_angle)
     learning = strategy in ("ours", "oracle")
+    kept_payload = as_payload(payload)
     plan = (default_planner(failure_angle=failure_angle if learning else "min_n_gamma", cut_angle=cut_angle,
                             fill_limit=fill_limit, heel_clearance=heel_clearance,
                             end_blade_angle=end_blade_angle, curl_out_intervals=curl_out_intervals,
-                            midpoints=midpoints, objective=objective, lookahead=lookahead)
+                            midpoints=midpoints, objective=objective, lookahead=lookahead,
+                            descend_clearance=descend_clearance, payload=kept_payload)
             if planner else None)
+    ours_model = {} if force_model == "fee" else {"force_model": force_model, "payload": kept_payload}
     if strategy == "oracle":
         if oracle_params is None:
             raise WheelloaderError("plant_loop_unit: the oracle needs oracle_params (hindsight_parameters)")
         chosen: Strategy = Hindsight(oracle_params, plan, options=model)
-    elif strategy == "ours" and (model.extra_terms or prior != "none"):
-        chosen = make_strategy(strategy, plan, ours_options={"prior": prior,
+    elif strategy == "ours" and (model.extra_terms or prior != "none" or ours_model):
+        chosen = make_strategy(strategy, plan, ours_options={"prior": prior, **ours_model,
                                                              **({"options": model} if model.extra_terms else {})})
     else:
         chosen = make_strategy(strategy, plan, rl_policy=rl_policy)

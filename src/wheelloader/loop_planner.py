@@ -5,7 +5,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable
 
-from wheelloader.estimator import Pile, SoilParams, WheelloaderError
+from wheelloader.estimator import PayloadOptions, Pile, SoilParams, WheelloaderError
 from wheelloader.planner import LOOP_EXIT_MIN_FILL, PlannerOptions, PlanOutcome, optimizer_for, plan_next_cycle
 
 #: Work budget of the plan between cycles: IPOPT iterations per solve. A plan stopped at this limit is used
@@ -33,7 +33,8 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
                     fill_limit: float | None = None, heel_clearance: float | None = None,
                     end_blade_angle: float | None = None, curl_out_intervals: int = 0,
                     midpoints: bool | None = None, objective: str = "fill_energy",
-                    lookahead: bool | str = False) -> Callable[[SoilParams, Pile], PlanOutcome]:
+                    lookahead: bool | str = False, descend_clearance: float | None = None,
+                    payload: PayloadOptions | None = None) -> Callable[[SoilParams, Pile], PlanOutcome]:
     """The planner used between cycles.
 
     A full-cycle CasADi plan within :data:`BETWEEN_CYCLES_MAX_ITER` IPOPT
@@ -54,7 +55,9 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
     followed by the greedy plan of the next cycle, each plan within the same budgets as greedy's; ``"fast"``
     :data:`~wheelloader.planner.lookahead.FAST` (greedy and one candidate warm-started from it within 20 IPOPT
     iterations, the next cycle scored with the geometric Bezier placement; cheaper, and worse than greedy in the
-    FEE env, ``docs/results/lookahead.md``).
+    FEE env, ``docs/results/lookahead.md``); ``descend_clearance``: the opt-in height above the surface above
+    which the tip may not move down [m]; ``payload``: the payload state of the kept objective (and of the payload
+    force models; None: the model's default) (:class:`~wheelloader.planner.PlannerOptions`).
     """
     if lookahead not in (False, True, "fast", "full"):
         raise WheelloaderError(f"lookahead must be False, True, 'fast' or 'full', got {lookahead!r}")
@@ -64,7 +67,7 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
     options = PlannerOptions(max_iter=BETWEEN_CYCLES_MAX_ITER, failure_angle=failure_angle, cut_angle=cut_angle,
                              heel_clearance=heel_clearance, end_blade_angle=end_blade_angle,
                              curl_out_intervals=curl_out_intervals, midpoints=midpoints, objective=objective,
-                             **extra)
+                             descend_clearance=descend_clearance, payload=payload, **extra)
     # build the plan's NLP before the loop's timings start; those of the two wider-margin re-plans are built
     # when a plan first fails its check (once per process: planner.optimizer_for)
     optimizer_for(options=options)
