@@ -66,6 +66,14 @@ def beta_bounds(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS,
     return lo, hi
 
 
+def _of_shape(v, shape: tuple[int, ...]) -> np.ndarray:
+    """``v`` as an array of ``shape`` (read only): ``v`` itself where it already is one (the batched env's case,
+    without :func:`numpy.broadcast_to`'s cost per call), else a broadcast view; the same values either way."""
+    if type(v) is np.ndarray and v.shape == shape:
+        return v
+    return np.broadcast_to(v, shape)
+
+
 def log_ngamma_slope(beta, alpha, phi, s, tan=np.tan):
     """``g = d ln N_gamma / d beta`` and ``dg / d beta`` (eq 10), with ``s = rho + delta + phi``.
 
@@ -115,7 +123,7 @@ def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
         shape = arrays[0].shape  # 0-d inputs are worked on as 1-d and given back in their shape
         alpha, rho, phi, delta = (np.ravel(v) for v in arrays)
     s = rho + delta + phi
-    lo, hi = (np.broadcast_to(v, alpha.shape) for v in beta_bounds(alpha, rho, phi, delta, options))
+    lo, hi = (_of_shape(v, alpha.shape) for v in beta_bounds(alpha, rho, phi, delta, options))
     m = alpha.size
     if isinstance(phi, np.ndarray):
         g_lo, g_hi = _slope_only(lo, alpha, phi, s), _slope_only(hi, alpha, phi, s)
@@ -396,7 +404,7 @@ def optimal_beta_weight_force(alpha, rho, phi, delta, depth, surcharge, options:
     alpha, rho, phi, delta, depth, surcharge = (np.ravel(v) for v in arrays)
     d2 = np.square(np.maximum(depth, 0.0))
     q = np.maximum(surcharge, 0.0)
-    lo, hi = (np.broadcast_to(v, alpha.shape) for v in beta_bounds(alpha, rho, phi, delta, options))
+    lo, hi = (_of_shape(v, alpha.shape) for v in beta_bounds(alpha, rho, phi, delta, options))
     loaded = (d2 + q) > 0.0
     beta = np.array(hi, dtype=float)
     where = np.full(alpha.shape, BETA_INTERIOR)
