@@ -9,7 +9,8 @@ name                      model
                           the FEE with the carved fill as its surcharge; the kept soil (retention, smooth heaped
                           capacity) is the fill, and its weight and inertia take over from the surcharge as the
                           tip leaves the soil (the opt-in carried-load term, ``carried_in_soil=False``)
-``"fee-learned"``         ``"fee-payload"`` plus a correction learned offline from the continuum (MPM) cycles,
+``"fee-learned"``         ``"fee-payload-depth"`` (:data:`LEARNED_BASE`; ``"fee-payload"`` up to weights v2) plus
+                          a correction learned offline from the continuum (MPM) cycles,
                           with the soil among its inputs (:mod:`~wheelloader.estimator.learned`); its payload
                           is the one fitted with it (the shipped artifact's), unless given
 ``"fee-payload-depth"``   ``"fee-payload"`` with a depth-squared share of the soil's weight beside the wedge,
@@ -37,8 +38,9 @@ from .kinematics import ContactState
 from .payload import PayloadOptions, payload_contact_state
 from .validity import DEFAULT_OPTIONS, ModelOptions
 
-__all__ = ["DEFAULT_FORCE_MODEL", "DEFAULT_PAYLOAD", "DEFAULT_WEDGE_OFFSET", "FORCE_MODELS", "PAYLOAD_MODELS",
-           "PLANT_FORCE_MODELS", "check_force_model", "fee_options_for", "cycle_contact_state", "model_options_for"]
+__all__ = ["DEFAULT_FORCE_MODEL", "DEFAULT_PAYLOAD", "DEFAULT_WEDGE_OFFSET", "DEPTH_MODELS", "FORCE_MODELS",
+           "LEARNED_BASE", "PAYLOAD_MODELS", "PLANT_FORCE_MODELS", "check_force_model", "fee_options_for",
+           "cycle_contact_state", "model_options_for"]
 
 #: Names accepted by ``force_model=``.
 FORCE_MODELS: tuple[str, ...] = ("fee", "fee-payload", "fee-learned", "fee-payload-depth")
@@ -55,6 +57,10 @@ DEFAULT_PAYLOAD = PayloadOptions(retention=0.9649, heap_factor=0.6059, sharpness
 #: loops of ``benchmarks/transfer.py`` (never to its test paths) by ``python benchmarks/model_form.py --fit-offset``
 #: (``docs/results/model_form.md``).
 DEFAULT_WEDGE_OFFSET = 2.0
+#: The physical model ``"fee-learned"``'s correction sits on (weights v3 on; v1-v2 sat on ``"fee-payload"``).
+LEARNED_BASE = "fee-payload-depth"
+#: The models with ``"fee-payload-depth"``'s N_gamma offset.
+DEPTH_MODELS: tuple[str, ...] = ("fee-payload-depth", "fee-learned")
 
 
 def check_force_model(name: object, payload: PayloadOptions | None, error: type[Exception] = ParameterError
@@ -78,7 +84,7 @@ def check_force_model(name: object, payload: PayloadOptions | None, error: type[
 
 def model_options_for(name: str, options: ModelOptions) -> ModelOptions:
     """The force-model options ``name`` needs on top of ``options`` (the payload's carried load)."""
-    if name == "fee-payload-depth":
+    if name in DEPTH_MODELS:  # "fee-learned" is built on "fee-payload-depth" (its base, LEARNED_BASE)
         return replace(options, carried_load=True, carried_in_soil=False, wedge_offset=DEFAULT_WEDGE_OFFSET)
     return replace(options, carried_load=True, carried_in_soil=False) if name in PAYLOAD_MODELS else options
 

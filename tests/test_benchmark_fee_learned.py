@@ -80,3 +80,18 @@ def test_the_mean_network_is_the_mean_of_its_members():
     assert mean.hidden == 9
     np.testing.assert_allclose(mean.correction(x), np.mean([m.correction(x) for m in members], axis=0),
                                rtol=1e-12, atol=1e-12)
+
+
+def test_the_loop_cycles_weigh_their_share():
+    fl = _load()
+    rng = np.random.default_rng(4)
+
+    def group(n):
+        x = rng.uniform(0.1, 1.0, (n, len(INPUT_NAMES)))
+        return {"blocks": [{"own": (x, x[:, :2], x[:, :2]), "cross": [(x, x[:, :2], x[:, :2])]}]}
+
+    learn, loops = [group(30)], [group(70)]
+    x, _, w = fl.stack(learn, loops=loops, loop_share=0.2)
+    assert len(x) == 200 and w.sum() == pytest.approx(1.0)
+    assert w[60:].sum() == pytest.approx(0.2)
+    assert len(fl.stack(learn, loops=loops, loop_share=0.0)[0]) == 60

@@ -133,17 +133,19 @@ def test_calibration_carries_the_learned_model_and_predict_reproduces_it(log, le
     assert pred.outside_training is not None and pred.outside_training.shape == (len(log),)
     np.testing.assert_allclose(pred.tangential, learned_cal.predicted_tangential, rtol=1e-9, atol=1e-6)
     np.testing.assert_allclose(pred.normal, learned_cal.predicted_normal, rtol=1e-9, atol=1e-6)
-    # the correction is what sets it apart from the payload FEE at the same soil
-    plain = predict(learned_cal.params, log, force_model="fee-payload", payload=model.payload)
+    # the correction is what sets it apart from its base at the same soil
+    plain = predict(learned_cal.params, log, force_model="fee-payload-depth", payload=model.payload)
     assert not np.allclose(plain.tangential, pred.tangential)
 
 
-def test_the_soil_is_one_refit_of_the_payload_fee_s_own_fit(log, learned_cal, model):
-    """CALIBRATION_PASSES (1): the fee-payload fit of one cycle (the soil the network was trained at), then the
-    FEE refitted once to the forces less the correction at that soil."""
+def test_the_soil_is_one_refit_of_the_base_s_own_fit(log, learned_cal, model):
+    """CALIBRATION_PASSES (1): the base's fit of one cycle (LEARNED_BASE, the soil the network was trained at),
+    then the base refitted once to the forces less the correction at that soil."""
+    from wheelloader.estimator.force_models import LEARNED_BASE
     from wheelloader.estimator.learned import CALIBRATION_PASSES, corrected_log
 
-    opts = CalibrationOptions(force_model="fee-payload", payload=model.payload, grid=(4, 4, 3), n_starts=1)
+    assert LEARNED_BASE == model.manifest["base"]
+    opts = CalibrationOptions(force_model=LEARNED_BASE, payload=model.payload, grid=(4, 4, 3), n_starts=1)
     soil = calibrate(log, options=opts).params
     for _ in range(CALIBRATION_PASSES):
         soil = calibrate(corrected_log(model, log, soil, model.payload)[0], options=opts).params

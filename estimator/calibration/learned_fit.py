@@ -9,6 +9,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..cyclelog import CycleLog
+from ..force_models import LEARNED_BASE
 from ..learned import CALIBRATION_PASSES, corrected_log, default_learned_model
 from .options import CalibrationOptions
 from .result import Calibration, FitQuality
@@ -19,14 +20,15 @@ __all__ = ["calibrate_learned"]
 
 def calibrate_learned(logs: list[CycleLog], opts: CalibrationOptions, calibrate: Callable[..., Calibration]
                       ) -> Calibration:
-    """``force_model="fee-learned"``: a plain ``fee-payload`` fit (the soil the correction was trained at: the
-    soil a one-cycle ``fee-payload`` calibration finds, :mod:`wheelloader.estimator.learned`), then
-    :data:`~wheelloader.estimator.learned.CALIBRATION_PASSES` fits of the payload FEE to the forces minus the
-    correction at the current soil (a fixed point; 1 for the shipped weights). The result's forces, quality and
-    settings are the whole model's; its band is the FEE part's, shifted by the correction. ``calibrate`` is
+    """``force_model="fee-learned"``: a plain fit of its base
+    :data:`~wheelloader.estimator.force_models.LEARNED_BASE` (the soil the correction was trained at: the soil a
+    one-cycle calibration of the base finds, :mod:`wheelloader.estimator.learned`), then
+    :data:`~wheelloader.estimator.learned.CALIBRATION_PASSES` fits of the base to the forces minus the correction
+    at the current soil (a fixed point; 1 for the shipped weights). The result's forces, quality and settings are
+    the whole model's; its band is the base's, shifted by the correction. ``calibrate`` is
     :func:`~.api.calibrate` (passed in: this module is imported by it)."""
     model = default_learned_model()
-    base = dataclasses.replace(opts, force_model="fee-payload")
+    base = dataclasses.replace(opts, force_model=LEARNED_BASE)
     t0 = time.perf_counter()
     cal = calibrate(logs if len(logs) > 1 else logs[0], options=base)
     nfev = cal.nfev
