@@ -1,22 +1,23 @@
-"""The learned correction of ``force_model="fee-learned"``: the payload FEE plus a small network learned from MPM.
+"""The learned correction of ``force_model="fee-learned"``: its base plus a small network learned from MPM.
 
 The model (issue #32)::
 
-    F_T, F_N = FEE_payload(soil; state) + g(d) s MLP(x),       s = gamma g w L^2
+    F_T, F_N = FEE_base(soil; state) + g(d) s MLP(x),       s = gamma g w L^2
 
-where ``FEE_payload`` is ``force_model="fee-payload"`` (the paper's eqs 1-17 with the payload state,
-:mod:`~wheelloader.estimator.payload`), ``gamma`` the soil's density, ``w`` the bucket width, ``L`` its floor
-length, and ``x`` the dimensionless inputs :data:`INPUT_NAMES`: the contact geometry (depth / L, the contact
-ramp, the blade angle to the surface rho, the slope alpha, the blade angle, the carved and the kept fill as
-fractions of the nominal capacity, the Froude number of the tip speed) and the soil (tan phi, tan delta,
-c / (gamma g L), c_a / (gamma g L)). ``g(d)`` is the contact gate :func:`contact_gate`: the smoothstep of the
-depth over :data:`CONTACT_DEPTH` (C1, exactly 0 at and above the surface, 1 from 2 cm deep), so the correction
+where ``FEE_base`` is :data:`~wheelloader.estimator.force_models.LEARNED_BASE` (``"fee-payload-depth"`` from
+weights v3, ``"fee-payload"`` before: the paper's eqs 1-17 with the payload state,
+:mod:`~wheelloader.estimator.payload`, and N_gamma + k in eq 1), ``gamma`` the soil's density, ``w`` the bucket
+width, ``L`` its floor length, and ``x`` the dimensionless inputs :data:`INPUT_NAMES`: the contact geometry (depth
+/ L, the contact ramp, the blade angle to the surface rho, the slope alpha, the blade angle, the carved and the
+kept fill as fractions of the nominal capacity, the Froude number of the tip speed) and the soil (tan phi, tan
+delta, c / (gamma g L), c_a / (gamma g L)). ``g(d)`` is the contact gate :func:`contact_gate`: the smoothstep of
+the depth over :data:`CONTACT_DEPTH` (C1, exactly 0 at and above the surface, 1 from 2 cm deep), so the correction
 is exactly zero out of the soil (before entry, in the air, after exit: the payload model carries the load there).
 
-The soil inputs are the soil a one-cycle ``fee-payload`` calibration finds, not the true soil: the network is
+The soil inputs are the soil a one-cycle calibration of the base finds, not the true soil: the network is
 trained on the residual of each training cycle's own path and of other paths of its family at the soil fitted
 to one cycle (``benchmarks/fee_learned.py``). So :func:`~wheelloader.estimator.calibration.calibrate` starts
-from the payload FEE's own fit, refits it once to the forces less the correction at that soil
+from the base's own fit, refits it once to the forces less the correction at that soil
 (:data:`CALIBRATION_PASSES`), and the prediction adds the correction at the soil found, near where it was
 trained.
 
