@@ -3,7 +3,8 @@
 Reads the loops' JSON (``OUT/loops/plant_adaptation.json``, else the latest phase's), the paired run's
 (``OUT/paired/plant_paired.json``) and the saved cycles (``CYCLES/loops/SOIL/seedN/STRATEGY/cycleK`` and
 ``CYCLES/paired/SOIL/seedN/fixed_on_ours/cycleK/cycle1``), and writes ``OUT/acceptance.json``,
-``OUT/acceptance.md`` and ``OUT/acceptance.png``. Every figure is the plant's:
+``OUT/acceptance.md`` and ``OUT/acceptance.png`` (and ``OUT/headline.md``, the README's short paired table).
+Every figure is the plant's:
 
 * energy per m³: the plant's work along the path plus the lift of what the bucket holds at the end from the
   path's end height to the fixed path's end height (:func:`wheelloader.planner.kept.dump_height`, 1.20 m;
@@ -353,6 +354,33 @@ def markdown(data: dict[str, Any], summary: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def headline(data: dict[str, Any], summary: dict[str, Any]) -> str:
+    """The README's short table (#33 item 4): the paired comparison pooled, with its spread over the loops, and
+    beside it every other loop of the run on its own piles (the fixed path's, the trained policies'); empty
+    without a paired run."""
+    if "paired" not in summary:
+        return ""
+    p, z = summary["paired"], data["z_ref_m"]
+    ratios = [q["ratio"] for q in p["per_loop"].values()]
+    lines = [f"| MPM plant, 2 soils × seeds × cycles | cycles | energy per m³ kept, lifted to {z:.2f} m | kept fill | "
+             "ours / fixed |", "|---|---|---|---|---|",
+             f"| **paired**: fixed path on ours' piles | {p['fixed']['cycles']} | "
+             f"{p['fixed']['lifted_energy_per_m3_kJ']:.1f} kJ/m³ | {p['fixed']['kept_fill']:.1%} | – |",
+             f"| **paired**: ours (calibrate + plan) | {p['ours']['cycles']} | "
+             f"{p['ours']['lifted_energy_per_m3_kJ']:.1f} kJ/m³ | {p['ours']['kept_fill']:.1%} | "
+             f"**{p['ratio']:.3f}** (per loop {min(ratios):.3f}–{max(ratios):.3f}) |"]
+    for name, s in summary["loops"].items():
+        if name == "ours":
+            continue
+        lines.append(f"| {name}, its own loops | {s['cycles']} | {s['lifted_energy_per_m3_kJ']:.1f} kJ/m³ | "
+                     f"{s['kept_fill']:.1%} | – |")
+    lines += ["", f"*Paired: the same pile, soil and seed, only the path differs; the target is ours ≤ "
+              f"{1.0 - ENERGY_GAIN_TARGET:.2f} × fixed at a kept fill ≥ fixed's. Energy: the plant's work plus the "
+              f"lift of what it kept to {z:.2f} m, over what it kept. From `python benchmarks/loop_mpm_report.py` "
+              "(`acceptance.md` has every row and the verdicts).*"]
+    return "\n".join(lines) + "\n"
+
+
 def plot(data: dict[str, Any], target: Path) -> None:
     """Energy per m³ (lifted) and kept fill per cycle: ours, the fixed path on ours' piles, fixed and oracle loops."""
     import matplotlib
@@ -415,6 +443,9 @@ def main(argv: list[str] | None = None) -> int:
     (target / "acceptance.json").write_text(json.dumps({**data, "summary": summary}, indent=1, default=str))
     text = markdown(data, summary)
     (target / "acceptance.md").write_text(text)
+    short = headline(data, summary)
+    if short:
+        (target / "headline.md").write_text(short)
     plot(data, target / "acceptance.png")
     print(text)
     return 0

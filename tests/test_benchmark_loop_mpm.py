@@ -59,6 +59,13 @@ def test_acceptance_figures_known_answers():
                             "settings": {"resolution": 0.02, "threads": 2, "cycles": 3},
                             "machine": {}}, summary)
     assert "| ours vs fixed, all | 3 |" in text and "| ours ≤ 1.05 × the hindsight oracle" in text
+    # the README's short table: the paired pair first, then the other loops on their own piles
+    short = report.headline({"z_ref_m": 1.2}, summary).splitlines()
+    assert short[2].startswith("| **paired**: fixed path on ours' piles | 3 | 55.0 kJ/m³ | 50.0% |")
+    assert short[3].startswith("| **paired**: ours (calibrate + plan) | 3 | 36.4 kJ/m³ | 55.0% | **0.661** (per loop "
+                               "0.661–0.661)")
+    assert short[4].startswith("| fixed, its own loops | 3 |") and short[5].startswith("| oracle, its own loops |")
+    assert report.headline({"z_ref_m": 1.2}, report.summarise({"rows": rows, "fixed_on_ours": []})) == ""
 
 
 def test_gap_table_compares_the_same_loops():
@@ -129,7 +136,8 @@ def test_the_whole_run_at_a_coarse_grid(tmp_path):
     """``RES=0.08 N=1 bash benchmarks/loop_mpm.sh`` then the report: every phase runs, the paired cycles pair
     with ours' (the first pile's fixed dig is the fixed loop's first cycle, copied), the table is written."""
     _need_taichi()
-    env = dict(os.environ, RES="0.08", N="1", PY=sys.executable, PRIOR="held")
+    env = dict(os.environ, RES="0.08", N="1", PY=sys.executable, PRIOR="held", DESCEND="0.1",
+               PAYLOAD="docs/results/transfer/transfer.json")
     out, cycles = tmp_path / "out", tmp_path / "cycles"
     done = subprocess.run(["bash", "benchmarks/loop_mpm.sh", str(out), str(cycles)], cwd=ROOT, env=env,
                           capture_output=True, text=True, timeout=3000)
