@@ -12,8 +12,10 @@ load. Every run's ``table.md`` must be byte-identical to the committed ``docs/re
 ``--stages`` also runs the current demo once more, in-process with a progress hook, and records the CPU time and
 resident memory at each of its progress lines (where the time and the memory go).
 
-Run: ``python benchmarks/demo_speed.py --baseline REV [--rounds 2] [--stages] [--out docs/results/demo_speed]``;
-``--from-json`` rewrites the table and the figure from ``--out``'s ``speed.json``.
+Run: ``python benchmarks/demo_speed.py --baseline REV [--rounds 2] [--stages] [--compiled]
+[--out docs/results/demo_speed]``; ``--compiled`` runs the current version as ``wheelloader demo --compiled``
+(round 1 compiles the planner's derivatives into its NLP cache, later rounds load them); ``--from-json``
+rewrites the table and the figure from ``--out``'s ``speed.json``.
 """
 
 from __future__ import annotations
@@ -44,17 +46,18 @@ def strip_timings(value):
     return value
 
 
-def run_demo_process(out: Path, cache: Path, pythonpath: str | None) -> dict:
-    """One ``wheelloader demo`` in a fresh process: CPU, wall, peak RSS, load, the module it imported."""
+def run_demo_process(out: Path, cache: Path, pythonpath: str | None, extra: tuple[str, ...] = ()) -> dict:
+    """One ``wheelloader demo`` (with the flags ``extra``) in a fresh process: CPU, wall, peak RSS, load, the module
+    it imported."""
     env = dict(os.environ, WHEELLOADER_NLP_CACHE=str(cache))
     env.pop("PYTHONPATH", None)
     if pythonpath:
         env["PYTHONPATH"] = pythonpath
     code = ("import sys, wheelloader; print('MODULE', wheelloader.__file__, flush=True); "
-            "from wheelloader.cli import main; sys.exit(main(['demo', '-o', sys.argv[1]]))")
+            "from wheelloader.cli import main; sys.exit(main(['demo', '-o', *sys.argv[1:]]))")
     load_before = os.getloadavg()
     wall = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-c", code, str(out)], env=env, stdout=subprocess.PIPE,
+    proc = subprocess.Popen([sys.executable, "-c", code, str(out), *extra], env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT)
     output = proc.stdout.read().decode(errors="replace")
     _, status, usage = os.wait4(proc.pid, 0)
@@ -89,17 +92,18 @@ def side_by_side(args) -> dict:
             for version, path in (("baseline", str(pkg)), ("current", None)):
                 out = tmp / f"{version}-{rnd}"
                 out.mkdir()
-                run = run_demo_process(out, tmp / f"nlp-{version}", path)
+                extra = ("--compiled",) if args.compiled and version == "current" else ()
+                run = run_demo_process(out, tmp / f"nlp-{version}", path, extra)
                 if reference is None:
                     reference = strip_timings(json.loads((out / "summary.json").read_text(encoding="utf-8")))
-                run.update(version=version, round=rnd, nlp_cache="empty" if rnd == 1 else "filled",
+                run.update(version=version, round=rnd, nlp_cache="empty" if rnd == 1 else "filled", flags=list(extra),
                            **compare(out, reference))
                 runs.append(run)
                 print(f"round {rnd} {version:8s} cpu {run['cpu_s']:6.2f} s  wall {run['wall_s']:6.2f} s  "
                       f"rss {run['max_rss_mb']:6.1f} MB  load {run['load_before'][0]:.1f}  "
                       f"table {run['table_identical_to_committed']}  "
                       f"summary {run['summary_identical_to_first_baseline']}", flush=True)
-        extra = {"stages": stages(tmp / "nlp-current")} if args.stages else {}
+        extra = {"stages": stages(tmp / "nlp-current", args.compiled)} if args.stages else {}
     return {"baseline": args.baseline, "baseline_commit": commit, "current_commit": _head(), "runs": runs, **extra}
 
 
@@ -110,7 +114,7 @@ def _head() -> str:
     return done.stdout.strip() + (" (with uncommitted changes)" if dirty else "")
 
 
-def stages_worker(out: Path) -> int:
+def stages_worker(out: Path, compiled: bool = False) -> int:
     """Run the current demo in this process; print each progress line with the CPU time and RSS so far."""
     import resource
 
@@ -124,18 +128,19 @@ def stages_worker(out: Path) -> int:
                        "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, "line": line})
 
     out.mkdir(parents=True, exist_ok=True)
-    run_demo(out, seeds=3, progress=hook)
+    run_demo(out, seeds=3, progress=hook, compiled=compiled)
     hook("figures and summary written")
     print(json.dumps(stages))
     return 0
 
 
-def stages(cache: Path) -> list[dict]:
+def stages(cache: Path, compiled: bool = False) -> list[dict]:
     """:func:`stages_worker` of the current code in a fresh process (with the NLP cache ``cache``, filled by the
     current version's runs)."""
     with tempfile.TemporaryDirectory(prefix="demo-stages-") as tmp:
         env = dict(os.environ, WHEELLOADER_NLP_CACHE=str(cache))
-        done = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--stages-worker", tmp], env=env,
+        flags = ["--compiled"] if compiled else []
+        done = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--stages-worker", tmp, *flags], env=env,
                               capture_output=True, text=True, check=True)
     return json.loads(done.stdout.strip().splitlines()[-1])
 
@@ -157,12 +162,14 @@ def markdown(results: dict) -> str:
     lines = ["| round | version | NLP cache | CPU (user + sys) | wall | peak RSS | load (before-after) | table "
              "identical |", "|---|---|---|---|---|---|---|---|"]
     for r in results["runs"]:
-        lines.append(f"| {r['round']} | {r['version']} | {r['nlp_cache']} | {r['cpu_s']:.1f} s | {r['wall_s']:.1f} s "
+        version = r["version"] + "".join(f" `{flag}`" for flag in r.get("flags", ()))
+        lines.append(f"| {r['round']} | {version} | {r['nlp_cache']} | {r['cpu_s']:.1f} s | {r['wall_s']:.1f} s "
                      f"| {r['max_rss_mb']:.0f} MB | {r['load_before'][0]:.1f}-{r['load_after'][0]:.1f} | "
                      f"{'yes' if r['table_identical_to_committed'] else 'NO'} |")
     base = results["baseline_commit"][:10]
-    lines.append(f"\n*`python benchmarks/demo_speed.py --baseline {results['baseline']}` (baseline = {base}, current "
-                 f"= {results['current_commit'][:10]}); targets: {TARGETS['wall_s']:g} s wall, "
+    flag = " --compiled" if results.get("settings", {}).get("compiled") else ""
+    lines.append(f"\n*`python benchmarks/demo_speed.py --baseline {results['baseline']}{flag}` (baseline = {base}, "
+                 f"current = {results['current_commit'][:10]}); targets: {TARGETS['wall_s']:g} s wall, "
                  f"{TARGETS['max_rss_mb']:g} MB.*")
     return "\n".join(lines)
 
@@ -200,12 +207,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rounds", type=int, default=2, help="rounds of both versions (default: %(default)s)")
     parser.add_argument("--out", default="results/demo_speed", help="output folder (default: %(default)s)")
     parser.add_argument("--stages", action="store_true", help="also the current demo's CPU and memory per stage")
+    parser.add_argument("--compiled", action="store_true", help="run the current version as `wheelloader demo "
+                        "--compiled` (the planner's derivatives compiled once per NLP cache: round 1 compiles)")
     parser.add_argument("--from-json", action="store_true", help="rewrite table.md and speed.png from --out's "
                         "speed.json (no runs)")
     parser.add_argument("--stages-worker", metavar="DIR", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.stages_worker:
-        return stages_worker(Path(args.stages_worker))
+        return stages_worker(Path(args.stages_worker), args.compiled)
     if args.from_json:
         out = Path(args.out)
         results = json.loads((out / "speed.json").read_text(encoding="utf-8"))

@@ -19,17 +19,19 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
+import re
 import shutil
 import subprocess
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import casadi as ca
 
 from . import nlp_cache
 
-__all__ = ["FLAGS", "LOG", "compiled", "compiler"]
+__all__ = ["FLAGS", "LOG", "SPLIT_STATEMENTS", "compiled", "compiled_by_key", "compiler"]
 
 logger = logging.getLogger(__name__)
 
@@ -38,6 +40,14 @@ FLAGS: tuple[str, ...] = ("-O1", "-shared", "-fPIC")
 #: One entry per :func:`compiled` call of this process: name, digest, library path, "compiled" / "loaded" /
 #: "failed: ...", and for a compile its CPU and wall seconds.
 LOG: list[dict] = []
+#: :func:`compiled_by_key`: statements per C function and functions per translation unit. gcc's time and memory
+#: grow faster than the size of a function (the IPOPT Hessian of the demo's 40-interval NLP is one function of
+#: 1.16M statements, 30 MB of C; whole, it took 7 GB to compile at -O1), so its body is cut into pieces that
+#: share their intermediate values through CasADi's work vector ``w`` (the same operations in the same order).
+SPLIT_STATEMENTS = 2000
+SPLIT_FUNCTIONS = 10
+#: Version of the split layout (part of the library's digest).
+SPLIT_FORMAT = 1
 _TEMP_DIR: Path | None = None
 
 
@@ -123,6 +133,171 @@ def _compile(source: str, cc: str, library: Path, entry: dict) -> None:
 def _load(functions: dict[str, ca.Function], library: Path, entry: dict, how: str) -> dict[str, ca.Function] | None:
     try:
         loaded = {key: ca.external(f.name(), str(library)) for key, f in functions.items()}
+    except RuntimeError as exc:
+        entry["status"] = f"failed: cannot load {library.name} ({str(exc).splitlines()[-1] if str(exc) else exc})"
+        logger.warning("%s: CasADi's virtual machine is used", entry["status"])
+        return None
+    entry["status"] = how
+    return loaded
+
+
+def compiled_by_key(key: str, names: dict[str, str], make: Callable[[], dict[str, ca.Function]],
+                    name: str) -> dict[str, ca.Function] | None:
+    """Large functions compiled to C once per machine, found again by ``key`` without being made.
+
+    Like :func:`compiled`, for functions too large to generate in every process (the IPOPT derivatives of a
+    full-cycle NLP: 42 MB of C, seconds to differentiate and generate): the library is named by a digest of
+    ``key`` (what determines the functions, e.g. :func:`.nlp_cache.cache_key`), the compiler, its flags, the
+    CasADi version and :data:`SPLIT_FORMAT`, and loaded from there when it exists; else ``make()`` gives the
+    functions, their C is cut into pieces (:data:`SPLIT_STATEMENTS`) compiled one translation unit at a time,
+    linked and loaded.
+
+    Parameters
+    ----------
+    key : str
+        Identifies the functions ``make`` returns (a change of them must change it).
+    names : dict of str to str
+        The CasADi name of each function, by the keys ``make`` returns.
+    make : callable
+        Returns the functions by the keys of ``names`` (called only when the library must be compiled).
+    name : str
+        Stem of the library (a plain identifier).
+
+    Returns
+    -------
+    dict or None
+        External Functions by the keys of ``names``; ``None`` (with a warning) when there is no C compiler or
+        the compile or the load fails.
+    """
+    cc = compiler()
+    entry: dict = {"name": name, "functions": sorted(names.values())}
+    LOG.append(entry)
+    if cc is None:
+        entry["status"] = "failed: no C compiler"
+        logger.warning("no C compiler (%s) for the compiled planner functions: CasADi's virtual machine is used",
+                       os.environ.get("CC") or "cc")
+        return None
+    digest = hashlib.sha256("\n".join([key, cc, " ".join(FLAGS), ca.__version__, str(SPLIT_FORMAT),
+                                       str(SPLIT_STATEMENTS), str(SPLIT_FUNCTIONS)]).encode()).hexdigest()
+    directory = _directory()
+    library = directory / f"{name}-{digest[:32]}.so"
+    entry.update(digest=digest, library=str(library))
+    if library.exists():
+        loaded = _load_names(names, library, entry, "loaded")
+        if loaded is not None:
+            return loaded
+    try:
+        functions = make()
+        generator = ca.CodeGenerator(f"{name}.c", {"with_header": False})
+        for key_ in names:
+            generator.add(functions[key_])
+        source = generator.dump()
+        entry["source_bytes"] = len(source)
+        directory.mkdir(parents=True, exist_ok=True)
+        _compile_split(_split(source, name), cc, library, entry)
+    except (OSError, ValueError, subprocess.CalledProcessError) as exc:
+        detail = exc.stderr.strip().splitlines()[-1:] if isinstance(exc, subprocess.CalledProcessError) \
+            and exc.stderr else [str(exc)]
+        entry["status"] = f"failed: {detail[0] if detail else exc}"
+        logger.warning("compiling the planner functions failed (%s): CasADi's virtual machine is used",
+                       entry["status"])
+        return None
+    return _load_names(names, library, entry, "compiled")
+
+
+_FUNCTION = re.compile(r"static int (casadi_f\d+)\(const casadi_real\*\* arg, casadi_real\*\* res, casadi_int\* iw, "
+                       r"casadi_real\* w, int mem\) \{$")
+_LOCAL = re.compile(r"\ba(\d+)\b")
+
+
+def _split(source: str, stem: str) -> list[str]:
+    """CasADi's generated C (:class:`casadi.CodeGenerator` of SX Functions) as translation units: the first one
+    CasADi's file with each function's body replaced by calls of its pieces, the others the pieces.
+
+    CasADi writes an SX Function as one C function: locals ``a00000, a00001, ...`` (reused), then one statement
+    per instruction. Here the locals become entries of the work vector ``w`` (``a00012`` -> ``w[12]``; the
+    function's work size grows to their count), and the statements go, in their order, into functions of
+    :data:`SPLIT_STATEMENTS` each. Raises ValueError on a layout it does not know.
+    """
+    lines = source.split("\n")
+    marker = "/* Configuration this file was compiled with */"
+    if marker not in lines:
+        raise ValueError("unknown layout of CasADi's generated C (no configuration marker)")
+    # the pieces' files repeat the prelude (includes, types, CasADi's helpers made static to each file)
+    prelude = [("static " + line if line.startswith("casadi_real casadi_") else line)
+               for line in lines[:lines.index(marker)]]
+    main: list[str] = []
+    pieces: list[list[str]] = []
+    work = 0
+    i = 0
+    while i < len(lines):
+        match = _FUNCTION.match(lines[i])
+        if match is None:
+            main.append(lines[i])
+            i += 1
+            continue
+        j = i + 1
+        count = 0
+        while lines[j].startswith("  casadi_real a"):
+            count += lines[j].count(",") + 1
+            j += 1
+        body = []
+        while lines[j] != "}":
+            body.append(lines[j])
+            j += 1
+        if not body or body.pop() != "  return 0;" or any(not (s.startswith("  a") or s.startswith("  if (res["))
+                                                               for s in body):
+            raise ValueError(f"unknown layout of CasADi's generated C in {match.group(1)}")
+        body = [_LOCAL.sub(lambda m: f"w[{int(m.group(1))}]", s) for s in body]
+        names = []
+        for k in range(0, len(body), SPLIT_STATEMENTS):
+            piece = f"{stem}_{match.group(1)}_{k // SPLIT_STATEMENTS}"
+            names.append(piece)
+            pieces.append([f"void {piece}(const casadi_real** arg, casadi_real** res, casadi_real* w) {{",
+                           *body[k:k + SPLIT_STATEMENTS], "}"])
+        main.extend(f"void {piece}(const casadi_real** arg, casadi_real** res, casadi_real* w);" for piece in names)
+        main.append(lines[i])
+        main.extend(f"  {piece}(arg, res, w);" for piece in names)
+        main.extend(["  return 0;", "}"])
+        work = max(work, count)
+        i = j + 1
+    text = "\n".join(main)
+    sizes = ("if (sz_w) *sz_w = 0;", "if (sz_w) *sz_w = 0*sizeof(casadi_real);")
+    if text.count(sizes[0]) != text.count(sizes[1]) or not text.count(sizes[0]):
+        raise ValueError("unknown layout of CasADi's generated C (work sizes)")
+    text = text.replace(sizes[0], f"if (sz_w) *sz_w = {work};").replace(sizes[1],
+                                                                       f"if (sz_w) *sz_w = {work}*sizeof(casadi_real);")
+    units = [text]
+    for k in range(0, len(pieces), SPLIT_FUNCTIONS):
+        units.append("\n".join(prelude + [line for piece in pieces[k:k + SPLIT_FUNCTIONS] for line in piece]) + "\n")
+    return units
+
+
+def _compile_split(units: list[str], cc: str, library: Path, entry: dict) -> None:
+    """Compile the translation units ``units`` one at a time and link them into ``library`` (renamed into place)."""
+    flags = [flag for flag in FLAGS if flag != "-shared"]
+    with tempfile.TemporaryDirectory(dir=library.parent) as work:
+        wall, before = time.perf_counter(), os.times()
+        objects = []
+        for k, unit in enumerate(units):
+            c_file = Path(work) / f"unit{k}.c"
+            c_file.write_text(unit)
+            objects.append(str(c_file.with_suffix(".o")))
+            subprocess.run([cc, *flags, "-c", str(c_file), "-o", objects[-1]], check=True, capture_output=True,
+                           text=True)
+        out = Path(work) / library.name
+        subprocess.run([cc, "-shared", *objects, "-o", str(out), "-lm"], check=True, capture_output=True, text=True)
+        after = os.times()
+        entry["compile_wall_seconds"] = time.perf_counter() - wall
+        entry["compile_cpu_seconds"] = (after.children_user + after.children_system
+                                        - before.children_user - before.children_system)
+        entry["units"] = len(units)
+        os.replace(out, library)
+
+
+def _load_names(names: dict[str, str], library: Path, entry: dict, how: str) -> dict[str, ca.Function] | None:
+    try:
+        loaded = {key: ca.external(casadi_name, str(library)) for key, casadi_name in names.items()}
     except RuntimeError as exc:
         entry["status"] = f"failed: cannot load {library.name} ({str(exc).splitlines()[-1] if str(exc) else exc})"
         logger.warning("%s: CasADi's virtual machine is used", entry["status"])

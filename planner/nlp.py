@@ -195,13 +195,28 @@ def build(bucket: Bucket, loader: Loader, options: PlannerOptions):
             if f"compiled {plugin}" not in entry:  # None: no compiler or a failed compile (logged)
                 entry[f"compiled {plugin}"] = guarded(codegen.compiled, derivatives, f"planner_{plugin}")
             derivatives = entry[f"compiled {plugin}"] or derivatives
+        elif options.compiled:  # IPOPT's derivatives as compiled C, found by the NLP's key (once per machine)
+            if f"compiled {plugin}" not in entry:
+                entry[f"compiled {plugin}"] = guarded(
+                    codegen.compiled_by_key, nlp_cache.cache_key(bucket, loader, structural),
+                    dict(_DERIVATIVES[plugin]), lambda: _virtual_derivatives(bucket, loader, options, plugin),
+                    f"planner_{plugin}")
+            derivatives = entry[f"compiled {plugin}"] or _virtual_derivatives(bucket, loader, options, plugin)
         solver, monitor = guarded(_make_solver, entry["problem"], settings, derivatives)
-        if plugin not in entry["derivatives"]:
+        if plugin not in entry["derivatives"] and not options.compiled:
             entry["derivatives"][plugin] = {name: solver.get_function(own) for name, own in _DERIVATIVES[plugin]
                                             if solver.has_function(own)}
         entry["solvers"][settings] = (solver, {**entry["functions"], "monitor": monitor})
     solver, functions = entry["solvers"][settings]
     return solver, functions, entry["layout"]
+
+
+def _virtual_derivatives(bucket: Bucket, loader: Loader, options: PlannerOptions, plugin: str) -> dict:
+    """The derivative functions of ``plugin`` in CasADi's virtual machine (differentiated once per NLP)."""
+    entry = _CACHE[(bucket, loader, structural_options(options))]
+    if plugin not in entry["derivatives"]:
+        build(bucket, loader, replace(options, compiled=False))
+    return entry["derivatives"][plugin]
 
 
 def problem_function(bucket: Bucket, loader: Loader, options: PlannerOptions) -> ca.Function:
@@ -285,6 +300,8 @@ def _solver_settings(options: PlannerOptions) -> tuple[tuple[str, object], ...]:
     if options.ipopt_warm_start:
         settings.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
                          "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})
+    if options.compiled:
+        settings["compiled"] = True
     return tuple(settings.items())
 
 

@@ -131,11 +131,13 @@ class PlannerOptions:
     qp_solver : {"daqp", "qpoases", "osqp"}
         The QP solver of ``solver="sqp"`` (default ``"daqp"``, the fastest in ``benchmarks/planner.py``).
     compiled : bool
-        With ``solver="sqp"``: evaluate the SQP's derivatives (the Hessian of the Lagrangian and the Jacobian)
-        as C code compiled once per machine and cached on disk (:mod:`wheelloader.planner.codegen`; default
-        False: CasADi's virtual machine; IPOPT ignores it). The same iterates; the compile takes about 30 s of
-        CPU for the MPC's 12-interval NLP. Without a C compiler, or when the compile fails, the virtual
-        machine is used (a warning).
+        Evaluate the solver's derivatives (the Hessian of the Lagrangian, the Jacobian, with IPOPT also the
+        objective's gradient) as C code compiled once per machine and cached on disk
+        (:mod:`wheelloader.planner.codegen`; default False: CasADi's virtual machine). The same iterates; the
+        compile takes about 30 s of CPU for the MPC's 12-interval SQP and a few minutes for a 40-interval
+        IPOPT plan (:func:`~wheelloader.planner.codegen.compiled_by_key`, found again by the NLP cache's key, so
+        a later process neither differentiates nor generates code). Without a C compiler, or when the compile
+        fails, the virtual machine is used (a warning).
     objective : {"fill_energy", "kept_per_energy"}
         What the plan optimises: the carved fill against energy (default, ``-V/capacity + lambda E``), or the
         opt-in energy per m^3 of *kept* soil with the load lifted on to ``dump_height``

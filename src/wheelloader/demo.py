@@ -42,7 +42,7 @@ DEMO_PLANTS = ("fee-env", "mpm")
 def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner: bool = True,
              progress: Any = None, mpc: bool = False, plant: str = "fee-env",
              resolution: float = 0.02, window: int | None = None, seeds: int = 1,
-             prior: str | None = None) -> dict[str, Any]:
+             prior: str | None = None, compiled: bool = False) -> dict[str, Any]:
     """Run the loop (ours and the fixed baseline), write figures and ``summary.json`` into ``out``.
 
     ``seeds`` runs of both strategies, with plant seeds ``seed, seed + 1, ...``: ``table.md`` gives each
@@ -53,7 +53,9 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     :func:`wheelloader.loop.run_loop` on the plant :func:`wheelloader.references.make_plant` makes.
     ``window``: ours calibrates on the last ``window`` cycles together (default
     :data:`wheelloader.adaptation.DEFAULT_WINDOW`). ``prior``: ours' calibration prior at the nominal soil
-    (:data:`wheelloader.adaptation.PRIOR_NAMES`; default :data:`DEMO_PRIOR`).
+    (:data:`wheelloader.adaptation.PRIOR_NAMES`; default :data:`DEMO_PRIOR`). ``compiled``: the planner's
+    IPOPT derivatives as C compiled once per machine (``PlannerOptions.compiled``; minutes of CPU the first time,
+    cached; the same plans and table; without a C compiler CasADi's virtual machine, with a warning).
     """
     from wheelloader.estimator import ParameterError
     from wheelloader.estimator.checks import check_int
@@ -80,18 +82,18 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     held = hold_margin_variants(False)
     try:
         return _run_demo(out, cycles, seed, use_planner, say, mpc, plant, resolution, window, seeds, prior, start,
-                         hidden)
+                         hidden, compiled)
     finally:
         hold_margin_variants(held)
 
 
 def _run_demo(out: Path, cycles: int, seed: int, use_planner: bool, say: Any, mpc: bool, plant: str,
               resolution: float, window: int | None, seeds: int, prior: str, start: float,
-              hidden: Any) -> dict[str, Any]:
+              hidden: Any, compiled: bool = False) -> dict[str, Any]:
     """:func:`run_demo` after its checks (with the NLP memory rule set)."""
     from wheelloader.adaptation import DEFAULT_WINDOW, NOMINAL_SOIL, default_planner
 
-    planner = default_planner(mpc=mpc) if use_planner else None
+    planner = default_planner(mpc=mpc, compiled=compiled) if use_planner else None
     if planner is not None and not mpc:
         from wheelloader.planner.memo import RememberedPlanner
 

@@ -34,7 +34,8 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
                     end_blade_angle: float | None = None, curl_out_intervals: int = 0,
                     midpoints: bool | None = None, objective: str = "fill_energy",
                     lookahead: bool | str = False, descend_clearance: float | None = None,
-                    payload: PayloadOptions | None = None) -> Callable[[SoilParams, Pile], PlanOutcome]:
+                    payload: PayloadOptions | None = None,
+                    compiled: bool = False) -> Callable[[SoilParams, Pile], PlanOutcome]:
     """The planner used between cycles.
 
     A full-cycle CasADi plan within :data:`BETWEEN_CYCLES_MAX_ITER` IPOPT
@@ -57,7 +58,8 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
     iterations, the next cycle scored with the geometric Bezier placement; cheaper, and worse than greedy in the
     FEE env, ``docs/results/lookahead.md``); ``descend_clearance``: the opt-in height above the surface above
     which the tip may not move down [m]; ``payload``: the payload state of the kept objective (and of the payload
-    force models; None: the model's default) (:class:`~wheelloader.planner.PlannerOptions`).
+    force models; None: the model's default) (:class:`~wheelloader.planner.PlannerOptions`); ``compiled``:
+    IPOPT's derivatives as C compiled once per machine (``PlannerOptions.compiled``; the same plans, bit for bit).
     """
     if lookahead not in (False, True, "fast", "full"):
         raise WheelloaderError(f"lookahead must be False, True, 'fast' or 'full', got {lookahead!r}")
@@ -67,7 +69,7 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
     options = PlannerOptions(max_iter=BETWEEN_CYCLES_MAX_ITER, failure_angle=failure_angle, cut_angle=cut_angle,
                              heel_clearance=heel_clearance, end_blade_angle=end_blade_angle,
                              curl_out_intervals=curl_out_intervals, midpoints=midpoints, objective=objective,
-                             descend_clearance=descend_clearance, payload=payload, **extra)
+                             descend_clearance=descend_clearance, payload=payload, compiled=compiled, **extra)
     # build the plan's NLP before the loop's timings start; those of the two wider-margin re-plans are built
     # when a plan first fails its check (once per process: planner.optimizer_for)
     optimizer_for(options=options)

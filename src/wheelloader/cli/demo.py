@@ -42,6 +42,10 @@ def register(subparsers: Any) -> None:
                         "(needs the mpm extra; about 3 minutes per cycle at 2 cm, 2 x CYCLES cycles; resumable)")
     p.add_argument("--resolution", type=float, default=None,
                    help="MPM grid spacing [m], 0.005-0.1, with --plant mpm only (default: 0.02, the verified one)")
+    p.add_argument("--compiled", action="store_true",
+                   help="evaluate the planner's derivatives as C code compiled once per machine and cached with the "
+                        "NLP cache (minutes of CPU the first time, then faster; the same table; needs a C compiler, "
+                        "else CasADi's virtual machine with a warning)")
     add_force_flag(p)
     p.set_defaults(func=run)
 
@@ -82,7 +86,8 @@ def run(args: argparse.Namespace) -> int:
             shutil.copytree(out / "cycles", staged / "cycles", dirs_exist_ok=True)
         summary = run_demo(staged, cycles=args.cycles, seed=args.seed, use_planner=not args.no_planner,
                            progress=lambda line: print(line, flush=True), mpc=args.mpc, plant=args.plant,
-                           prior=args.prior, resolution=resolution, window=args.window, seeds=seeds)
+                           prior=args.prior, resolution=resolution, window=args.window, seeds=seeds,
+                           compiled=args.compiled)
     print()
     print(summary["table"])
     print()

@@ -1,0 +1,107 @@
+"""Large CasADi functions compiled in pieces (``codegen.compiled_by_key``) and IPOPT's compiled derivatives."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from wheelloader.estimator import Pile
+from wheelloader.planner import PlannerOptions, TrajectoryOptimizer, codegen, cycle_duration, default_start, nlp
+
+needs_cc = pytest.mark.skipif(codegen.compiler() is None, reason="no C compiler")
+
+
+def _functions():
+    """Two SX functions with the operations CasADi's generated C uses (helpers, constants, outputs)."""
+    x = ca.SX.sym("x", 3)
+    y = ca.SX.sym("y", 2)
+    e = ca.sin(x[0]) * x[1] ** 2 + ca.log1p(ca.exp(-ca.fabs(x[2]))) / (1 + y[0] ** 2) + ca.fmax(x[0], y[1])
+    f = ca.Function("wl_split_f", [x, y], [e, ca.vertcat(ca.sign(x[1]) * e, ca.tanh(e) - y[1], 0.5 * e ** 3)])
+    jac = ca.Function("wl_split_jac", [x, y], [ca.jacobian(e, ca.vertcat(x, y))])
+    hess = ca.Function("wl_split_hess", [x, y], [ca.hessian(e, x)[0]])
+    return {"f": f, "jac": jac, "hess": hess}
+
+
+@needs_cc
+def test_pieces_evaluate_bit_for_bit_like_the_virtual_machine(tmp_path, monkeypatch):
+    monkeypatch.setenv("WHEELLOADER_NLP_CACHE", str(tmp_path))
+    monkeypatch.setattr(codegen, "SPLIT_STATEMENTS", 3)  # many pieces: values cross pieces and units
+    monkeypatch.setattr(codegen, "SPLIT_FUNCTIONS", 2)
+    functions = _functions()
+    names = {key: f.name() for key, f in functions.items()}
+    made = []
+    compiled = codegen.compiled_by_key("key-1", names, lambda: made.append(1) or functions, "wl_split")
+    assert compiled is not None and made == [1]
+    assert codegen.LOG[-1]["status"] == "compiled" and codegen.LOG[-1]["units"] > 3
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        point = [rng.normal(size=3), rng.normal(size=2)]
+        for key, function in functions.items():
+            expected = function(*point)
+            got = compiled[key](*point)
+            for a, b in zip(expected if isinstance(expected, (list, tuple)) else [expected],
+                            got if isinstance(got, (list, tuple)) else [got], strict=True):
+                assert np.array(a).tobytes() == np.array(b).tobytes(), key
+    # found again by its key alone: nothing is made or compiled
+    again = codegen.compiled_by_key("key-1", names, lambda: pytest.fail("made again"), "wl_split")
+    assert again is not None and codegen.LOG[-1]["status"] == "loaded"
+    assert len(list((tmp_path / "compiled").glob("wl_split-*.so"))) == 1
+    # another key is another library
+    codegen.compiled_by_key("key-2", names, lambda: functions, "wl_split")
+    assert codegen.LOG[-1]["status"] == "compiled"
+    assert len(list((tmp_path / "compiled").glob("wl_split-*.so"))) == 2
+
+
+def test_unknown_generated_layout_falls_back(tmp_path, monkeypatch, caplog):
+    with pytest.raises(ValueError, match="configuration marker"):
+        codegen._split("int main(void) { return 0; }", "x")
+    monkeypatch.setenv("WHEELLOADER_NLP_CACHE", str(tmp_path))
+    monkeypatch.setattr(codegen, "compiler", lambda: "/bin/true")  # never reached: the split refuses first
+    monkeypatch.setattr(codegen, "_split", lambda source, stem: (_ for _ in ()).throw(ValueError("unknown layout")))
+    functions = _functions()
+    assert codegen.compiled_by_key("k", {key: f.name() for key, f in functions.items()}, lambda: functions,
+                                   "wl_split_bad") is None
+    assert codegen.LOG[-1]["status"] == "failed: unknown layout"
+    assert "virtual machine is used" in caplog.text
+
+
+def _plan(options):
+    pile = Pile.trapezoid()
+    start = default_start(pile)
+    return TrajectoryOptimizer(options=options).solve("gravel", pile, start, cycle_duration(pile, start))
+
+
+def _same(a, b):
+    for name in ("t", "x", "z", "blade_angle", "fill", "tangential", "normal"):
+        assert np.array(getattr(a, name)).tobytes() == np.array(getattr(b, name)).tobytes(), name
+    assert a.energy == b.energy and a.objective == b.objective and a.iterations == b.iterations
+
+
+def test_ipopt_without_a_compiler_plans_like_the_virtual_machine(tmp_path, monkeypatch, caplog):
+    monkeypatch.setenv("WHEELLOADER_NLP_CACHE", str(tmp_path))
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-cc"))
+    monkeypatch.setattr(nlp, "_CACHE", {})
+    plain = _plan(PlannerOptions(intervals=10))
+    fallback = _plan(PlannerOptions(intervals=10, compiled=True))
+    assert codegen.LOG[-1]["status"] == "failed: no C compiler" and "no C compiler" in caplog.text
+    _same(plain, fallback)
+
+
+@pytest.mark.slow
+@needs_cc
+def test_compiled_ipopt_plans_bit_for_bit_like_the_virtual_machine(tmp_path, monkeypatch):
+    """IPOPT on compiled derivatives (a 10-interval NLP, about a minute of CPU to compile): the same plan; a
+    second process (here: an emptied memory cache) loads the library by the NLP's key without differentiating."""
+    monkeypatch.setenv("WHEELLOADER_NLP_CACHE", str(tmp_path))
+    monkeypatch.setattr(nlp, "_CACHE", {})
+    plain = _plan(PlannerOptions(intervals=10))
+    compiled = _plan(PlannerOptions(intervals=10, compiled=True))
+    assert codegen.LOG[-1]["status"] == "compiled"
+    _same(plain, compiled)
+    monkeypatch.setattr(nlp, "_CACHE", {})
+    loaded = _plan(PlannerOptions(intervals=10, compiled=True))
+    assert codegen.LOG[-1]["status"] == "loaded"
+    (entry,) = nlp._CACHE.values()
+    assert not entry["derivatives"]  # nothing was differentiated in CasADi's virtual machine
+    _same(plain, loaded)
