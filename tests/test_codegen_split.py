@@ -105,3 +105,23 @@ def test_compiled_ipopt_plans_bit_for_bit_like_the_virtual_machine(tmp_path, mon
     (entry,) = nlp._CACHE.values()
     assert not entry["derivatives"]  # nothing was differentiated in CasADi's virtual machine
     _same(plain, loaded)
+
+
+def test_demo_flag_reaches_the_planner(tmp_path, monkeypatch):
+    import wheelloader.adaptation as adaptation
+    from wheelloader.cli import main
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def planner(**kwargs):
+        seen.append(kwargs)
+        raise Stop
+
+    monkeypatch.setattr(adaptation, "default_planner", planner)
+    for flags, compiled in (([], False), (["--compiled"], True)):
+        with pytest.raises(Stop):
+            main(["demo", "-o", str(tmp_path / f"demo{len(seen)}"), *flags])
+        assert seen[-1] == {"mpc": False, "compiled": compiled}
