@@ -78,8 +78,7 @@ def log_ngamma_slope(beta, alpha, phi, s, tan=np.tan):
     """``g = d ln N_gamma / d beta`` and ``dg / d beta`` (eq 10), with ``s = rho + delta + phi``.
 
     ``tan`` is the tangent of the array library (NumPy by default; ``math.tan`` for scalars,
-    ``casadi.tan`` for the planner's symbolic Newton steps).
-    """
+    ``casadi.tan`` for the planner's symbolic Newton steps)."""
     t1 = tan(alpha + beta)
     c2 = 1.0 / tan(alpha + beta + phi)
     c3 = 1.0 / tan(beta)
@@ -150,9 +149,8 @@ def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
     return beta.reshape(shape), where.reshape(shape)
 
 
-#: Below this many unconverged samples :func:`_bracketed_newton` finishes them one by one (:func:`_newton_tail`):
-#: a NumPy iteration on a few samples costs about 30 array calls whatever their number.
-_TAIL = 8
+#: At most this many unconverged samples :func:`_bracketed_newton` finishes on floats (:func:`_newton_tail`).
+_TAIL = 16
 
 
 def _slope_only(beta, alpha, phi, s):
@@ -179,8 +177,7 @@ def _bracketed_newton(x, a, b, al, ph, ss, tol: float, max_iter: int) -> np.ndar
     shorter than ``tol`` or after ``max_iter`` steps. The slope and curvature are :func:`log_ngamma_slope`'s
     operations in the same order (``-t1 + c2`` computed as ``c2 - t1``, ``-t1*t1 - c2*c2`` as
     ``-(t1*t1 + c2*c2)``: the same roundings), so every iterate is the one the plain loop gives, bit for bit.
-    Only the unconverged samples are iterated; the last few go through :func:`_newton_tail`.
-    """
+    Only the unconverged samples are iterated; the last few go through :func:`_newton_tail`."""
     out = np.empty_like(x)
     active = np.arange(x.size)
     per_sample_phi = isinstance(ph, np.ndarray)
@@ -188,11 +185,9 @@ def _bracketed_newton(x, a, b, al, ph, ss, tol: float, max_iter: int) -> np.ndar
     with np.errstate(divide="ignore", invalid="ignore"):  # only the Newton step divides
         while it < max_iter:
             k = x.size
-            if k <= _TAIL:
-                phs = ph.tolist() if per_sample_phi else [ph] * k
-                for m, xm, am, bm, alm, phm, ssm in zip(active.tolist(), x.tolist(), a.tolist(), b.tolist(),
-                                                        al.tolist(), phs, ss.tolist(), strict=True):
-                    out[m] = _newton_tail(xm, am, bm, alm, phm, ssm, tol, max_iter - it)
+            if k <= _TAIL:  # a NumPy iteration costs about 30 array calls whatever the samples' number
+                out[active] = _newton_tail(x.tolist(), a.tolist(), b.tolist(), al.tolist(),
+                                           ph.tolist() if per_sample_phi else [ph] * k, ss.tolist(), tol, max_iter - it)
                 return out
             t = np.empty((4, k))
             np.add(al, x, out=t[0])  # alpha + beta
@@ -236,35 +231,34 @@ def _bracketed_newton(x, a, b, al, ph, ss, tol: float, max_iter: int) -> np.ndar
     return out
 
 
-def _newton_tail(x: float, a: float, b: float, al: float, ph: float, ss: float, tol: float, steps: int) -> float:
-    """:func:`_bracketed_newton`'s iteration for one sample on Python floats, for at most ``steps`` steps.
-
-    The tangents come from ``np.tan`` (element for element the values NumPy gives inside an array; ``math.tan``
-    may differ in the last bit); the rest is the same IEEE arithmetic as NumPy's, so the iterates are the same.
-    """
-    tan, arr, inf = np.tan, np.array, math.inf
-    x_new = x
-    for _ in range(steps):
-        u = al + x
-        t1, t2, t3, t4 = tan(arr((u, u + ph, x, x + ss))).tolist()
-        c2 = 1.0 / t2 if t2 != 0.0 else math.copysign(inf, t2)
-        c3 = 1.0 / t3 if t3 != 0.0 else math.copysign(inf, t3)
-        c4 = 1.0 / t4 if t4 != 0.0 else math.copysign(inf, t4)
-        g = -t1 + c2 - c3 - c4
-        dg = -t1 * t1 - c2 * c2 + c3 * c3 + c4 * c4
-        if g > 0.0:
-            b = x
-        else:
-            a = x
-        x_new = 0.5 * (a + b)
-        if dg > 0.0:
-            newton = x - g / dg
-            if a <= newton <= b:
-                x_new = newton
-        if not abs(x_new - x) >= tol:
-            return x_new
-        x = x_new
-    return x_new
+def _newton_tail(x: list, a: list, b: list, al: list, ph: list, ss: list, tol: float, steps: int) -> list[float]:
+    """:func:`_bracketed_newton`'s iteration on Python floats (lists, updated in place) for the last few samples,
+    each for at most ``steps`` steps and stopping on its own step; returns their final iterates. The samples still
+    going share one ``np.tan`` call per step (NumPy's values; ``math.tan`` may differ in the last bit), the rest
+    is the same IEEE arithmetic as the array loop's, so the iterates are the same."""
+    inf, copysign = math.inf, math.copysign
+    out, live = list(x), list(range(len(x)))
+    while live and steps > 0:
+        steps -= 1
+        args: list[float] = []
+        for m in live:
+            u = al[m] + x[m]
+            args += (u, u + ph[m], x[m], x[m] + ss[m])
+        t, going = np.tan(np.array(args)).tolist(), []
+        for j, m in enumerate(live):
+            t1, t2, t3, t4 = t[4 * j:4 * j + 4]
+            c2 = 1.0 / t2 if t2 != 0.0 else copysign(inf, t2)
+            c3 = 1.0 / t3 if t3 != 0.0 else copysign(inf, t3)
+            c4 = 1.0 / t4 if t4 != 0.0 else copysign(inf, t4)
+            g, dg, xm = -t1 + c2 - c3 - c4, -t1 * t1 - c2 * c2 + c3 * c3 + c4 * c4, x[m]
+            (b if g > 0.0 else a)[m] = xm
+            newton = xm - g / dg if dg > 0.0 else a[m] - 1.0  # the array loop's ok: dg > 0 and a <= newton <= b
+            x_new = out[m] = newton if a[m] <= newton <= b[m] else 0.5 * (a[m] + b[m])
+            if abs(x_new - xm) >= tol:
+                x[m] = x_new
+                going.append(m)
+        live = going
+    return out
 
 
 def optimal_beta_scalar(alpha: float, rho: float, phi: float, delta: float,

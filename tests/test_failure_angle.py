@@ -212,3 +212,25 @@ def test_casadi_model_agrees_on_down_slopes(name):
     # away from the smooth clamp's 1e-3 rad corner the two agree closely
     far = np.abs(alpha - alpha_lower_limit(soil.phi)) > 0.02
     assert np.max(np.abs(f_n - ref.normal)[far]) <= 0.03 * np.max(ref.normal)
+
+
+@pytest.mark.parametrize("per_sample_phi", [False, True])
+@pytest.mark.parametrize("warm", [False, True])
+def test_newton_tail_on_floats_gives_the_array_iterates(monkeypatch, per_sample_phi, warm):
+    """The last unconverged samples, finished on Python floats, end where the NumPy loop ends, bit for bit."""
+    import wheelloader.estimator.failure_angle as fa
+
+    rng = np.random.default_rng(11)
+    n = 400
+    phi = rng.uniform(deg(20), deg(45), n) if per_sample_phi else deg(35)
+    delta = deg(25)
+    alpha, rho, _ = clamp_angles(rng.uniform(deg(-40), deg(50), n), rng.uniform(0.0, 2.5, n), phi, delta)
+    guess = rng.uniform(0.05, 1.2, n) if warm else None
+    results = []
+    for tail in (0, 1, 16, n):  # 0: the NumPy loop only; n: the floats from the first step
+        monkeypatch.setattr(fa, "_TAIL", tail)
+        results.append(optimal_beta(alpha, rho, phi, delta, guess=guess))
+    _, where = optimal_beta(alpha, rho, phi, delta, guess=guess, return_where=True)
+    assert np.count_nonzero(where == BETA_INTERIOR) > 20  # the Newton loop runs
+    for other in results[1:]:
+        np.testing.assert_array_equal(other, results[0])
