@@ -67,8 +67,8 @@ from wheelloader.estimator.validity import alpha_lower_limit
 from . import codegen, nlp_cache
 from .casadi_model import casadi_forces, casadi_learned, learned_trust, smooth_max, smooth_min, smooth_pos
 from .interrupt import guarded
-from .iteration_monitor import IterationMonitor
 from .kept import KEPT_OBJECTIVE_SCALE, kept_terms, smooth_lift
+from .nlp_solver import make_solver, solver_settings
 from .options import PlannerOptions
 
 __all__ = ["VALIDITY_RELAX", "build", "handle", "hold_margin_variants", "origin", "problem_function", "release",
@@ -184,7 +184,7 @@ def build(bucket: Bucket, loader: Loader, options: PlannerOptions):
         problem, functions, layout = guarded(nlp_cache.load_or_build, bucket, loader, structural, _build_nlp)
         entry = _CACHE[(bucket, loader, structural)] = _Entry(problem=problem, functions=functions, layout=layout,
                                                               derivatives={}, solvers={})
-    settings = _solver_settings(options)
+    settings = solver_settings(options)
     if settings not in entry["solvers"]:
         plugin = dict(settings)["plugin"]
         derivatives = entry["derivatives"].get(plugin)
@@ -202,7 +202,7 @@ def build(bucket: Bucket, loader: Loader, options: PlannerOptions):
                     dict(_DERIVATIVES[plugin]), lambda: _virtual_derivatives(bucket, loader, options, plugin),
                     f"planner_{plugin}")
             derivatives = entry[f"compiled {plugin}"] or _virtual_derivatives(bucket, loader, options, plugin)
-        solver, monitor = guarded(_make_solver, entry["problem"], settings, derivatives)
+        solver, monitor = guarded(make_solver, entry["problem"], settings, derivatives)
         if plugin not in entry["derivatives"] and not options.compiled:
             entry["derivatives"][plugin] = {name: solver.get_function(own) for name, own in _DERIVATIVES[plugin]
                                             if solver.has_function(own)}
@@ -233,7 +233,7 @@ def handle(bucket: Bucket, loader: Loader, options: PlannerOptions) -> Callable[
     """A function returning :func:`build`'s ``(solver, functions, layout)`` of these settings without holding
     them: it keeps a weak reference to the NLP's cache entry (a few dictionary look-ups per call) and builds
     it again when the entry was released (:func:`release`) or replaced by a margin variant (:func:`build`)."""
-    settings = _solver_settings(options)
+    settings = solver_settings(options)
     key = (bucket, loader, structural_options(options))
     ref: list = [lambda: None]
 
@@ -282,56 +282,6 @@ def release() -> int:
 # module's globals are torn down at the interpreter's finalisation can abort the process (seen after Ctrl-C of
 # `wheelloader plan --pareto`: "PyThreadState_Get ... finalizing", rc -6 instead of 130).
 atexit.register(release)
-
-
-def _solver_settings(options: PlannerOptions) -> tuple[tuple[str, object], ...]:
-    """The nlpsol plugin and its options for ``options`` (hashable: the key of a solver within its NLP)."""
-    if options.solver == "sqp":
-        # CasADi's SQP: exact Hessian of the Lagrangian, regularised to be convex for the QP solver
-        return (("plugin", "sqpmethod"), ("qpsol", options.qp_solver), ("max_iter", options.max_iter),
-                ("tol_pr", options.tolerance), ("tol_du", options.tolerance), ("convexify_strategy", "regularize"),
-                ("compiled", options.compiled))
-    settings: dict[str, object] = {
-        "plugin": "ipopt", "ipopt.max_iter": options.max_iter, "ipopt.tol": options.tolerance,
-        "ipopt.acceptable_tol": 1e-3, "ipopt.acceptable_iter": 5, "ipopt.mu_strategy": "adaptive",
-    }
-    if options.max_wall_time is not None:
-        settings["ipopt.max_wall_time"] = float(options.max_wall_time)
-    if options.ipopt_warm_start:
-        settings.update({"ipopt.warm_start_init_point": "yes", "ipopt.mu_init": 1e-4,
-                         "ipopt.warm_start_bound_push": 1e-6, "ipopt.warm_start_mult_bound_push": 1e-6})
-    if options.compiled:
-        settings["compiled"] = True
-    return tuple(settings.items())
-
-
-#: Options that keep each QP solver of ``sqpmethod`` quiet and failures non-fatal (the SQP reports them).
-_QP_OPTIONS: dict[str, dict[str, object]] = {
-    "daqp": {}, "qpoases": {"printLevel": "none"},
-    "osqp": {"verbose": False, "osqp": {"verbose": False, "eps_abs": 1e-8, "eps_rel": 1e-8, "polish": True}},
-}
-
-
-def _make_solver(problem, settings: tuple[tuple[str, object], ...], derivatives: dict | None):
-    """The solver on ``problem`` (a Function ``(x, p) -> (f, g)``) with an :class:`IterationMonitor`; with
-    ``derivatives`` (another solver's derivative functions of the same problem and plugin: IPOPT's ``grad_f``,
-    ``jac_g`` and ``hess_lag``, sqpmethod's ``jac_fg`` and ``hess_lag``) nothing is differentiated again."""
-    opts = dict(settings)
-    plugin = opts.pop("plugin")
-    opts.pop("compiled", None)  # build() passes the compiled derivatives
-    solver_opts = {"print_time": False, "error_on_fail": False,
-                   # the multipliers of the parameters are never read: no Jacobian with respect to p
-                   "calc_lam_p": False, **opts, **(derivatives or {})}
-    if plugin == "ipopt":
-        # no gradient of the Lagrangian either (nlp_grad: computed only for lam_p, lam_x, f or g after the
-        # solve, none of which is asked for; ~380k instructions, 23 MB and 0.35 s CPU per 40-interval NLP)
-        solver_opts.update({"ipopt.print_level": 0, "ipopt.sb": "yes", "no_nlp_grad": True})
-    else:
-        solver_opts.update({"print_header": False, "print_iteration": False, "print_status": False,
-                            "qpsol_options": {"error_on_fail": False, **_QP_OPTIONS[str(opts["qpsol"])]}})
-    monitor = IterationMonitor(problem.size1_in(0), problem.size1_out(1))
-    solver_opts["iteration_callback"] = monitor
-    return ca.nlpsol("bucket_path", plugin, problem, solver_opts), monitor
 
 
 def _build_nlp(bucket: Bucket, loader: Loader, options: PlannerOptions):
