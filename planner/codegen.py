@@ -90,14 +90,9 @@ def compiled(functions: dict[str, ca.Function], name: str) -> dict[str, ca.Funct
     entry: dict = {"name": name, "functions": [f.name() for f in functions.values()], "source_bytes": len(source)}
     LOG.append(entry)
     if cc is None:
-        entry["status"] = "failed: no C compiler"
-        logger.warning("no C compiler (%s) for the compiled planner functions: CasADi's virtual machine is used",
-                       os.environ.get("CC") or "cc")
-        return None
-    digest = hashlib.sha256("\n".join([source, cc, " ".join(FLAGS), ca.__version__]).encode()).hexdigest()
-    directory = _directory()
-    library = directory / f"{name}-{digest[:32]}.so"
-    entry.update(digest=digest, library=str(library))
+        return _no_compiler(entry)
+    library = _library(name, [source, cc, " ".join(FLAGS), ca.__version__], entry)
+    directory = library.parent
     if library.exists():
         loaded = _load(functions, library, entry, "loaded")
         if loaded is not None:
@@ -106,13 +101,29 @@ def compiled(functions: dict[str, ca.Function], name: str) -> dict[str, ca.Funct
         directory.mkdir(parents=True, exist_ok=True)
         _compile(source, cc, library, entry)
     except (OSError, subprocess.CalledProcessError) as exc:
-        detail = exc.stderr.strip().splitlines()[-1:] if isinstance(exc, subprocess.CalledProcessError) \
-            and exc.stderr else [str(exc)]
-        entry["status"] = f"failed: {detail[0] if detail else exc}"
-        logger.warning("compiling the planner functions failed (%s): CasADi's virtual machine is used",
-                       entry["status"])
-        return None
+        return _compile_failed(entry, exc)
     return _load(functions, library, entry, "compiled")
+
+
+def _library(name: str, parts: list[str], entry: dict) -> Path:
+    """The cached library's path: ``name`` and a SHA-256 digest of ``parts`` (recorded in ``entry``)."""
+    digest = hashlib.sha256("\n".join(parts).encode()).hexdigest()
+    library = _directory() / f"{name}-{digest[:32]}.so"
+    entry.update(digest=digest, library=str(library))
+    return library
+
+
+def _no_compiler(entry: dict) -> None:
+    entry["status"] = "failed: no C compiler"
+    logger.warning("no C compiler (%s) for the compiled planner functions: CasADi's virtual machine is used",
+                   os.environ.get("CC") or "cc")
+
+
+def _compile_failed(entry: dict, exc: Exception) -> None:
+    detail = exc.stderr.strip().splitlines()[-1:] if isinstance(exc, subprocess.CalledProcessError) \
+        and exc.stderr else [str(exc)]
+    entry["status"] = f"failed: {detail[0] if detail else exc}"
+    logger.warning("compiling the planner functions failed (%s): CasADi's virtual machine is used", entry["status"])
 
 
 def _compile(source: str, cc: str, library: Path, entry: dict) -> None:
@@ -173,15 +184,10 @@ def compiled_by_key(key: str, names: dict[str, str], make: Callable[[], dict[str
     entry: dict = {"name": name, "functions": sorted(names.values())}
     LOG.append(entry)
     if cc is None:
-        entry["status"] = "failed: no C compiler"
-        logger.warning("no C compiler (%s) for the compiled planner functions: CasADi's virtual machine is used",
-                       os.environ.get("CC") or "cc")
-        return None
-    digest = hashlib.sha256("\n".join([key, cc, " ".join(FLAGS), ca.__version__, str(SPLIT_FORMAT),
-                                       str(SPLIT_STATEMENTS), str(SPLIT_FUNCTIONS)]).encode()).hexdigest()
-    directory = _directory()
-    library = directory / f"{name}-{digest[:32]}.so"
-    entry.update(digest=digest, library=str(library))
+        return _no_compiler(entry)
+    library = _library(name, [key, cc, " ".join(FLAGS), ca.__version__, str(SPLIT_FORMAT), str(SPLIT_STATEMENTS),
+                              str(SPLIT_FUNCTIONS)], entry)
+    directory = library.parent
     if library.exists():
         loaded = _load_names(names, library, entry, "loaded")
         if loaded is not None:
@@ -196,12 +202,7 @@ def compiled_by_key(key: str, names: dict[str, str], make: Callable[[], dict[str
         directory.mkdir(parents=True, exist_ok=True)
         _compile_split(_split(source, name), cc, library, entry)
     except (OSError, ValueError, subprocess.CalledProcessError) as exc:
-        detail = exc.stderr.strip().splitlines()[-1:] if isinstance(exc, subprocess.CalledProcessError) \
-            and exc.stderr else [str(exc)]
-        entry["status"] = f"failed: {detail[0] if detail else exc}"
-        logger.warning("compiling the planner functions failed (%s): CasADi's virtual machine is used",
-                       entry["status"])
-        return None
+        return _compile_failed(entry, exc)
     return _load_names(names, library, entry, "compiled")
 
 
