@@ -82,27 +82,32 @@ def compiled(functions: dict[str, ca.Function], name: str) -> dict[str, ca.Funct
         The same keys, each an external Function loaded from the cached library; ``None`` (with a warning)
         when there is no C compiler or the compile or load fails.
     """
-    generator = ca.CodeGenerator(f"{name}.c", {"with_header": False})
-    for function in functions.values():
-        generator.add(function)
-    source = generator.dump()
+    names = {key: f.name() for key, f in functions.items()}
+    source = _c_source(name, functions.values())
     cc = compiler()
-    entry: dict = {"name": name, "functions": [f.name() for f in functions.values()], "source_bytes": len(source)}
+    entry: dict = {"name": name, "functions": list(names.values()), "source_bytes": len(source)}
     LOG.append(entry)
     if cc is None:
         return _no_compiler(entry)
     library = _library(name, [source, cc, " ".join(FLAGS), ca.__version__], entry)
-    directory = library.parent
     if library.exists():
-        loaded = _load(functions, library, entry, "loaded")
+        loaded = _load(names, library, entry, "loaded")
         if loaded is not None:
             return loaded
     try:
-        directory.mkdir(parents=True, exist_ok=True)
+        library.parent.mkdir(parents=True, exist_ok=True)
         _compile(source, cc, library, entry)
     except (OSError, subprocess.CalledProcessError) as exc:
         return _compile_failed(entry, exc)
-    return _load(functions, library, entry, "compiled")
+    return _load(names, library, entry, "compiled")
+
+
+def _c_source(name: str, functions) -> str:
+    """The C of ``functions`` (an iterable of CasADi Functions) from one :class:`casadi.CodeGenerator`."""
+    generator = ca.CodeGenerator(f"{name}.c", {"with_header": False})
+    for function in functions:
+        generator.add(function)
+    return generator.dump()
 
 
 def _library(name: str, parts: list[str], entry: dict) -> Path:
@@ -141,17 +146,6 @@ def _compile(source: str, cc: str, library: Path, entry: dict) -> None:
         os.replace(out, library)
 
 
-def _load(functions: dict[str, ca.Function], library: Path, entry: dict, how: str) -> dict[str, ca.Function] | None:
-    try:
-        loaded = {key: ca.external(f.name(), str(library)) for key, f in functions.items()}
-    except RuntimeError as exc:
-        entry["status"] = f"failed: cannot load {library.name} ({str(exc).splitlines()[-1] if str(exc) else exc})"
-        logger.warning("%s: CasADi's virtual machine is used", entry["status"])
-        return None
-    entry["status"] = how
-    return loaded
-
-
 def compiled_by_key(key: str, names: dict[str, str], make: Callable[[], dict[str, ca.Function]],
                     name: str) -> dict[str, ca.Function] | None:
     """Large functions compiled to C once per machine, found again by ``key`` without being made.
@@ -187,23 +181,19 @@ def compiled_by_key(key: str, names: dict[str, str], make: Callable[[], dict[str
         return _no_compiler(entry)
     library = _library(name, [key, cc, " ".join(FLAGS), ca.__version__, str(SPLIT_FORMAT), str(SPLIT_STATEMENTS),
                               str(SPLIT_FUNCTIONS)], entry)
-    directory = library.parent
     if library.exists():
-        loaded = _load_names(names, library, entry, "loaded")
+        loaded = _load(names, library, entry, "loaded")
         if loaded is not None:
             return loaded
     try:
         functions = make()
-        generator = ca.CodeGenerator(f"{name}.c", {"with_header": False})
-        for key_ in names:
-            generator.add(functions[key_])
-        source = generator.dump()
+        source = _c_source(name, (functions[key_] for key_ in names))
         entry["source_bytes"] = len(source)
-        directory.mkdir(parents=True, exist_ok=True)
+        library.parent.mkdir(parents=True, exist_ok=True)
         _compile_split(_split(source, name), cc, library, entry)
     except (OSError, ValueError, subprocess.CalledProcessError) as exc:
         return _compile_failed(entry, exc)
-    return _load_names(names, library, entry, "compiled")
+    return _load(names, library, entry, "compiled")
 
 
 _FUNCTION = re.compile(r"static int (casadi_f\d+)\(const casadi_real\*\* arg, casadi_real\*\* res, casadi_int\* iw, "
@@ -296,7 +286,7 @@ def _compile_split(units: list[str], cc: str, library: Path, entry: dict) -> Non
         os.replace(out, library)
 
 
-def _load_names(names: dict[str, str], library: Path, entry: dict, how: str) -> dict[str, ca.Function] | None:
+def _load(names: dict[str, str], library: Path, entry: dict, how: str) -> dict[str, ca.Function] | None:
     try:
         loaded = {key: ca.external(casadi_name, str(library)) for key, casadi_name in names.items()}
     except RuntimeError as exc:
