@@ -103,19 +103,7 @@ def tied_columns(tie: TiedLift, offset: bool):
 
 def fit_with(cols, cases, phi_grid, n_grid) -> dict:
     """model_form's grid + NNLS fit with another column builder and grids."""
-    from scipy.optimize import nnls
-    best = {"cost": math.inf}
-    y = np.concatenate([np.concatenate([c.y_t, c.y_n]) for c in cases])
-    for phi in phi_grid:
-        for delta in mf.DELTA_GRID:
-            for n in n_grid:
-                a = np.vstack([np.vstack(cols(c, phi, delta, n, ())) for c in cases])
-                norm = np.linalg.norm(a, axis=0) + 1e-30
-                x, res = nnls(a / norm, y)
-                if res < best["cost"]:
-                    best = {"cost": float(res), "phi": float(phi), "delta": float(delta), "n": float(n),
-                            "coefficients": (x / norm).tolist()}
-    return best
+    return mf.fit_form(cases, (), columns_of=cols, phi_grid=phi_grid, n_grid=n_grid)
 
 
 def error_with(cols, case, fit) -> float:

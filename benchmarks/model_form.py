@@ -165,14 +165,20 @@ def columns(case: Case, phi: float, delta: float, n: float, terms: tuple[str, ..
     return np.column_stack(col_t), np.column_stack(col_n)
 
 
-def fit_form(cases: list[Case], terms: tuple[str, ...]) -> dict:
-    """The grid + non-negative least-squares fit of one form to one or several cycles (module docstring)."""
+def fit_form(cases: list[Case], terms: tuple[str, ...], columns_of: Callable | None = None, phi_grid=None,
+             n_grid=None) -> dict:
+    """The grid + non-negative least-squares fit of one form to one or several cycles (module docstring).
+
+    ``columns_of`` (default :func:`columns`) builds a cycle's columns, ``phi_grid`` and ``n_grid`` (default
+    :data:`PHI_GRID`, :data:`N_GRID`) are the grids searched (``benchmarks/lift_study.py`` passes its own).
+    """
+    columns_of = columns if columns_of is None else columns_of
     best = {"cost": math.inf}
     y = np.concatenate([np.concatenate([c.y_t, c.y_n]) for c in cases])
-    for phi in PHI_GRID:
+    for phi in PHI_GRID if phi_grid is None else phi_grid:
         for delta in DELTA_GRID:
-            for n in N_GRID:
-                mats = [columns(c, phi, delta, n, terms) for c in cases]
+            for n in N_GRID if n_grid is None else n_grid:
+                mats = [columns_of(c, phi, delta, n, terms) for c in cases]
                 a = np.vstack([np.vstack(m) for m in mats])
                 norm = np.linalg.norm(a, axis=0) + 1e-30
                 x, res = nnls(a / norm, y)
