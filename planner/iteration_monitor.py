@@ -15,6 +15,11 @@ class IterationMonitor(ca.Callback):
 
     A stop is IPOPT's ``User_Requested_Stop`` at that iterate; it depends on the iterates only, so a solve
     watched this way is as deterministic as one that is not.
+
+    A Ctrl-C that arrives while this callback runs in Python is turned into a stop request instead of an
+    exception: CasADi would print the exception's traceback and carry on. The SIGINT handler that
+    :func:`wheelloader.planner.interrupt.guarded` installs has recorded it already and re-raises
+    ``KeyboardInterrupt`` once the solve returns.
     """
 
     def __init__(self, nx: int, ng: int) -> None:
@@ -46,6 +51,11 @@ class IterationMonitor(ca.Callback):
         return ca.Sparsity(0, 0)
 
     def eval(self, arg):
-        if self.watch is None:
-            return [0]
-        return [1 if self.watch(np.array(arg[0]).ravel()) else 0]
+        try:
+            if self.watch is None:
+                return [0]
+            return [1 if self.watch(np.array(arg[0]).ravel()) else 0]
+        except (KeyboardInterrupt, SystemError) as error:
+            if isinstance(error, KeyboardInterrupt) or isinstance(error.__cause__, KeyboardInterrupt):
+                return [1]  # Ctrl-C inside the callback (raw, or wrapped by SWIG): stop the solve now
+            raise

@@ -156,3 +156,40 @@ def test_an_in_process_command_gives_the_ctrl_c_handler_back(tmp_path):
     assert main(["predict", "gravel", str(tmp_path / "path.csv"), "-o", str(tmp_path / "f.csv")]) == 0
     assert (tmp_path / "f.csv").is_file()
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_ctrl_c_inside_the_iteration_callback_stops_the_solve_without_a_traceback(capfd):
+    """SIGINT while IPOPT's iteration callback runs: the callback asks IPOPT to stop, and ``guarded`` re-raises
+    it after the solve. When the signal lands inside a SWIG call (the callback's ``np.array`` of a DM), SWIG
+    hands the ``KeyboardInterrupt`` on as the cause of a ``SystemError``, whose traceback CasADi would print;
+    the watcher below lets the signal in and hands it on that way."""
+    import casadi as ca
+
+    from wheelloader.planner.interrupt import guarded
+    from wheelloader.planner.iteration_monitor import IterationMonitor
+
+    x = ca.MX.sym("x", 2)
+    monitor = IterationMonitor(2, 0)
+    solver = ca.nlpsol("rosenbrock", "ipopt", {"x": x, "f": (1 - x[0]) ** 2 + 100 * (x[1] - x[0] ** 2) ** 2},
+                       {"iteration_callback": monitor, "print_time": False, "ipopt.print_level": 0})
+    seen: list[int] = []
+
+    def watch(_x):
+        seen.append(1)
+        if len(seen) == 3:
+            try:
+                os.kill(os.getpid(), signal.SIGINT)  # the handler runs at the next bytecode, here
+                for _ in range(10**6):
+                    pass
+            except KeyboardInterrupt as interrupt:
+                raise SystemError("DM.__array__ returned a result with an exception set") from interrupt
+        return None
+
+    monitor.watch = watch
+    capfd.readouterr()
+    with pytest.raises(KeyboardInterrupt, match="during an IPOPT solve"):
+        guarded(solver, x0=[-1.2, 1.0])
+    err = capfd.readouterr().err
+    assert len(seen) == 3, "the solve went on after the Ctrl-C"
+    assert "Traceback" not in err, err
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
