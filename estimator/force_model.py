@@ -66,9 +66,8 @@ from .failure_angle import (
     log_ngamma_slope,
     optimal_beta,
     optimal_beta_scalar,
-    optimal_beta_weight_force,
-    optimal_beta_weight_force_scalar,
 )
+from .failure_angle_weight import optimal_beta_weight_force, optimal_beta_weight_force_scalar
 from .kinematics import ContactState
 from .machine import Bucket
 from .soil import SoilParams
@@ -275,7 +274,7 @@ def soil_forces(soil: SoilParams, state: ContactState, bucket: Bucket,
     d = np.where(out, 0.0, d)
     w = bucket.width
     ramp = np.minimum(d / options.contact_depth, 1.0)
-    if options.failure_angle == "min_weight_force":  # opt-in (failure_angle module docstring)
+    if options.failure_angle == "min_weight_force":  # opt-in (failure_angle_weight module docstring)
         beta = optimal_beta_weight_force(alpha, rho, phi, delta, d, ramp * state.fill_volume / w, options)
     else:
         beta = optimal_beta(alpha, rho, phi, delta, options, guess=beta_guess)  # eq 14

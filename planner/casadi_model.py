@@ -30,7 +30,8 @@ import casadi as ca
 import numpy as np
 
 from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, ModelOptions, SoilParams
-from wheelloader.estimator.failure_angle import beta_bounds, unrolled_beta, unrolled_beta_weight_force
+from wheelloader.estimator.failure_angle import beta_bounds, unrolled_beta
+from wheelloader.estimator.failure_angle_weight import unrolled_beta_weight_force
 from wheelloader.estimator.soil_vector import SOIL_VECTOR_NAMES
 from wheelloader.estimator.soil_vector import soil_vector as estimator_soil_vector
 from wheelloader.estimator.validity import alpha_lower_limit

@@ -13,12 +13,8 @@ from wheelloader.estimator import Bucket, ModelOptions, Pile, default_path, pres
 from wheelloader.estimator.calibration import CalibrationOptions, calibrate, predict
 from wheelloader.estimator.calibration.fitmodel import FitData, factors, soil_to_fit
 from wheelloader.estimator.errors import CalibrationError, ParameterError, PlanningError
-from wheelloader.estimator.failure_angle import (
-    beta_bounds,
-    optimal_beta,
-    optimal_beta_weight_force,
-    optimal_beta_weight_force_scalar,
-)
+from wheelloader.estimator.failure_angle import beta_bounds, optimal_beta
+from wheelloader.estimator.failure_angle_weight import optimal_beta_weight_force, optimal_beta_weight_force_scalar
 from wheelloader.estimator.force_model import GRAVITY, bearing_factors, soil_forces, soil_forces_single
 from wheelloader.estimator.kinematics import contact_state
 from wheelloader.estimator.synthetic import synthetic_cycle

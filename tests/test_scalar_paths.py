@@ -15,7 +15,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from wheelloader.estimator import DEFAULT_OPTIONS, Pile, SurfaceCarver, contact_single
-from wheelloader.estimator.failure_angle import _root_in_bracket, log_ngamma_slope, optimal_beta_scalar
+from wheelloader.estimator.failure_angle import log_ngamma_slope, optimal_beta_scalar
+from wheelloader.estimator.failure_angle_weight import _root_in_bracket
 from wheelloader.estimator.kinematics import surface_contact
 from wheelloader.estimator.pile import node_height, node_heights
 

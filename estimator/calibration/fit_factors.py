@@ -17,9 +17,8 @@ from ..failure_angle import (
     BETA_AT_SLOPE_LIMIT,
     BETA_INTERIOR,
     optimal_beta,
-    optimal_beta_weight_force,
-    weight_force_slope,
 )
+from ..failure_angle_weight import optimal_beta_weight_force, weight_force_slope
 from ..force_model import DEFAULT_OPTIONS, ModelOptions
 from ..validity import clamp_details
 
