@@ -13,10 +13,18 @@ bound, and it moves continuously with the angles. At ``beta = pi/2 - alpha`` N_g
 
 Three front ends share the branch and the slope:
 
-* :func:`optimal_beta`: NumPy arrays, safeguarded Newton inside a bisection bracket (forces, fits);
-* :func:`optimal_beta_scalar`: one sample in pure ``math`` (environment steps);
+* :func:`optimal_beta`: NumPy arrays, safeguarded Halley iteration inside a bisection bracket (forces, fits);
+* :func:`optimal_beta_scalar`: one sample in pure ``math`` (environment steps), the same iteration;
 * :func:`unrolled_beta`: a fixed number of guarded Newton steps for symbolic backends (the
   planner's CasADi model passes ``casadi.tan`` and smooth clamps).
+
+The first two start from a warm guess where one is given and inside the bracket, else from
+:func:`cold_start`, an explicit approximate root. Each step is Halley's (the slope, its derivative and its second
+derivative come from the same four tangents, :func:`log_ngamma_derivatives`), kept where it lands inside the
+bracket, else a bisection; a sample stops once its step is shorter than ``tol`` (1e-11 rad), so beta* is the
+root to rounding whatever the start. On the batched env's own calls (1024 envs) rows entering the soil took 9-14
+Newton steps from the middle of the branch (3-8 of them bisections) and warm rows 4-6; from the cold start with
+Halley steps both take 3-4.
 
 The opt-in rule of the least weight force is :mod:`~wheelloader.estimator.failure_angle_weight`.
 """
@@ -72,6 +80,51 @@ def log_ngamma_slope(beta, alpha, phi, s, tan=np.tan):
     return g, dg
 
 
+def log_ngamma_derivatives(beta, alpha, phi, s, tan=np.tan):
+    """:func:`log_ngamma_slope`'s ``g`` and ``dg`` and half the second derivative, ``d2g / 2`` (eq 10).
+
+    With ``t1 = tan(alpha + beta)`` and ``c2, c3, c4`` the cotangents of :func:`log_ngamma_slope`,
+    ``d2g / 2 = -t1 (1 + t1^2) + c2 (1 + c2^2) - c3 (1 + c3^2) - c4 (1 + c4^2)``. The reference form of the
+    solvers' Halley step (:func:`halley_step`)."""
+    g, dg = log_ngamma_slope(beta, alpha, phi, s, tan)
+    t1 = tan(alpha + beta)
+    c2 = 1.0 / tan(alpha + beta + phi)
+    c3 = 1.0 / tan(beta)
+    c4 = 1.0 / tan(beta + s)
+    half = (c2 * c2 + 1.0) * c2 - (t1 * t1 + 1.0) * t1 - (c3 * c3 + 1.0) * c3 - (c4 * c4 + 1.0) * c4
+    return g, dg, half
+
+
+def halley_step(x: float, g: float, dg: float, half: float, a: float, b: float) -> float:
+    """The solvers' next iterate from ``x`` (scalar reference form): Halley's step
+    ``x - n / (1 - n half / dg)`` with ``n = g / dg`` where ``dg > 0``, its factor is positive and it lands in
+    the bracket ``[a, b]`` (already updated with ``x``), else the bracket's middle."""
+    if dg > 0.0:
+        n = g / dg
+        fac = 1.0 - n * (half / dg)
+        if fac > 0.0:
+            new = x - n / fac
+            if a <= new <= b:
+                return new
+    return 0.5 * (a + b)
+
+
+def cold_start(b_hi, cot_s, sqrt=np.sqrt, atan2=np.arctan2):
+    """Explicit approximate root of ``g`` (:func:`log_ngamma_slope`), the solvers' start without a warm guess.
+
+    ``g = B(beta) - cot(beta) - cot(beta + s)`` with ``B = -tan(alpha + beta) + cot(alpha + beta + phi)``.
+    An interior root lies only where the upper bound is the rho limit ``pi - s - eps2``, near the pole of
+    ``-cot(beta + s)``; there ``B`` varies slowly. With ``B`` frozen at its value at the upper bound
+    (``b_hi``, which the bracket check has just evaluated), ``cot(beta) + cot(beta + s) = B`` is a quadratic in
+    ``c = cot(beta)``: ``c^2 + (2k - B) c - (1 + B k) = 0`` with ``k = cot(s)`` (``cot_s``). Its discriminant
+    is ``B^2 + 4 k^2 + 4 > 0``, and its larger root is the one with ``beta`` in ``(0, pi - s)``:
+    ``beta0 = atan2(2, sqrt(B^2 + 4 k^2 + 4) - (2k - B))``. The callers use it where it lies strictly inside
+    the bracket (else the bracket's middle; a NaN from a pole is not inside). Measured on the batched env's rows
+    entering the soil: 8e-3 rad from the root (median), against 0.43 rad for the middle of the branch.
+    ``sqrt``, ``atan2``: the array library's (``math``'s for scalars)."""
+    return atan2(2.0, sqrt(b_hi * b_hi + 4.0 * cot_s * cot_s + 4.0) - (2.0 * cot_s - b_hi))
+
+
 def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS,
                  tol: float = 1e-11, max_iter: int = 60, guess=None, return_where: bool = False):
     """Failure angle beta* minimising N_gamma (eq 10) under eq 14, on the valid branch.
@@ -85,11 +138,12 @@ def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
     options : ModelOptions
         Margins eps1, eps2.
     tol : float
-        Step size [rad] below which the Newton iteration stops.
+        Step size [rad] below which the iteration stops.
     max_iter : int
         Largest number of iterations.
     guess : array_like, optional
-        Warm start (e.g. the previous step's beta*), used where it lies inside the bracket.
+        Warm start (e.g. the previous step's beta*), used where it lies inside the bracket; elsewhere
+        :func:`cold_start`.
     return_where : bool
         Also return where beta* lies (``BETA_*`` codes).
 
@@ -120,10 +174,12 @@ def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
     if np.any(inner):
         a, b, al, ss = lo[inner], hi[inner], alpha[inner], s[inner]
         ph = phi[inner] if isinstance(phi, np.ndarray) else phi
-        x = 0.5 * (a + b)
-        if guess is not None:
+        if guess is None:
+            x = _cold_starts(a, b, al, ph, ss)
+        else:
             g0 = np.broadcast_to(np.asarray(guess, dtype=float), alpha.shape)[inner]
-            x = np.where((g0 > a) & (g0 < b), g0, x)
+            warm = (g0 > a) & (g0 < b)
+            x = g0 if warm.all() else np.where(warm, g0, _cold_starts(a, b, al, ph, ss))
         beta[inner] = _bracketed_newton(x, a, b, al, ph, ss, tol, max_iter)
     if not return_where:
         return beta.reshape(shape)
@@ -135,6 +191,22 @@ def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
 
 #: At most this many unconverged samples :func:`_bracketed_newton` finishes on floats (:func:`_newton_tail`).
 _TAIL = 16
+
+
+def _cold_starts(a, b, al, ph, ss) -> np.ndarray:
+    """:func:`cold_start` for arrays where it lies inside ``(a, b)``, else the bracket's middle (``b`` is the upper
+    bound)."""
+    t = np.empty((3, a.size))
+    np.add(al, b, out=t[0])  # alpha + hi
+    np.add(t[0], ph, out=t[1])  # alpha + hi + phi
+    t[2] = ss
+    np.tan(t, out=t)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        np.divide(1.0, t[1:], out=t[1:])  # cot(alpha + hi + phi), cot(s)
+        x = cold_start(t[1] - t[0], t[2])
+    mid = a + b
+    mid *= 0.5
+    return np.where((x > a) & (x < b), x, mid)
 
 
 def _slope_only(beta, alpha, phi, s):
@@ -155,13 +227,13 @@ def _slope_only(beta, alpha, phi, s):
 
 
 def _bracketed_newton(x, a, b, al, ph, ss, tol: float, max_iter: int) -> np.ndarray:
-    """:func:`optimal_beta`'s safeguarded Newton iteration on the interior samples, from ``x`` inside ``(a, b)``.
+    """:func:`optimal_beta`'s safeguarded Halley iteration on the interior samples, from ``x`` inside ``(a, b)``.
 
     Each sample follows its own sequence of iterates (element-wise operations only): it stops once a step is
-    shorter than ``tol`` or after ``max_iter`` steps. The slope and curvature are :func:`log_ngamma_slope`'s
-    operations in the same order (``-t1 + c2`` computed as ``c2 - t1``, ``-t1*t1 - c2*c2`` as
-    ``-(t1*t1 + c2*c2)``: the same roundings), so every iterate is the one the plain loop gives, bit for bit.
-    Only the unconverged samples are iterated; the last few go through :func:`_newton_tail`."""
+    shorter than ``tol`` or after ``max_iter`` steps. Its steps are :func:`halley_step`'s on
+    :func:`log_ngamma_derivatives`, with the same roundings (``-t1 + c2`` computed as ``c2 - t1``,
+    ``-t1*t1 - c2*c2`` as ``-(t1*t1 + c2*c2)``). Only the unconverged samples are iterated; the last few go through
+    :func:`_newton_tail`, which gives the same iterates bit for bit."""
     out = np.empty_like(x)
     active = np.arange(x.size)
     per_sample_phi = isinstance(ph, np.ndarray)
@@ -187,13 +259,23 @@ def _bracketed_newton(x, a, b, al, ph, ss, tol: float, max_iter: int) -> np.ndar
             dg = sq[0] + sq[1]
             np.subtract(sq[2], dg, out=dg)
             dg += sq[3]
+            sq += 1.0
+            sq *= t  # t (1 + t^2)
+            half = sq[1] - sq[0]  # d2g / 2
+            half -= sq[2]
+            half -= sq[3]
             pos = g > 0.0
             b = np.where(pos, x, b)
             a = np.where(pos, a, x)
-            np.divide(g, dg, out=g)
-            newton = np.subtract(x, g, out=g)
-            # a Newton step onto a bracket end is kept (the root then sits within rounding of that end)
+            np.divide(g, dg, out=g)  # the Newton step n
+            np.divide(half, dg, out=half)
+            half *= g
+            fac = np.subtract(1.0, half, out=half)  # Halley's step is n / fac
             ok = dg > 0.0
+            ok &= fac > 0.0
+            np.divide(g, fac, out=g)
+            newton = np.subtract(x, g, out=g)
+            # a step onto a bracket end is kept (the root then sits within rounding of that end)
             ok &= newton >= a
             ok &= newton <= b
             mid = a + b
@@ -235,8 +317,14 @@ def _newton_tail(x: list, a: list, b: list, al: list, ph: list, ss: list, tol: f
             c3 = 1.0 / t3 if t3 != 0.0 else copysign(inf, t3)
             c4 = 1.0 / t4 if t4 != 0.0 else copysign(inf, t4)
             g, dg, xm = -t1 + c2 - c3 - c4, -t1 * t1 - c2 * c2 + c3 * c3 + c4 * c4, x[m]
+            half = (c2 * c2 + 1.0) * c2 - (t1 * t1 + 1.0) * t1 - (c3 * c3 + 1.0) * c3 - (c4 * c4 + 1.0) * c4
             (b if g > 0.0 else a)[m] = xm
-            newton = xm - g / dg if dg > 0.0 else a[m] - 1.0  # the array loop's ok: dg > 0 and a <= newton <= b
+            newton = a[m] - 1.0  # the array loop's ok: dg > 0, fac > 0 and a <= newton <= b
+            if dg > 0.0:
+                n = g / dg
+                fac = 1.0 - n * (half / dg)
+                if fac > 0.0:
+                    newton = xm - n / fac
             x_new = out[m] = newton if a[m] <= newton <= b[m] else 0.5 * (a[m] + b[m])
             if abs(x_new - xm) >= tol:
                 x[m] = x_new
@@ -247,12 +335,12 @@ def _newton_tail(x: list, a: list, b: list, al: list, ph: list, ss: list, tol: f
 
 def optimal_beta_scalar(alpha: float, rho: float, phi: float, delta: float,
                         options: ModelOptions = DEFAULT_OPTIONS, guess: float | None = None) -> float:
-    """Scalar fast path of :func:`optimal_beta` (pure ``math``), optionally warm-started.
+    """Scalar fast path of :func:`optimal_beta` (pure ``math``), optionally warm-started, else from
+    :func:`cold_start`.
 
-    The bracket checks and :func:`_root_in_bracket`'s Newton loop on :func:`log_ngamma_slope`, written out
-    with the same expressions in the same order (the env steps through here; a function call per Newton step
-    cost as much as the step's arithmetic), so the result is bit for bit the loop's
-    (``tests/test_failure_angle.py`` checks it).
+    The bracket checks and the loop of :func:`halley_step` on :func:`log_ngamma_derivatives`, written out with the
+    same expressions in the same order (the env steps through here; a function call per step cost as much as the
+    step's arithmetic), so the result is bit for bit the loop's (``tests/test_scalar_paths.py`` checks it).
     """
     s = rho + delta + phi
     lo = options.eps1
@@ -260,9 +348,16 @@ def optimal_beta_scalar(alpha: float, rho: float, phi: float, delta: float,
     tan = math.tan
     if -tan(alpha + lo) + 1.0 / tan(alpha + lo + phi) - 1.0 / tan(lo) - 1.0 / tan(lo + s) >= 0.0:
         return lo  # g(lo) >= 0
-    if -tan(alpha + hi) + 1.0 / tan(alpha + hi + phi) - 1.0 / tan(hi) - 1.0 / tan(hi + s) <= 0.0:
+    b_hi = -tan(alpha + hi) + 1.0 / tan(alpha + hi + phi)
+    if b_hi - 1.0 / tan(hi) - 1.0 / tan(hi + s) <= 0.0:
         return hi  # g(hi) <= 0
-    x = guess if guess is not None and lo < guess < hi else 0.5 * (lo + hi)
+    if guess is not None and lo < guess < hi:
+        x = guess
+    else:
+        t_s = tan(s)
+        x = cold_start(b_hi, 1.0 / t_s, math.sqrt, math.atan2) if t_s != 0.0 else math.nan
+        if not lo < x < hi:
+            x = 0.5 * (lo + hi)
     a, b = lo, hi
     for _ in range(60):
         t1 = tan(alpha + x)
@@ -275,7 +370,13 @@ def optimal_beta_scalar(alpha: float, rho: float, phi: float, delta: float,
             b = x
         else:
             a = x
-        xn = x - g / dg if dg > 0.0 else a - 1.0
+        xn = a - 1.0
+        if dg > 0.0:
+            n = g / dg
+            half = (c2 * c2 + 1.0) * c2 - (t1 * t1 + 1.0) * t1 - (c3 * c3 + 1.0) * c3 - (c4 * c4 + 1.0) * c4
+            fac = 1.0 - n * (half / dg)
+            if fac > 0.0:
+                xn = x - n / fac
         if not a <= xn <= b:
             xn = 0.5 * (a + b)
         if abs(xn - x) < 1e-11:

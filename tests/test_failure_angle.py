@@ -25,6 +25,7 @@ from wheelloader.estimator.failure_angle import (
     BETA_AT_SLOPE_LIMIT,
     BETA_INTERIOR,
     beta_bounds,
+    cold_start,
     optimal_beta,
     optimal_beta_scalar,
 )
@@ -234,3 +235,30 @@ def test_newton_tail_on_floats_gives_the_array_iterates(monkeypatch, per_sample_
     assert np.count_nonzero(where == BETA_INTERIOR) > 20  # the Newton loop runs
     for other in results[1:]:
         np.testing.assert_array_equal(other, results[0])
+
+
+@pytest.mark.parametrize("name", ["gravel", "sand", "dirt", "lean_clay"])
+def test_cold_start_reaches_the_root_in_three_steps_on_pile_faces(name):
+    """Rows entering a pile face (slope 10-40 deg, blade 20-60 deg) have no warm guess: from the explicit cold start
+    three Halley steps give beta* to rounding (the batched env's entering rows started 0.43 rad off in the middle of
+    the branch and took up to 14 Newton steps)."""
+    soil = preset(name)
+    a, r = np.meshgrid(np.linspace(deg(10), deg(40), 31), np.linspace(deg(20), deg(60), 41))
+    alpha, rho, _ = clamp_angles(a.ravel(), r.ravel(), soil.phi, soil.delta)
+    beta, where = optimal_beta(alpha, rho, soil.phi, soil.delta, return_where=True)
+    inner = where == BETA_INTERIOR
+    assert np.count_nonzero(inner) >= 10
+    three = optimal_beta(alpha, rho, soil.phi, soil.delta, max_iter=3)
+    assert np.max(np.abs(three - beta)[inner]) <= 1e-14
+    lo, hi = beta_bounds(alpha, rho, soil.phi, soil.delta)
+    b_hi = -np.tan(alpha + hi) + 1.0 / np.tan(alpha + hi + soil.phi)
+    start = cold_start(b_hi, 1.0 / np.tan(rho + soil.delta + soil.phi))
+    assert np.median(np.abs(start - beta)[inner]) <= 0.5 * np.median(np.abs(0.5 * (lo + hi) - beta)[inner])
+
+
+@settings(max_examples=300, deadline=None)
+@given(b_hi=st.floats(-1e6, 1e6), s=st.floats(1e-3, math.pi - 1e-3))
+def test_cold_start_lies_on_the_branch_side_of_the_pole(b_hi, s):
+    """The quadratic's larger root is an angle in (0, pi - s): never beyond the pole of cot(beta + s)."""
+    start = float(cold_start(b_hi, 1.0 / math.tan(s)))
+    assert 0.0 <= start <= math.pi - s + 1e-12
