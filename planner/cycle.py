@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from dataclasses import replace
 from typing import Any
 
@@ -16,15 +17,20 @@ DIG_DURATION = 4.67
 APPROACH_SPEED = 0.6
 
 _OPTIMIZERS: dict[tuple, TrajectoryOptimizer] = {}
+_OPTIMIZERS_LOCK = threading.Lock()
 
 
 def optimizer_for(bucket: Bucket | None = None, loader: Loader | None = None,
                   options: PlannerOptions | None = None) -> TrajectoryOptimizer:
     """A cached :class:`TrajectoryOptimizer` (the NLP is built once per settings)."""
     key = (bucket or Bucket(), loader or Loader(), options or PlannerOptions())
-    if key not in _OPTIMIZERS:
-        _OPTIMIZERS[key] = TrajectoryOptimizer(*key)
-    return _OPTIMIZERS[key]
+    found = _OPTIMIZERS.get(key)
+    if found is None:
+        with _OPTIMIZERS_LOCK:  # threads planning side by side (planner.lanes) share one optimizer per settings
+            found = _OPTIMIZERS.get(key)
+            if found is None:
+                found = _OPTIMIZERS[key] = TrajectoryOptimizer(*key)
+    return found
 
 
 def cautious_options(options: PlannerOptions, level: int = 1) -> PlannerOptions:

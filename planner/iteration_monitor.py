@@ -6,6 +6,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from . import lanes
+
 __all__ = ["IterationMonitor"]
 
 
@@ -15,6 +17,8 @@ class IterationMonitor(ca.Callback):
 
     A stop is IPOPT's ``User_Requested_Stop`` at that iterate; it depends on the iterates only, so a solve
     watched this way is as deterministic as one that is not.
+
+    A solve in a cancelled lane (:mod:`.lanes`) stops at its next iterate.
 
     A Ctrl-C that arrives while this callback runs in Python is turned into a stop request instead of an
     exception: CasADi would print the exception's traceback and carry on. The SIGINT handler that
@@ -52,6 +56,8 @@ class IterationMonitor(ca.Callback):
 
     def eval(self, arg):
         try:
+            if lanes.cancelled():  # the lane's cancel event (planner.lanes): stop at this iterate
+                return [1]
             if self.watch is None:
                 return [0]
             return [1 if self.watch(np.array(arg[0]).ravel()) else 0]

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import struct
+import threading
 import time
 from collections import OrderedDict
 from collections.abc import Callable
@@ -39,6 +40,7 @@ class RememberedPlanner:
 
     Notes
     -----
+    Thread-safe: a call for a soil and pile that another thread is planning waits for that outcome.
     A repeated call returns a deep copy of the kept outcome (the caller may set its ``seconds``), with
     ``seconds`` the time of the look-up.
     """
@@ -51,6 +53,9 @@ class RememberedPlanner:
         self._kept: OrderedDict[bytes, PlanOutcome] = OrderedDict()
         #: How many calls were answered from the kept outcomes.
         self.hits = 0
+        # threads planning side by side (planner.lanes): one plans a soil and pile, the others wait for it
+        self._lock = threading.Lock()
+        self._pending: dict[bytes, threading.Event] = {}
 
     @staticmethod
     def key(params: SoilParams | str | dict, pile: Pile) -> bytes:
@@ -63,15 +68,28 @@ class RememberedPlanner:
     def __call__(self, params: SoilParams | str | dict, pile: Pile) -> PlanOutcome:
         tic = time.perf_counter()
         key = self.key(params, pile)
-        if key in self._kept:
-            self._kept.move_to_end(key)
-            self.hits += 1
-            outcome = copy.deepcopy(self._kept[key])
-            outcome.seconds = time.perf_counter() - tic
-            return outcome
-        outcome = self.planner(params, pile)
-        if outcome.controller is None:
-            self._kept[key] = copy.deepcopy(outcome)
-            while len(self._kept) > self.size:
-                self._kept.popitem(last=False)
+        while True:
+            with self._lock:
+                if key in self._kept:
+                    self._kept.move_to_end(key)
+                    self.hits += 1
+                    outcome = copy.deepcopy(self._kept[key])
+                    outcome.seconds = time.perf_counter() - tic
+                    return outcome
+                pending = self._pending.get(key)
+                if pending is None:  # this thread plans it; another one asking meanwhile waits for its outcome
+                    pending = self._pending[key] = threading.Event()
+                    break
+            pending.wait()
+        try:
+            outcome = self.planner(params, pile)
+            if outcome.controller is None:
+                with self._lock:
+                    self._kept[key] = copy.deepcopy(outcome)
+                    while len(self._kept) > self.size:
+                        self._kept.popitem(last=False)
+        finally:
+            with self._lock:
+                del self._pending[key]
+            pending.set()
         return outcome

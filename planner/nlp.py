@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import atexit
 import math
+import threading
 import weakref
 from collections.abc import Callable
 from dataclasses import replace
@@ -64,7 +65,7 @@ from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, Loader, Plan
 from wheelloader.estimator.payload import kept_volume
 from wheelloader.estimator.validity import alpha_lower_limit
 
-from . import codegen, nlp_cache
+from . import codegen, lanes, nlp_cache
 from .casadi_model import casadi_forces, casadi_learned, learned_trust, smooth_max, smooth_min, smooth_pos
 from .interrupt import guarded
 from .kept import KEPT_OBJECTIVE_SCALE, kept_terms, smooth_lift
@@ -76,6 +77,8 @@ __all__ = ["VALIDITY_RELAX", "build", "handle", "hold_margin_variants", "origin"
 
 #: The NLPs of this process by (bucket, loader, structural options): expressions, layout, derivatives, solvers.
 _CACHE: dict[tuple, dict] = {}
+#: One thread at a time builds or looks up an NLP and its solvers (:mod:`.lanes`: threads that plan side by side).
+_LOCK = threading.RLock()
 #: How fast the validity-domain limits on rho relax above the surface [rad/m]: the limits bind in soil
 #: and fade out within centimetres above it (a product ``depth * (rho - limit) >= 0`` would be degenerate
 #: out of soil and blow up IPOPT's multipliers).
@@ -169,6 +172,12 @@ def build(bucket: Bucket, loader: Loader, options: PlannerOptions):
     an NLP is made from the first one's derivative functions (no new differentiation), so its iterates are
     bit-identical to those of a solver that built its own.
     """
+    with _LOCK:
+        return _build(bucket, loader, options)
+
+
+def _build(bucket: Bucket, loader: Loader, options: PlannerOptions):
+    """:func:`build` under its lock."""
     structural = structural_options(options)
     entry = _CACHE.get((bucket, loader, structural))
     if entry is None:
@@ -185,12 +194,18 @@ def build(bucket: Bucket, loader: Loader, options: PlannerOptions):
         entry = _CACHE[(bucket, loader, structural)] = _Entry(problem=problem, functions=functions, layout=layout,
                                                               derivatives={}, solvers={})
     settings = solver_settings(options)
-    if settings not in entry["solvers"]:
+    lane = lanes.current()
+    if (settings, lane) not in entry["solvers"]:
         plugin = dict(settings)["plugin"]
+        if lane != 0 and (settings, 0) not in entry["solvers"]:
+            with lanes.lane(0):  # lane 0's solver differentiates; the other lanes' solvers reuse its derivatives
+                _build(bucket, loader, options)
         derivatives = entry["derivatives"].get(plugin)
-        if options.compiled and options.solver == "sqp":  # the derivatives as compiled C (once per machine)
+        if lane != 0:
+            derivatives = (options.compiled and entry.get(f"compiled {plugin}")) or derivatives
+        elif options.compiled and options.solver == "sqp":  # the derivatives as compiled C (once per machine)
             if derivatives is None:  # the virtual machine's solver first: its derivative functions
-                build(bucket, loader, replace(options, compiled=False))
+                _build(bucket, loader, replace(options, compiled=False))
                 derivatives = entry["derivatives"][plugin]
             if f"compiled {plugin}" not in entry:  # None: no compiler or a failed compile (logged)
                 entry[f"compiled {plugin}"] = guarded(codegen.compiled, derivatives, f"planner_{plugin}")
@@ -206,8 +221,8 @@ def build(bucket: Bucket, loader: Loader, options: PlannerOptions):
         if plugin not in entry["derivatives"] and not options.compiled:
             entry["derivatives"][plugin] = {name: solver.get_function(own) for name, own in _DERIVATIVES[plugin]
                                             if solver.has_function(own)}
-        entry["solvers"][settings] = (solver, {**entry["functions"], "monitor": monitor})
-    solver, functions = entry["solvers"][settings]
+        entry["solvers"][(settings, lane)] = (solver, {**entry["functions"], "monitor": monitor})
+    solver, functions = entry["solvers"][(settings, lane)]
     return solver, functions, entry["layout"]
 
 
@@ -239,11 +254,13 @@ def handle(bucket: Bucket, loader: Loader, options: PlannerOptions) -> Callable[
 
     def get() -> tuple:
         entry = ref[0]()
-        if entry is None or settings not in entry["solvers"]:
-            result = build(bucket, loader, options)
-            ref[0] = weakref.ref(_CACHE[key])
+        solver_key = (settings, lanes.current())
+        if entry is None or solver_key not in entry["solvers"]:
+            with _LOCK:
+                result = build(bucket, loader, options)
+                ref[0] = weakref.ref(_CACHE[key])
             return result
-        solver, functions = entry["solvers"][settings]
+        solver, functions = entry["solvers"][solver_key]
         return solver, functions, entry["layout"]
 
     return get
@@ -273,8 +290,9 @@ def hold_margin_variants(hold: bool) -> bool:
 def release() -> int:
     """Drop this process's NLPs and solvers from memory (~150 MB each for the loop's 40 intervals); the next
     :func:`build` of one makes it again (from the disk cache's expressions). Returns how many were dropped."""
-    dropped = len(_CACHE)
-    _CACHE.clear()
+    with _LOCK:
+        dropped = len(_CACHE)
+        _CACHE.clear()
     return dropped
 
 

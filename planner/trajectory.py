@@ -27,6 +27,7 @@ from wheelloader.estimator import (
 )
 from wheelloader.estimator.checks import check_range
 
+from . import lanes
 from .casadi_model import soil_vector
 from .guess import face_position, first_rise, straight_dig, surface_dig
 from .interrupt import guarded
@@ -69,7 +70,24 @@ class TrajectoryOptimizer:
         # its place in memory (nlp.build), and the next solve then builds it again
         self._nlp = handle(self.bucket, self.loader, self.options)
         self._nlp()  # the NLP now, not at the first solve
-        self._last: dict[str, np.ndarray] | None = None
+        self._lasts: dict[int, dict[str, np.ndarray]] = {}  # the last solution by lane (planner.lanes)
+
+    @property
+    def _last(self) -> dict[str, np.ndarray] | None:
+        """The last solution of this thread's lane (:mod:`.lanes`): its warm start."""
+        return self._lasts.get(lanes.current())
+
+    @_last.setter
+    def _last(self, value: dict[str, np.ndarray] | None) -> None:
+        if value is None:
+            self._lasts.pop(lanes.current(), None)
+        else:
+            self._lasts[lanes.current()] = value
+
+    def _solver_and_monitor(self) -> tuple[Any, Any]:
+        """This lane's IPOPT solver and its iteration callback (:mod:`.lanes`)."""
+        solver, functions, _ = self._nlp()
+        return solver, functions["monitor"]
 
     @property
     def _solver(self) -> Any:
@@ -160,7 +178,7 @@ class TrajectoryOptimizer:
         # out of its window's range is re-solved once, from where IPOPT stopped, with re-centred windows
         # (not after the wall-time limit: the NumPy check judges that iterate on the real pile)
         iterations = 0
-        monitor = self._functions["monitor"]
+        solver, monitor = self._solver_and_monitor()  # held for the whole solve (planner.nlp.build may drop them)
         try:
             for attempt in range(2):
                 windows = self._windows(pile, start, args["x0"])
@@ -168,18 +186,18 @@ class TrajectoryOptimizer:
                 if checkpoint is not None:
                     monitor.watch = _Watch(self, checkpoint, checkpoint_every, p, h, start, face, iterations,
                                            tic)
-                sol = guarded(self._solver, **args)  # Ctrl-C is re-raised, never kept as a plan
-                stats = dict(self._solver.stats())
+                sol = guarded(solver, **args)  # Ctrl-C is re-raised, never kept as a plan
+                stats = dict(solver.stats())
                 if isinstance(monitor.watch, _Watch) and monitor.watch.error is not None:
                     raise monitor.watch.error
                 iterations += int(stats.get("iter_count", 0))
                 w = np.array(sol["x"]).ravel()
-                self._last = {"x": w, "lam_x": np.array(sol["lam_x"]).ravel(),
-                              "lam_g": np.array(sol["lam_g"]).ravel()}
+                self._last = last = {"x": w, "lam_x": np.array(sol["lam_x"]).ravel(),
+                                     "lam_g": np.array(sol["lam_g"]).ravel()}
                 stopped = stats.get("return_status") in ("Maximum_WallTime_Exceeded", "User_Requested_Stop")
                 if attempt == 1 or stopped or not self._outside_windows(windows, w):
                     break
-                args.update(x0=w, lam_x0=self._last["lam_x"], lam_g0=self._last["lam_g"])
+                args.update(x0=w, lam_x0=last["lam_x"], lam_g0=last["lam_g"])
         finally:
             monitor.watch = None
         elapsed = time.perf_counter() - tic

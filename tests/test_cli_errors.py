@@ -96,6 +96,9 @@ def test_dem_runs_without_yade_are_one_error_line_before_any_work(tmp_path, caps
     (["--plant", "mpm", "--mpc"], "--mpc needs"),
     (["--cycles", "0"], "--cycles must be"),
     (["--window", "0"], "--window must be"),
+    (["--jobs", "0"], "--jobs must be"),
+    (["--jobs", "2", "--mpc"], "--jobs above 1 needs"),
+    (["--jobs", "2", "--no-planner"], "--jobs above 1 needs"),
 ])
 def test_bad_demo_options_are_refused_before_any_work(tmp_path, capsys, no_work, argv, message):
     out = tmp_path / "demo"

@@ -42,7 +42,7 @@ DEMO_PLANTS = ("fee-env", "mpm")
 def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner: bool = True,
              progress: Any = None, mpc: bool = False, plant: str = "fee-env",
              resolution: float = 0.02, window: int | None = None, seeds: int = 1,
-             prior: str | None = None, compiled: bool = False) -> dict[str, Any]:
+             prior: str | None = None, compiled: bool = False, jobs: int | None = None) -> dict[str, Any]:
     """Run the loop (ours and the fixed baseline), write figures and ``summary.json`` into ``out``.
 
     ``seeds`` runs of both strategies, with plant seeds ``seed, seed + 1, ...``: ``table.md`` gives each
@@ -55,7 +55,10 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     :data:`wheelloader.adaptation.DEFAULT_WINDOW`). ``prior``: ours' calibration prior at the nominal soil
     (:data:`wheelloader.adaptation.PRIOR_NAMES`; default :data:`DEMO_PRIOR`). ``compiled``: the planner's
     IPOPT derivatives as C compiled once per machine (``PlannerOptions.compiled``; minutes of CPU the first time,
-    cached; the same plans and table; without a C compiler CasADi's virtual machine, with a warning).
+    cached; the same plans and table; without a C compiler CasADi's virtual machine, with a warning). ``jobs``:
+    seeds run side by side in this many threads (:func:`default_jobs` when None; the fee-env plant with the
+    planner and without ``mpc`` only, else 1), each planning in its own lane (:mod:`wheelloader.planner.lanes`):
+    the same results and progress lines as one after another, in less wall time where the CPUs are free.
     """
     from wheelloader.estimator import ParameterError
     from wheelloader.estimator.checks import check_int
@@ -65,6 +68,12 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     if plant != "fee-env" and mpc:
         raise ParameterError("--mpc needs the env's feedback and runs only with the fee-env plant")
     seeds = check_int("seeds", seeds, minimum=1, maximum=MAX_SEEDS)
+    side_by_side = plant == "fee-env" and use_planner and not mpc
+    if jobs is None:
+        jobs = default_jobs(seeds) if side_by_side else 1
+    jobs = check_int("jobs", jobs, minimum=1, maximum=MAX_SEEDS)
+    if jobs > 1 and not side_by_side:
+        raise ParameterError("jobs > 1 needs the fee-env plant with the planner and without mpc")
     from wheelloader.adaptation import PRIOR_NAMES, hidden_default_soil
 
     prior = DEMO_PRIOR if prior is None else prior
@@ -82,29 +91,39 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     held = hold_margin_variants(False)
     try:
         return _run_demo(out, cycles, seed, use_planner, say, mpc, plant, resolution, window, seeds, prior, start,
-                         hidden, compiled)
+                         hidden, compiled, min(jobs, seeds))
     finally:
         hold_margin_variants(held)
 
 
 def _run_demo(out: Path, cycles: int, seed: int, use_planner: bool, say: Any, mpc: bool, plant: str,
               resolution: float, window: int | None, seeds: int, prior: str, start: float,
-              hidden: Any, compiled: bool = False) -> dict[str, Any]:
+              hidden: Any, compiled: bool = False, jobs: int = 1) -> dict[str, Any]:
     """:func:`run_demo` after its checks (with the NLP memory rule set)."""
     from wheelloader.adaptation import DEFAULT_WINDOW, NOMINAL_SOIL, default_planner
 
-    planner = default_planner(mpc=mpc, compiled=compiled) if use_planner else None
-    if planner is not None and not mpc:
-        from wheelloader.planner.memo import RememberedPlanner
+    def build_planner() -> Any:
+        planner = default_planner(mpc=mpc, compiled=compiled) if use_planner else None
+        if planner is not None and not mpc:
+            from wheelloader.planner.memo import RememberedPlanner
 
-        # every seed plans cycle 1 with the nominal soil on the same pile: that plan is solved once
-        planner = RememberedPlanner(planner)
-    runs = {}
-    for s in range(seed, seed + seeds):
-        if seeds > 1:
-            say(f"seed {s} ({s - seed + 1} of {seeds}):")
+            # every seed plans cycle 1 with the nominal soil on the same pile: that plan is solved once
+            planner = RememberedPlanner(planner)
+        return planner
+
+    def run_strategy(s: int, name: str, planner: Any, say_part: Any) -> tuple[list[Any], list[Any]]:
+        if name == "ours" and seeds > 1:
+            say_part(f"seed {s} ({s - seed + 1} of {seeds}):")
         cache = out / "cycles" if seeds == 1 else out / "cycles" / f"seed{s}"
-        runs[s] = _run_seed(cache, cycles, s, planner, plant, hidden, resolution, window, say, prior)
+        return _run_strategy(cache / name, cycles, s, name, planner, plant, hidden, resolution, window, say_part,
+                             prior)
+
+    order = list(range(seed, seed + seeds))
+    if jobs > 1:
+        planner, runs = _side_by_side(order, build_planner, run_strategy, say, jobs)
+    else:
+        planner = build_planner()
+        runs = {s: {name: run_strategy(s, name, planner, say) for name in STRATEGIES} for s in order}
     if planner is not None:
         from wheelloader.planner.nlp import release
 
@@ -140,30 +159,132 @@ def _run_demo(out: Path, cycles: int, seed: int, use_planner: bool, say: Any, mp
     return summary
 
 
-def _run_seed(cache: Path, cycles: int, seed: int, planner: Any, plant: str, hidden: Any, resolution: float,
-              window: int | None, say: Any, prior: str) -> dict[str, Any]:
-    """Both strategies' loops with one plant seed: ``{name: (records, logs)}`` (MPM cycles saved under
-    ``cache / name``)."""
+def default_jobs(seeds: int) -> int:
+    """Threads for ``seeds`` plant seeds side by side: one per CPU this process may run on, at most one per seed."""
+    import os
+
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return max(1, min(seeds, cpus))
+
+
+#: The demo's strategies, in the order of the summary, the table and the progress lines of each seed.
+STRATEGIES = ("ours", "fixed")
+
+
+def _side_by_side(order: list[int], build_planner: Any, run_strategy: Any, say: Any,
+                  jobs: int) -> tuple[Any, dict[int, dict[str, Any]]]:
+    """``(planner, {s: {name: run_strategy(s, name, planner, say_part)}})`` for the seeds in ``order``, ``jobs``
+    threads at a time, each seed in its own planner lane (:mod:`wheelloader.planner.lanes`).
+
+    Each thread digs its seed's fixed path first, while this thread builds the planner (CasADi lets go of
+    Python's lock while it differentiates), then ours. ``say_part`` prints in the order of a run one seed after
+    another (:class:`_Streams`). A Ctrl-C (or any error) cancels the lanes: their solves stop at the next
+    iterate, and the error is raised once the threads have ended.
+    """
+    import queue
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    from wheelloader.planner import lanes
+
+    cancel = threading.Event()
+    ready = threading.Event()
+    built: dict[str, Any] = {}
+    lines = _Streams([(s, name) for s in order for name in STRATEGIES], say, cancel)
+    free: queue.SimpleQueue[int] = queue.SimpleQueue()
+    for lane in range(jobs):
+        free.put(lane)
+
+    def work(s: int) -> dict[str, Any]:
+        lane = free.get()
+        try:
+            with lanes.lane(lane, cancel):
+                runs = {}
+                for name in reversed(STRATEGIES):  # the fixed path needs no planner: dug while it is built
+                    if name != "fixed":
+                        while not ready.wait(0.05):
+                            lines.check()
+                        if "planner" not in built:
+                            raise KeyboardInterrupt("the planner was not built")
+                    runs[name] = run_strategy(s, name, built.get("planner") if name != "fixed" else None,
+                                              lambda line, key=(s, name): lines.say(key, line))
+                    lines.done((s, name))
+                return {name: runs[name] for name in STRATEGIES}
+        finally:
+            free.put(lane)
+
+    pool = ThreadPoolExecutor(max_workers=jobs, thread_name_prefix="demo-seed")
+    try:
+        futures = {s: pool.submit(work, s) for s in order}
+        try:
+            built["planner"] = build_planner()
+        finally:
+            ready.set()
+        return built["planner"], {s: future.result() for s, future in futures.items()}
+    except BaseException:
+        cancel.set()
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+class _Streams:
+    """Progress lines of runs side by side, printed as a run one after another prints them: the lines of the
+    first unfinished stream (of ``order``) as they come, the later streams' held until every one before is done.
+    A line said after ``cancel`` is set raises ``KeyboardInterrupt`` instead (the run stops there)."""
+
+    def __init__(self, order: list[Any], say: Any, cancel: Any) -> None:
+        import threading
+
+        self.order, self.say_line, self.cancel = list(order), say, cancel
+        self.held: dict[Any, list[str]] = {key: [] for key in order}
+        self.finished: set[Any] = set()
+        self.lock = threading.Lock()
+
+    def check(self) -> None:
+        """Raise ``KeyboardInterrupt`` once the runs are cancelled."""
+        if self.cancel.is_set():
+            raise KeyboardInterrupt("the demo's runs were cancelled")
+
+    def say(self, key: Any, line: str) -> None:
+        self.check()
+        with self.lock:
+            if self.order and self.order[0] == key:
+                self.say_line(line)
+            else:
+                self.held[key].append(line)
+
+    def done(self, key: Any) -> None:
+        with self.lock:
+            self.finished.add(key)
+            while self.order and self.order[0] in self.finished:
+                self.order.pop(0)
+                if self.order:
+                    for line in self.held.pop(self.order[0]):
+                        self.say_line(line)
+
+
+def _run_strategy(cache: Path, cycles: int, seed: int, name: str, planner: Any, plant: str, hidden: Any,
+                  resolution: float, window: int | None, say: Any, prior: str) -> tuple[list[Any], list[Any]]:
+    """The loop of strategy ``name`` (``"ours"`` or ``"fixed"``) with one plant seed: ``(records, logs)`` (MPM
+    cycles saved under ``cache``)."""
     from wheelloader.adaptation import NOMINAL_SOIL, Calibrating, FixedBezier
     from wheelloader.estimator import Pile, preset
     from wheelloader.loop import run_loop
     from wheelloader.references import make_plant
 
+    strategy = (Calibrating(preset(NOMINAL_SOIL), planner=planner, window=window, prior=prior) if name == "ours"
+                else FixedBezier(preset(NOMINAL_SOIL)))
     # the FEE env digs every cycle in one env (its sensor noise seen raw); the MPM continuum saves each cycle
     settings = {"keep_env": True} if plant == "fee-env" else {"resolution": resolution}
-    results = {}
-    for strategy in (Calibrating(preset(NOMINAL_SOIL), planner=planner, window=window, prior=prior),
-                     FixedBezier(preset(NOMINAL_SOIL))):
-        say(f"running {cycles} cycles, strategy '{strategy.name}', plant {plant} ...")
-        digger = make_plant(plant, **settings)
-        try:
-            results[strategy.name] = run_loop(digger, strategy, Pile.trapezoid(), hidden, cycles=cycles, seed=seed,
-                                              cache=None if plant == "fee-env" else cache / strategy.name,
-                                              progress=say)
-        finally:
-            if hasattr(digger, "close"):
-                digger.close()
-    return results
+    say(f"running {cycles} cycles, strategy '{strategy.name}', plant {plant} ...")
+    digger = make_plant(plant, **settings)
+    try:
+        return run_loop(digger, strategy, Pile.trapezoid(), hidden, cycles=cycles, seed=seed,
+                        cache=None if plant == "fee-env" else cache, progress=say)
+    finally:
+        if hasattr(digger, "close"):
+            digger.close()
 
 
 def _spread(values: list[float], fmt: str) -> str:

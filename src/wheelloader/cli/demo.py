@@ -46,6 +46,9 @@ def register(subparsers: Any) -> None:
                    help="evaluate the planner's derivatives as C code compiled once per machine and cached with the "
                         "NLP cache (minutes of CPU the first time, then faster; the same table; needs a C compiler, "
                         "else CasADi's virtual machine with a warning)")
+    p.add_argument("--jobs", type=int, default=None,
+                   help="run the seeds side by side in this many threads (the same table and output; default: one "
+                        "per CPU available, at most --seeds; with the fee-env plant and the planner, without --mpc)")
     add_force_flag(p)
     p.set_defaults(func=run)
 
@@ -71,6 +74,10 @@ def run(args: argparse.Namespace) -> int:
         raise ParameterError(f"--resolution must be between 0.005 and 0.1 m, got {args.resolution}")
     if args.window is not None and args.window < 1:
         raise ParameterError(f"--window must be a positive number of cycles, got {args.window}")
+    if args.jobs is not None and not 1 <= args.jobs <= MAX_SEEDS:
+        raise ParameterError(f"--jobs must be between 1 and {MAX_SEEDS}, got {args.jobs}")
+    if args.jobs is not None and args.jobs > 1 and (args.plant != "fee-env" or args.mpc or args.no_planner):
+        raise ParameterError("--jobs above 1 needs the fee-env plant with the planner and without --mpc")
     if args.mpc and args.plant != "fee-env":
         raise ParameterError("--mpc needs the env's feedback and runs only with the fee-env plant")
     if args.plant == "mpm":
@@ -87,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
         summary = run_demo(staged, cycles=args.cycles, seed=args.seed, use_planner=not args.no_planner,
                            progress=lambda line: print(line, flush=True), mpc=args.mpc, plant=args.plant,
                            prior=args.prior, resolution=resolution, window=args.window, seeds=seeds,
-                           compiled=args.compiled)
+                           compiled=args.compiled, jobs=args.jobs)
     print()
     print(summary["table"])
     print()
