@@ -470,8 +470,8 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
         np.maximum(a, -1.0, out=a)
         np.minimum(a, 1.0, out=a)
         scale, rate_step, low, high = self._motion_constants()
-        pos = np.stack((self._x, self._z, self._th))
-        vel = np.stack((self._vx, self._vz, self._om))
+        pos = np.array((self._x, self._z, self._th))  # np.stack's values without its Python-level cost
+        vel = np.array((self._vx, self._vz, self._om))
         change = np.multiply(a, scale, out=a)
         change -= vel
         np.maximum(change, -rate_step, out=change)
@@ -601,22 +601,25 @@ class BucketLoadingVectorEnv(VectorApi, VectorEnv):
     # ------------------------------------------------------------------ observation
     def _observation(self) -> np.ndarray:
         cfg = self.cfg
-        n = self.num_envs
         look = cfg.lookahead
-        # float32 columns clipped to the float32 bounds: the same values as clipping in float64 and rounding after
-        # (rounding is monotone and the bounds are float32 numbers)
-        obs = np.empty((n, 12 + len(look)), dtype=np.float32)
-        np.stack((self._x, self._z, self._th, self._vx, self._vz, self._om, self._depth, self._rho, self._alpha,
-                  self._kept / cfg.bucket.capacity, self._mt * 1e-3, self._mn * 1e-3), axis=1, out=obs[:, :12])
+        # built as float32 rows (one per column, along the sub-envs), clipped to the float32 bounds there (the same
+        # values as clipping in float64 and rounding after: rounding is monotone and the bounds are float32
+        # numbers), then transposed in one copy
+        rows = np.empty((12 + len(look), self.num_envs), dtype=np.float32)
+        np.concatenate((self._x, self._z, self._th, self._vx, self._vz, self._om, self._depth, self._rho, self._alpha,
+                        self._kept / cfg.bucket.capacity, self._mt * 1e-3, self._mn * 1e-3), out=rows[:12].reshape(-1),
+                       casting="same_kind")
         if look:  # the look-ahead points as rows (k, n): every array operation runs along the sub-envs
             if self._look_col[0] is not look:
                 self._look_col = (look, np.array(look, dtype=float).reshape(-1, 1))
             ahead = self._look_col[1] + self._x
             h = self._surf.carved_height(ahead)
             h -= self._z
-            obs[:, 12:] = h.T
-        np.maximum(obs, self._low32, out=obs)  # clip
-        return np.minimum(obs, self._high32, out=obs)
+            rows[12:] = h
+        np.maximum(rows, self._low32[:, None], out=rows)  # clip
+        np.minimum(rows, self._high32[:, None], out=rows)
+        return rows.T.copy()
+
 
 def _pairs(noise: np.ndarray) -> np.ndarray:
     """The ``(n, NOISE_CHUNK, 2)`` draws as a flat view of ``(first, second)`` pairs (complex numbers): one gather
