@@ -70,9 +70,10 @@ class VectorApi:
         soils = [self._soils[i] for i in rows]
         values = np.zeros((len(PARAMETER_NAMES), self.num_envs))  # a row per parameter
         masks = np.repeat(mask[None, :], len(PARAMETER_NAMES) + 2, axis=0)  # fresh mask rows, one allocation
+        if soils:  # one assignment of a (parameter, row) table instead of one per parameter
+            values[:, rows] = np.array([[getattr(s, name) for s in soils] for name in PARAMETER_NAMES])
         soil: dict[str, np.ndarray] = {}
         for k, name in enumerate(PARAMETER_NAMES):
-            values[k, rows] = [getattr(s, name) for s in soils]
             soil[name], soil["_" + name] = values[k], masks[k]
         return {"soil": soil, "_soil": masks[-2], "cycle": np.zeros(self.num_envs, dtype=int), "_cycle": masks[-1]}
 

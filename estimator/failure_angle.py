@@ -159,6 +159,12 @@ def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
         arrays = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (alpha, rho, phi, delta)))
         shape = arrays[0].shape  # 0-d inputs are worked on as 1-d and given back in their shape
         alpha, rho, phi, delta = (np.ravel(v) for v in arrays)
+    with np.errstate(divide="ignore", invalid="ignore"):  # the slopes' cotangents and the steps divide
+        return _optimal_beta(alpha, rho, phi, delta, shape, options, tol, max_iter, guess, return_where)
+
+
+def _optimal_beta(alpha, rho, phi, delta, shape, options, tol, max_iter, guess, return_where):
+    """:func:`optimal_beta` on 1-d arrays (floating-point errors already silenced)."""
     s = rho + delta + phi
     lo, hi = (of_shape(v, alpha.shape) for v in beta_bounds(alpha, rho, phi, delta, options))
     m = alpha.size
@@ -170,14 +176,14 @@ def optimal_beta(alpha, rho, phi, delta, options: ModelOptions = DEFAULT_OPTIONS
     at_lo = g_lo >= 0.0
     at_hi = (g_hi <= 0.0) & ~at_lo
     inner = ~(at_lo | at_hi)
-    beta = np.array(np.where(at_lo, lo, hi), dtype=float)
-    if np.any(inner):
+    beta = np.where(at_lo, lo, hi)  # a new array
+    if inner.any():
         a, b, al, ss = lo[inner], hi[inner], alpha[inner], s[inner]
         ph = phi[inner] if isinstance(phi, np.ndarray) else phi
         if guess is None:
             x = _cold_starts(a, b, al, ph, ss)
         else:
-            g0 = np.broadcast_to(np.asarray(guess, dtype=float), alpha.shape)[inner]
+            g0 = of_shape(np.asarray(guess, dtype=float), alpha.shape)[inner]
             warm = (g0 > a) & (g0 < b)
             x = g0 if warm.all() else np.where(warm, g0, _cold_starts(a, b, al, ph, ss))
         beta[inner] = _bracketed_newton(x, a, b, al, ph, ss, tol, max_iter)
@@ -201,9 +207,8 @@ def _cold_starts(a, b, al, ph, ss) -> np.ndarray:
     np.add(t[0], ph, out=t[1])  # alpha + hi + phi
     t[2] = ss
     np.tan(t, out=t)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        np.divide(1.0, t[1:], out=t[1:])  # cot(alpha + hi + phi), cot(s)
-        x = cold_start(t[1] - t[0], t[2])
+    np.divide(1.0, t[1:], out=t[1:])  # cot(alpha + hi + phi), cot(s)
+    x = cold_start(t[1] - t[0], t[2])
     mid = a + b
     mid *= 0.5
     return np.where((x > a) & (x < b), x, mid)
@@ -218,8 +223,7 @@ def _slope_only(beta, alpha, phi, s):
     t[2] = beta
     np.add(beta, s, out=t[3])
     np.tan(t, out=t)
-    with np.errstate(divide="ignore"):
-        np.divide(1.0, t[1:], out=t[1:])
+    np.divide(1.0, t[1:], out=t[1:])
     g = t[1] - t[0]  # -t1 + c2
     g -= t[2]
     g -= t[3]
@@ -233,67 +237,67 @@ def _bracketed_newton(x, a, b, al, ph, ss, tol: float, max_iter: int) -> np.ndar
     shorter than ``tol`` or after ``max_iter`` steps. Its steps are :func:`halley_step`'s on
     :func:`log_ngamma_derivatives`, with the same roundings (``-t1 + c2`` computed as ``c2 - t1``,
     ``-t1*t1 - c2*c2`` as ``-(t1*t1 + c2*c2)``). Only the unconverged samples are iterated; the last few go through
-    :func:`_newton_tail`, which gives the same iterates bit for bit."""
+    :func:`_newton_tail`, which gives the same iterates bit for bit. Called with floating-point errors silenced
+    (:func:`optimal_beta`)."""
     out = np.empty_like(x)
     active = np.arange(x.size)
     per_sample_phi = isinstance(ph, np.ndarray)
     it = 0
-    with np.errstate(divide="ignore", invalid="ignore"):  # only the Newton step divides
-        while it < max_iter:
-            k = x.size
-            if k <= _TAIL:  # a NumPy iteration costs about 30 array calls whatever the samples' number
-                out[active] = _newton_tail(x.tolist(), a.tolist(), b.tolist(), al.tolist(),
-                                           ph.tolist() if per_sample_phi else [ph] * k, ss.tolist(), tol, max_iter - it)
-                return out
-            t = np.empty((4, k))
-            np.add(al, x, out=t[0])  # alpha + beta
-            np.add(t[0], ph, out=t[1])  # alpha + beta + phi
-            t[2] = x
-            np.add(x, ss, out=t[3])  # beta + s
-            np.tan(t, out=t)
-            np.divide(1.0, t[1:], out=t[1:])  # t1, c2, c3, c4
-            g = t[1] - t[0]
-            g -= t[2]
-            g -= t[3]
-            sq = t * t
-            dg = sq[0] + sq[1]
-            np.subtract(sq[2], dg, out=dg)
-            dg += sq[3]
-            sq += 1.0
-            sq *= t  # t (1 + t^2)
-            half = sq[1] - sq[0]  # d2g / 2
-            half -= sq[2]
-            half -= sq[3]
-            pos = g > 0.0
-            b = np.where(pos, x, b)
-            a = np.where(pos, a, x)
-            np.divide(g, dg, out=g)  # the Newton step n
-            np.divide(half, dg, out=half)
-            half *= g
-            fac = np.subtract(1.0, half, out=half)  # Halley's step is n / fac
-            ok = dg > 0.0
-            ok &= fac > 0.0
-            np.divide(g, fac, out=g)
-            newton = np.subtract(x, g, out=g)
-            # a step onto a bracket end is kept (the root then sits within rounding of that end)
-            ok &= newton >= a
-            ok &= newton <= b
-            mid = a + b
-            mid *= 0.5
-            x_new = np.where(ok, newton, mid)
-            step = np.subtract(x_new, x, out=mid)
-            np.abs(step, out=step)
-            going = step >= tol
-            out[active] = x_new
-            it += 1
-            left = np.count_nonzero(going)
-            if left == 0:
-                break
-            if left < k:
-                active, x_new, a, b, al, ss = (v[going] for v in (active, x_new, a, b, al, ss))
-                if per_sample_phi:
-                    ph = ph[going]
-            x = x_new
+    while it < max_iter:
+        k = x.size
+        if k <= _TAIL:  # a NumPy iteration costs about 30 array calls whatever the samples' number
+            out[active] = _newton_tail(x.tolist(), a.tolist(), b.tolist(), al.tolist(),
+                                       ph.tolist() if per_sample_phi else [ph] * k, ss.tolist(), tol, max_iter - it)
+            return out
+        t = np.empty((4, k))
+        np.add(al, x, out=t[0])  # alpha + beta
+        np.add(t[0], ph, out=t[1])  # alpha + beta + phi
+        t[2] = x
+        np.add(x, ss, out=t[3])  # beta + s
+        np.tan(t, out=t)
+        np.divide(1.0, t[1:], out=t[1:])  # t1, c2, c3, c4
+        g = t[1] - t[0]
+        g -= t[2]
+        g -= t[3]
+        sq = t * t
+        dg = sq[0] + sq[1]
+        np.subtract(sq[2], dg, out=dg)
+        dg += sq[3]
+        sq += 1.0
+        sq *= t  # t (1 + t^2)
+        half = sq[1] - sq[0]  # d2g / 2
+        half -= sq[2]
+        half -= sq[3]
+        pos = g > 0.0
+        b = np.where(pos, x, b)
+        a = np.where(pos, a, x)
+        np.divide(g, dg, out=g)  # the Newton step n
+        np.divide(half, dg, out=half)
+        half *= g
+        fac = np.subtract(1.0, half, out=half)  # Halley's step is n / fac
+        ok = dg > 0.0
+        ok &= fac > 0.0
+        np.divide(g, fac, out=g)
+        newton = np.subtract(x, g, out=g)
+        # a step onto a bracket end is kept (the root then sits within rounding of that end)
+        ok &= newton >= a
+        ok &= newton <= b
+        mid = a + b
+        mid *= 0.5
+        x_new = np.where(ok, newton, mid)
+        step = np.subtract(x_new, x, out=mid)
+        np.abs(step, out=step)
+        going = step >= tol
+        out[active] = x_new
+        it += 1
+        left = np.count_nonzero(going)
+        if left == 0:
+            break
+        if left < k:
+            active, x_new, a, b, al, ss = (v[going] for v in (active, x_new, a, b, al, ss))
+            if per_sample_phi:
+                ph = ph[going]
+        x = x_new
     return out
 
 

@@ -108,10 +108,11 @@ def bearing_factors(alpha, rho, beta, phi, delta):
     alpha, rho, beta = np.asarray(alpha, float), np.asarray(rho, float), np.asarray(beta, float)
     s_beta = np.sin(rho + delta + beta + phi)
     sin_beta = np.sin(beta)
-    n_gamma = np.cos(alpha + beta) * np.sin(alpha + beta + phi) / (2.0 * np.cos(alpha) * sin_beta * s_beta)  # eq 10
+    sab = np.sin(alpha + beta + phi)  # in eqs 10 and 13
+    n_gamma = np.cos(alpha + beta) * sab / (2.0 * np.cos(alpha) * sin_beta * s_beta)  # eq 10
     n_c = math.cos(phi) / (sin_beta * s_beta) if np.ndim(phi) == 0 else np.cos(phi) / (sin_beta * s_beta)  # eq 11
     n_a = -np.cos(rho + beta + phi) / (np.sin(rho) * s_beta)  # eq 12 (sin(beta+phi) cancelled)
-    n_q = np.sin(alpha + beta + phi) / s_beta  # eq 13
+    n_q = sab / s_beta  # eq 13
     return n_gamma, n_c, n_a, n_q
 
 
