@@ -56,6 +56,10 @@ def plant_from_args(args: argparse.Namespace) -> Any:
     from wheelloader.references import make_plant
 
     if args.plant == "mpm":
+        if args.taichi_threads is not None:  # Taichi runs this many threads; the lanes (and results): --threads
+            from wheelloader.references.mpm import taichi_module
+
+            taichi_module(args.taichi_threads)
         return make_plant("mpm", resolution=args.resolution, threads=args.threads)
     if args.plant == "dem":
         return make_plant("dem", scenario="ci" if args.quick else "default", threads=args.threads)
@@ -317,6 +321,9 @@ def main(argv: list[str] | None = None) -> int:
                              "strategies; rolled out in the env of its config.json's force model")
     parser.add_argument("--resolution", type=float, default=0.02, help="MPM grid spacing [m] (verified: 0.02)")
     parser.add_argument("--threads", type=int, default=1, help="Taichi CPU threads")
+    parser.add_argument("--taichi-threads", type=int, default=None, metavar="N",
+                        help="MPM plant: the CPU threads Taichi runs (default --threads); the results depend on "
+                             "--threads (the lanes the particles are split into) only")
     parser.add_argument("--no-planner", action="store_true", help="dig Bezier paths only")
     parser.add_argument("--failure-angle", choices=("min_n_gamma", "min_weight_force"), default="min_n_gamma",
                         help="beta* rule of ours' and the oracle's model (calibration, prediction, planner); "

@@ -9,7 +9,7 @@ package does not import Taichi; the first solver does (``pip install "wheelloade
 (optional extra ``mpm-newton``).
 """
 
-from ._backend import INSTALL_HINT, MPMUnavailableError, taichi_available
+from ._backend import INSTALL_HINT, MPMUnavailableError, initialised_threads, taichi_available, taichi_module
 from .plant import DEFAULT_RESOLUTION, MPMPlant, MPMSettings
 from .scene import SceneSettings
 from .soil import DEFAULT_YOUNGS_MODULUS, ContinuumSoil, jaky_poisson_ratio
@@ -18,5 +18,5 @@ from .tool import Plate, ToolShape, Trajectory, bucket_shape
 __all__ = [
     "DEFAULT_RESOLUTION", "DEFAULT_YOUNGS_MODULUS", "INSTALL_HINT", "ContinuumSoil", "MPMPlant", "MPMSettings",
     "MPMUnavailableError", "Plate", "SceneSettings", "ToolShape", "Trajectory", "bucket_shape", "jaky_poisson_ratio",
-    "taichi_available",
+    "initialised_threads", "taichi_available", "taichi_module",
 ]
