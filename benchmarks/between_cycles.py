@@ -19,6 +19,12 @@ NLPs' expressions are built then, inside the first plan that needs them), later 
 
 Run: ``python benchmarks/between_cycles.py --baseline REV [--current REV] [--rounds 2]
 [--out docs/results/between_cycles]``; ``--from-json`` rewrites the table from ``--out``'s ``between_cycles.json``.
+``--run JSON`` replays the loops of another ``plant_adaptation.py`` run with its settings (its JSON's ``settings``:
+prior, payload, descend clearance, look-ahead, ...; its saved cycles unless ``--cycles-dir``), e.g. the look-ahead
+arm of ``benchmarks/lookahead_mpm.sh``; ``--single`` replays the current version only. Each plan's CPU is split
+into its IPOPT solves (``TrajectoryOptimizer.solve``: IPOPT with its iteration callback's NumPy checks, the
+look-ahead's candidates and second cycles included) and the rest (the kept target, the final check, NLP builds,
+the look-ahead's scoring).
 """
 
 from __future__ import annotations
@@ -47,9 +53,31 @@ ORACLE_PARAMS = ROOT / "docs" / "results" / "loop_mpm" / "phase2" / "plant_adapt
 TARGET_S = 1.0
 
 
-def worker(loops: list[str], cycles_dir: Path, out: Path, cycles: int = LOOP_SETTINGS["cycles"]) -> int:
-    """Replay the first ``cycles`` cycles of ``loops`` in this process; write the calibrations' and plans' CPU,
-    iterations and NLP builds (and the imports' CPU) to ``out`` (JSON)."""
+def run_settings(run: Path) -> tuple[dict, Path]:
+    """:func:`wheelloader.loop.plant_loop_unit`'s loop keywords of a ``plant_adaptation.py`` run (its JSON's
+    ``settings``; ``cycles`` its cycles per loop) and the folder of its saved cycles."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        from plant_adaptation import payload_from
+    finally:
+        sys.path.pop(0)
+    from wheelloader.arguments import planner_physics
+
+    st = json.loads(run.read_text(encoding="utf-8"))["settings"]
+    payload = st.get("payload")
+    loop = {"cycles": int(st["cycles"]), "failure_angle": st["failure_angle"], "objective": st["objective"],
+            "fill_limit": st.get("fill_limit_used"), "lookahead": bool(st.get("lookahead", False)),
+            "prior": st.get("prior", "none"), "descend_clearance": st.get("descend_clearance"),
+            "payload": payload_from(None if payload is None else str(ROOT / payload)),
+            "force_model": st.get("force_model", "fee"), **planner_physics(argparse.Namespace(**st))}
+    return loop, ROOT / st["cycles_dir"]
+
+
+def worker(loops: list[str], cycles_dir: Path, out: Path, cycles: int = LOOP_SETTINGS["cycles"],
+           run: Path | None = None) -> int:
+    """Replay the first ``cycles`` cycles of ``loops`` in this process (the loop settings of ``run``'s
+    ``plant_adaptation.py`` JSON where given, else :data:`LOOP_SETTINGS`); write the calibrations' and plans' CPU,
+    iterations, IPOPT solves' CPU and NLP builds (and the imports' CPU) to ``out`` (JSON)."""
     cpu0 = time.process_time()
     import casadi
 
@@ -61,7 +89,8 @@ def worker(loops: list[str], cycles_dir: Path, out: Path, cycles: int = LOOP_SET
     from wheelloader.references import make_plant
     from wheelloader.saved_loops import load_saved_cycle, path_digest
 
-    event: dict = {"iterations": 0, "builds": 0, "build_cpu_s": 0.0, "folder": None}
+    settings = LOOP_SETTINGS if run is None else run_settings(run)[0]
+    event: dict = {"iterations": 0, "builds": 0, "build_cpu_s": 0.0, "solve_cpu_s": 0.0, "folder": None}
     rows: list[dict] = []
 
     def counted_nlpsol(*args, **kwargs):
@@ -73,17 +102,20 @@ def worker(loops: list[str], cycles_dir: Path, out: Path, cycles: int = LOOP_SET
             event["build_cpu_s"] += time.process_time() - tic
 
     def counted_solve(self, *args, **kwargs):
+        tic = time.process_time()
         plan = real_solve(self, *args, **kwargs)
+        event["solve_cpu_s"] += time.process_time() - tic
         event["iterations"] += int(plan.iterations)
         return plan
 
     def timed(kind, method):
         def wrapper(self, *args, **kwargs):
-            event.update(iterations=0, builds=0, build_cpu_s=0.0)
+            event.update(iterations=0, builds=0, build_cpu_s=0.0, solve_cpu_s=0.0)
             tic, wall = time.process_time(), time.perf_counter()
             result = method(self, *args, **kwargs)
             row = {"kind": kind, "cpu_s": time.process_time() - tic, "wall_s": time.perf_counter() - wall,
-                   "iterations": event["iterations"], "builds": event["builds"], "build_cpu_s": event["build_cpu_s"]}
+                   "iterations": event["iterations"], "builds": event["builds"], "build_cpu_s": event["build_cpu_s"],
+                   "solve_cpu_s": event["solve_cpu_s"]}
             if kind == "plan":
                 digest = None if result.path is None else path_digest(result.path)
                 saved = load_saved_cycle(event["folder"], sum(r["kind"] == "plan" for r in rows) + 1)
@@ -108,7 +140,7 @@ def worker(loops: list[str], cycles_dir: Path, out: Path, cycles: int = LOOP_SET
         extra = {"oracle_params": SoilParams.from_dict(oracle[soil]["params"])} if strategy == "oracle" else {}
         event["folder"] = cycles_dir / soil / f"seed{seed}" / strategy
         plant_loop_unit(plant, strategy, soil, seed=int(seed), stale="keep", planner=True, cache=event["folder"],
-                        **{**LOOP_SETTINGS, "cycles": cycles}, **extra)
+                        **{**settings, "cycles": cycles}, **extra)
         result["loops"][loop] = {"cpu_s": time.process_time() - tic, "events": list(rows)}
     out.write_text(json.dumps(result), encoding="utf-8")
     return 0
@@ -128,13 +160,14 @@ def between(events: list[dict]) -> list[dict]:
                        "cpu_s": calib["cpu_s"] + e["cpu_s"], "wall_s": calib["wall_s"] + e["wall_s"],
                        "iterations": e["iterations"], "nlp_builds": e["builds"] + calib["builds"],
                        "nlp_build_cpu_s": e["build_cpu_s"] + calib["build_cpu_s"], "plan_ok": e["ok"],
+                       "solve_cpu_s": e.get("solve_cpu_s", math.nan),
                        "message": e["message"], "digest": e.get("digest"), "as_dug": e.get("as_dug")})
         pending = None
     return cycles
 
 
 def run_worker(variant: str, pythonpath: str | None, loops: list[str], cycles_dir: Path, tmp: Path,
-               cycles: int = LOOP_SETTINGS["cycles"]) -> dict:
+               cycles: int = LOOP_SETTINGS["cycles"], run: Path | None = None) -> dict:
     """One replay in a fresh process (NLP disk cache ``tmp/nlp-VARIANT``); its rows and its CPU, wall, peak memory
     and load."""
     env = dict(os.environ, WHEELLOADER_NLP_CACHE=str(tmp / f"nlp-{variant}"))
@@ -145,7 +178,7 @@ def run_worker(variant: str, pythonpath: str | None, loops: list[str], cycles_di
     load = os.getloadavg()
     wall = time.perf_counter()
     command = [sys.executable, str(Path(__file__).resolve()), "--worker", str(out), "--cycles-dir", str(cycles_dir),
-               "--cycles", str(cycles), "--loops", *loops]
+               "--cycles", str(cycles), "--loops", *loops, *([] if run is None else ["--run", str(run)])]
     proc = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     output = proc.stdout.read().decode(errors="replace")
     _, status, usage = os.wait4(proc.pid, 0)
@@ -166,6 +199,9 @@ def summarise(run: dict) -> dict:
     med = (lambda key: statistics.median(c[key] for c in cycles)) if cycles else (lambda key: math.nan)  # noqa: E731
     return {"cycles": len(cycles), "cpu_s_median": med("cpu_s"), "calibration_cpu_s_median": med("calibration_cpu_s"),
             "plan_cpu_s_median": med("plan_cpu_s"), "iterations_median": med("iterations"),
+            "solve_cpu_s_median": med("solve_cpu_s"),
+            "plan_rest_cpu_s_median": statistics.median(c["plan_cpu_s"] - c["solve_cpu_s"] for c in cycles)
+            if cycles and all("solve_cpu_s" in c for c in cycles) else math.nan,
             "cpu_s_max": max((c["cpu_s"] for c in cycles), default=math.nan),
             "cpu_s_total": sum(c["cpu_s"] for c in cycles),
             "nlp_builds": sum(c["nlp_builds"] for c in cycles),
@@ -206,11 +242,26 @@ def markdown(data: dict) -> str:
             cells = []
             for run in last.values():
                 o = run["loops"][name]["cycles"][k]
-                cells.append(f"{o['cpu_s']:.2f} s ({o['calibration_cpu_s']:.2f} + {o['plan_cpu_s']:.2f}), "
-                             f"{o['iterations']} it., {o['nlp_builds']}" + ("" if o["plan_ok"] else ", plan failed"))
+                solve = o.get("solve_cpu_s")
+                cells.append(f"{o['cpu_s']:.2f} s ({o['calibration_cpu_s']:.2f} + {o['plan_cpu_s']:.2f}"
+                             + ("" if solve is None or math.isnan(solve) else f", IPOPT solves {solve:.2f}")
+                             + f"), {o['iterations']} it., {o['nlp_builds']}"
+                             + ("" if o["plan_ok"] else ", plan failed"))
             lines.append(f"| {name} | {c['cycle']} | " + " | ".join(cells) + " |")
-    lines += ["", f"*`python benchmarks/between_cycles.py --baseline {data['baseline']}` (baseline = "
-              f"{data['baseline_commit'][:10]}, current = {data['current_commit'][:10]}); CPU seconds of this "
+    solves = [run["summary"].get("solve_cpu_s_median") for run in data["runs"]]
+    if any(v is not None and not math.isnan(v) for v in solves):
+        lines += ["", "| round | version | between cycles, CPU median | calibration | plan | of the plan: IPOPT "
+                  "solves | of the plan: the rest |", "|" + "---|" * 7]
+        for run in data["runs"]:
+            s = run["summary"]
+            lines.append(f"| {run['round']} | {run['variant']} | {s['cpu_s_median']:.2f} s | "
+                         f"{s['calibration_cpu_s_median']:.2f} s | {s['plan_cpu_s_median']:.2f} s | "
+                         f"{s['solve_cpu_s_median']:.2f} s | {s['plan_rest_cpu_s_median']:.2f} s |")
+    command = (f"--baseline {data['baseline']}" if "run" not in data else
+               f"--run {data['run']} --single --loops {' '.join(data['loops'])}")
+    versions = (f"current = {data['current_commit'][:10]}" if "run" in data else
+                f"baseline = {data['baseline_commit'][:10]}, current = {data['current_commit'][:10]}")
+    lines += ["", f"*`python benchmarks/between_cycles.py {command}` ({versions}); CPU seconds of this "
               f"process (`time.process_time`); target {TARGET_S:g} s median (#33).*"]
     return "\n".join(lines)
 
@@ -225,9 +276,10 @@ def side_by_side(args: argparse.Namespace) -> dict:
         commit, pkg = package_at_revision(ROOT, args.baseline, tmp / "baseline")
         current, current_pkg = package_at_revision(ROOT, args.current, tmp / "current")
         reference = None
+        variants = (("current", current_pkg),) if args.single else (("baseline", pkg), ("current", current_pkg))
         for rnd in range(1, args.rounds + 1):
-            for variant, path in (("baseline", pkg), ("current", current_pkg)):
-                run = run_worker(variant, str(path), args.loops, args.cycles_dir, tmp, args.cycles)
+            for variant, path in variants:
+                run = run_worker(variant, str(path), args.loops, args.cycles_dir, tmp, args.cycles, args.run)
                 reference = reference or run
                 run.update(round=rnd, nlp_cache="empty" if rnd == 1 else "filled", summary=summarise(run))
                 run["summary"]["plans_as_first_baseline"] = same_plans(run, reference)
@@ -238,7 +290,9 @@ def side_by_side(args: argparse.Namespace) -> dict:
                       f"{s['iterations_median']:.0f} it., NLPs built {s['nlp_builds']} "
                       f"({s['nlp_build_cpu_s']:.1f} s), load {run['load_before'][0]:.1f}", flush=True)
     return {"baseline": args.baseline, "baseline_commit": commit, "current": args.current, "current_commit": current,
-            "loops": list(args.loops), "settings": {**LOOP_SETTINGS, "cycles": args.cycles}, "runs": runs}
+            "loops": list(args.loops), "runs": runs,
+            "settings": {**(LOOP_SETTINGS if args.run is None else run_settings(args.run)[0]), "cycles": args.cycles},
+            **({} if args.run is None else {"run": str(args.run)})}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -249,23 +303,33 @@ def main(argv: list[str] | None = None) -> int:
                         help="rounds of baseline and current (default 2: the first with empty NLP disk caches)")
     parser.add_argument("--loops", nargs="+", default=list(DEFAULT_LOOPS), metavar="SOIL/SEED/STRATEGY",
                         help="the committed loops to replay (default: %(default)s)")
-    parser.add_argument("--cycles", type=int, default=LOOP_SETTINGS["cycles"],
-                        help="replay the first CYCLES cycles of each loop (default %(default)s)")
-    parser.add_argument("--cycles-dir", type=Path, default=CYCLES, help="the saved cycles (default: the committed)")
+    parser.add_argument("--cycles", type=int, default=None,
+                        help="replay the first CYCLES cycles of each loop (default: all, 5 or --run's)")
+    parser.add_argument("--cycles-dir", type=Path, default=None,
+                        help="the saved cycles (default: the committed, or --run's)")
+    parser.add_argument("--run", type=Path, default=None, metavar="JSON",
+                        help="replay with the loop settings of this plant_adaptation.py run (its JSON)")
+    parser.add_argument("--single", action="store_true", help="replay the current version only (no baseline)")
     parser.add_argument("--out", type=Path, default=None, help="write between_cycles.json and table.md here")
     parser.add_argument("--from-json", action="store_true", help="rewrite --out's table.md from its JSON")
     parser.add_argument("--worker", type=Path, default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.run is not None and not args.run.is_file():
+        parser.error(f"--run {args.run}: no such file")
+    most, saved = (LOOP_SETTINGS["cycles"], CYCLES) if args.run is None else (
+        run_settings(args.run)[0]["cycles"], run_settings(args.run)[1])
+    args.cycles = most if args.cycles is None else args.cycles
+    args.cycles_dir = saved if args.cycles_dir is None else args.cycles_dir
     if args.worker is not None:
-        return worker(args.loops, args.cycles_dir, args.worker, args.cycles)
+        return worker(args.loops, args.cycles_dir, args.worker, args.cycles, args.run)
     for loop in args.loops:
         parts = loop.split("/")
         if len(parts) != 3 or parts[2] not in ("ours", "oracle") or not parts[1].isdigit():
             parser.error(f"a loop is SOIL/SEED/ours or SOIL/SEED/oracle, got {loop!r}")
     if args.rounds < 1:
         parser.error("--rounds must be at least 1")
-    if not 1 <= args.cycles <= LOOP_SETTINGS["cycles"]:
-        parser.error(f"--cycles must be 1 to {LOOP_SETTINGS['cycles']}")
+    if not 1 <= args.cycles <= most:
+        parser.error(f"--cycles must be 1 to {most}")
     if args.from_json:
         if args.out is None:
             parser.error("--from-json needs --out")
