@@ -56,21 +56,23 @@ TARGET_S = 1.0
 def run_settings(run: Path) -> tuple[dict, Path]:
     """:func:`wheelloader.loop.plant_loop_unit`'s loop keywords of a ``plant_adaptation.py`` run (its JSON's
     ``settings``; ``cycles`` its cycles per loop) and the folder of its saved cycles."""
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    try:
-        from plant_adaptation import payload_from
-    finally:
-        sys.path.pop(0)
     from wheelloader.arguments import planner_physics
+    from wheelloader.estimator import PayloadOptions
 
     st = json.loads(run.read_text(encoding="utf-8"))["settings"]
     payload = st.get("payload")
     loop = {"cycles": int(st["cycles"]), "failure_angle": st["failure_angle"], "objective": st["objective"],
             "fill_limit": st.get("fill_limit_used"), "lookahead": bool(st.get("lookahead", False)),
             "prior": st.get("prior", "none"), "descend_clearance": st.get("descend_clearance"),
-            "payload": payload_from(None if payload is None else str(ROOT / payload)),
+            "payload": None if payload is None else _payload(ROOT / payload, PayloadOptions),
             "force_model": st.get("force_model", "fee"), **planner_physics(argparse.Namespace(**st))}
     return loop, ROOT / st["cycles_dir"]
+
+
+def _payload(path: Path, options: type) -> dict:
+    """The payload state of a run's ``--payload`` JSON (``transfer.json``'s ``"payload"``, or the file itself)."""
+    data = json.loads(path.read_text(encoding="utf-8"))
+    return options.from_dict(data.get("payload", data) if isinstance(data, dict) else data).to_dict()
 
 
 def worker(loops: list[str], cycles_dir: Path, out: Path, cycles: int = LOOP_SETTINGS["cycles"],

@@ -8,7 +8,7 @@ planner's ``lookahead`` differs. Every figure is the plant's:
 
 * energy per m³ kept: the plant's work along the path plus the lift of what the bucket holds at the end from the
   path's end height to the fixed path's end height (:func:`wheelloader.planner.kept.dump_height`, 1.20 m), over the
-  plant's kept fill, pooled over a loop's cycles (``loop_mpm_report.lifted``);
+  plant's kept fill, pooled over a loop's cycles (:func:`wheelloader.references.metrics.lifted_work`);
 * cycles to move ``--volume`` m³ of kept soil (the first cycle at which the kept volume summed from cycle 1 reaches
   it; None, "> cycles dug", where the loop's cycles do not);
 * the gain: the look-ahead's energy per m³ kept over greedy's on the same soil and seed, minus 1 (negative: the
@@ -17,7 +17,7 @@ planner's ``lookahead`` differs. Every figure is the plant's:
   the IPOPT iterations of the plan (greedy: its solve and re-plans, from the plan's message; the look-ahead: every
   candidate's and every second cycle's plans, from its message), from cycle 2;
 * failures: plans that failed the NumPy check (the loop dug the Bezier fallback) and cycles whose raw plant force
-  exceeded the loader's limits (``loop_mpm_report.plant_failures``).
+  exceeded the loader's limits (:func:`wheelloader.references.metrics.above_loader_limits`).
 
 Only the cycles both arms dug count in a comparison (a run cut short compares its complete pairs of cycles).
 
@@ -30,7 +30,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import math
 import re
@@ -51,16 +50,6 @@ PLAN_ITERATIONS = re.compile(r"IPOPT (?:\S+ in (\d+) it\.|iterate \d+ of (\d+))"
 #: The look-ahead's choice in its plan's message (planner/lookahead.py).
 CHOICE = re.compile(r"look-ahead chose (?P<name>.+?) \((?P<costs>.+?) kJ/m\^3 kept over two cycles; "
                     r"(?P<iterations>\d+) IPOPT it")
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def _loop_mpm_report() -> Any:
-    """``benchmarks/loop_mpm_report.py`` (its ``lifted`` energy and ``plant_failures``)."""
-    spec = importlib.util.spec_from_file_location("wheelloader_benchmark_loop_mpm_report",
-                                                  ROOT / "benchmarks" / "loop_mpm_report.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def arm_rows(out: Path, arm: str) -> tuple[list[dict[str, Any]], dict[str, Any]]:
@@ -101,9 +90,9 @@ def predicted_gain(message: str) -> tuple[str, float] | None:
 def collect(out: Path, cycles: Path) -> dict[str, Any]:
     """Per cycle rows of both arms with the lifted energy and the plant's failures."""
     from wheelloader.planner.kept import dump_height
+    from wheelloader.references.metrics import above_loader_limits, lifted_work
     from wheelloader.saved_loops import load_saved_cycle
 
-    lmr = _loop_mpm_report()
     z_ref = dump_height()
     rows, runs = [], {}
     for arm in ARMS:
@@ -116,8 +105,9 @@ def collect(out: Path, cycles: Path) -> dict[str, Any]:
             row = {"arm": arm, **{k: r[k] for k in ("soil", "seed", "cycle", "fill_m3", "energy_J", "plan_ok",
                                                      "plan_message", "calibration_s", "planning_s",
                                                      "prediction_rmse_percent")}}
-            row.update(lmr.plant_failures(log), capacity_m3=log.bucket.capacity, z_end=float(log.path.z[-1]),
-                       lifted_J=lmr.lifted(r["energy_J"], r["fill_m3"], log, z_ref, r["soil"]),
+            row.update(above_limits=above_loader_limits(log), capacity_m3=log.bucket.capacity,
+                       z_end=float(log.path.z[-1]), lifted_J=lifted_work(r["energy_J"], r["fill_m3"], log, z_ref,
+                                                                         r["soil"]),
                        iterations=plan_iterations(arm, r["plan_message"]))
             rows.append(row)
     rows.sort(key=lambda r: (r["soil"], r["seed"], ARMS.index(r["arm"]), r["cycle"]))

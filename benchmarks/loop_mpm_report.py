@@ -52,13 +52,11 @@ def _folder(strategy: str) -> str:
 
 
 def lifted(energy_j: float, fill_m3: float, log: Any, z_ref: float, soil: str) -> float:
-    """The cycle's energy with its load lifted from the path's end to ``z_ref`` [J] (credited when above); density
-    the continuum's where the log has one, else the soil preset's (as ``plant_adaptation.py``)."""
-    from wheelloader.estimator import preset
-    from wheelloader.estimator.force_model import GRAVITY
+    """The cycle's energy with its load lifted from the path's end to ``z_ref`` [J]
+    (:func:`wheelloader.references.metrics.lifted_work`)."""
+    from wheelloader.references.metrics import lifted_work
 
-    density = float((log.metadata.get("continuum") or {}).get("density") or preset(soil).gamma)
-    return energy_j + density * GRAVITY * fill_m3 * (z_ref - float(log.path.z[-1]))
+    return lifted_work(energy_j, fill_m3, log, z_ref, soil)
 
 
 def floor_percent(log: Any, failure_angle: str) -> float:
@@ -77,8 +75,6 @@ def floor_percent(log: Any, failure_angle: str) -> float:
 PHASES = ("phase1", "phase2", "phase3", "phase4", "loops", "rl", "rl_closed")
 #: The strategies whose rows come first in the tables, in this order; the others (policies) follow as found.
 PLANNED = ("fixed", "ours", "oracle")
-#: The loader's force limits [N] (``Loader().max_push_force``, ``max_lift_force``: the env's stall rule).
-FORCE_LIMITS = (20_000.0, 25_000.0)
 
 
 def strategies(rows: list[dict[str, Any]]) -> list[str]:
@@ -89,10 +85,12 @@ def strategies(rows: list[dict[str, Any]]) -> list[str]:
 
 def plant_failures(log: Any) -> dict[str, Any]:
     """What the log says beyond the loop's record: whether a raw sample of the plant's force exceeded the loader's
-    limits, and how a closed-loop cycle ended (None for a path)."""
+    limits (:func:`wheelloader.references.metrics.above_loader_limits`), and how a closed-loop cycle ended (None for
+    a path)."""
+    from wheelloader.references.metrics import above_loader_limits
+
     closed = log.metadata.get("closed_loop") or {}
-    above = bool(max(float(log.tangential.max()), 0.0) > FORCE_LIMITS[0] or float(log.normal.max()) > FORCE_LIMITS[1])
-    return {"above_limits": above, "end": closed.get("end")}
+    return {"above_limits": above_loader_limits(log), "end": closed.get("end")}
 
 
 def _latest_loops(out: Path) -> dict[str, Any]:

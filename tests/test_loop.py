@@ -17,7 +17,7 @@ from wheelloader.loop import Hindsight, hindsight_parameters, run_loop
 from wheelloader.planner import PlanOutcome
 from wheelloader.references import Plant
 from wheelloader.references.fee_env import FEEEnvPlant
-from wheelloader.references.metrics import cycle_work, world_force
+from wheelloader.references.metrics import cycle_work, lifted_work, world_force
 from wheelloader.saved_loops import path_digest, path_distance
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -48,6 +48,20 @@ def test_cycle_work_known_answer():
     # a carried 200 N load lifted 0.3 m costs 60 J more (force on the bucket pointing down: F_N = W cos a)
     log2 = _log(np.zeros_like(t), np.full_like(t, 200.0), np.zeros_like(t), np.zeros_like(t), 0.15 * t, t)
     assert cycle_work(log2) == pytest.approx(60.0, rel=1e-9)
+
+
+
+def test_lifted_work_adds_the_kept_loads_lift_to_the_common_height():
+    # the path ends at 0.3 m; 0.1 m^3 of soil of density 1600 lifted on to 1.2 m: 1600 g 0.1 0.9 J more
+    t = np.linspace(0.0, 2.0, 121)
+    log = _log(np.zeros_like(t), np.zeros_like(t), np.zeros_like(t), np.zeros_like(t), 0.15 * t, t)
+    log.metadata["continuum"] = {"density": 1600.0}
+    assert lifted_work(500.0, 0.1, log, 1.2, "gravel") == pytest.approx(500.0 + 1600.0 * 9.81 * 0.1 * 0.9, rel=1e-3)
+    # a path ending above the common height is credited the lift it did not need; without the continuum's
+    # density the soil preset's gamma is used
+    del log.metadata["continuum"]
+    assert lifted_work(500.0, 0.1, log, 0.2, "gravel") == pytest.approx(
+        500.0 - preset("gravel").gamma * 9.81 * 0.1 * 0.1, rel=1e-3)
 
 
 def test_fee_env_plant_is_a_plant_and_carves():

@@ -37,3 +37,24 @@ def cycle_work(log: CycleLog) -> float:
     vz = np.gradient(np.asarray(log.path.z, dtype=float), t)
     power = -(fx * vx + fz * vz)
     return float(np.sum(0.5 * (power[1:] + power[:-1]) * np.diff(t)))
+
+
+def lifted_work(energy_j: float, fill_m3: float, log: CycleLog, z_ref: float, soil: str) -> float:
+    """A cycle's energy with its kept load lifted from the path's end height to ``z_ref`` [J] (credited where the
+    path ends above it): ``energy_j + rho g V (z_ref - z_end)``; density the continuum's where the log records one
+    (the MPM plant's ``metadata["continuum"]``), else the soil preset's ``gamma`` [kg/m^3]."""
+    from wheelloader.estimator import preset
+    from wheelloader.estimator.force_model import GRAVITY
+
+    density = float((log.metadata.get("continuum") or {}).get("density") or preset(soil).gamma)
+    return energy_j + density * GRAVITY * fill_m3 * (z_ref - float(log.path.z[-1]))
+
+
+def above_loader_limits(log: CycleLog) -> bool:
+    """Whether a raw sample of the plant's force exceeded the loader's limits (F_T above ``Loader().max_push_force``
+    or F_N above ``max_lift_force``, the env's stall rule): the loader would have stalled there."""
+    from wheelloader.estimator import Loader
+
+    loader = Loader()
+    return bool(max(float(np.max(log.tangential)), 0.0) > loader.max_push_force
+                or float(np.max(log.normal)) > loader.max_lift_force)
