@@ -4,10 +4,13 @@
 
     python benchmarks/fee_learned.py --out estimator/learned_weights
 
-One command: it reads the continuum (MPM) cycles, splits them by case family, fits the payload and the
-correction on the training families only, and writes ``fee-learned.json`` (the weights, the payload, the
-manifest with the split) and ``manifest.json`` (the same manifest, readable alone) and ``report.json`` (the
-forms compared side by side). NumPy + SciPy only.
+One command: it reads the continuum (MPM) cycles, splits them by case family, takes the payload
+``benchmarks/transfer.py`` chooses (:func:`transfer_payload`: its recipe, fitted to its training and extra cycles,
+chosen on its validation loops; so the kept fill ``fee-learned`` predicts is the validated one; its extra cycles
+hold the ``data/learn`` cycles its ``manifest.json`` lists, validation groups included: their kept fill, never
+their forces), fits the correction on the training families only, and writes ``fee-learned.json`` (the
+weights, the payload, the manifest with the split) and ``manifest.json`` (the same manifest, readable alone) and
+``report.json`` (the forms compared side by side). NumPy + SciPy only.
 
 Split by case family (soil x pile x path family), never by sample:
 
@@ -60,7 +63,7 @@ from wheelloader.estimator.learned import (
     force_scale,
     learned_inputs,
 )
-from wheelloader.estimator.payload import PayloadOptions, fit_payload, payload_contact_state
+from wheelloader.estimator.payload import PayloadOptions, payload_contact_state
 from wheelloader.provenance import machine_info
 from wheelloader.references.filtering import filtered
 
@@ -74,7 +77,7 @@ SEED = 0
 ENSEMBLE = 3
 #: The loop cycles' share of the training weight (carved piles in two soils: not the test's path family).
 LOOP_SHARE = 0.2
-VERSION = "3"
+VERSION = "4"
 COMMAND = "python benchmarks/fee_learned.py --out estimator/learned_weights"
 TEST_ROWS = {"gravel": "gravel", "sand": "sand", "modified_sand": "modified_sand (unseen soil)",
              "dirt": "dirt (held-out soil)", "gravel_slope25": "25 deg pile (held-out pile)"}
@@ -117,6 +120,34 @@ def split(data: Path, results: Path, learn: Path) -> dict:
             "train": {**train, **loops}, "train_learn": train, "train_loops": loops,
             "validation": {**val, **val_loops}, "validation_learn": val, "validation_loops": val_loops,
             "test": test, "dropped_as_test_copies": dropped}
+
+
+def _benchmark(name: str):
+    """Another benchmark script of this folder, imported as a module (the benchmarks are not a package)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(f"wheelloader_benchmark_{name}",
+                                                  Path(__file__).with_name(f"{name}.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def transfer_payload(data: Path, results: Path) -> tuple[PayloadOptions, dict]:
+    """The payload ``benchmarks/transfer.py`` chooses (its :func:`split` and :func:`select_payload`: the candidate
+    recipe whose kept fill predicts its validation loops best, fitted to its training loops and, where the recipe
+    says so, its ``payload_extra`` cycles; test copies dropped), and the chosen recipe."""
+    tr = _benchmark("transfer")
+    parts = tr.split(data, results)
+    train = [tr.Pair(p) for p in parts["train"]]
+    validation = [tr.Pair(p) for p in parts["validation"]]
+    test = {k: [tr.Pair(p) for p in v] for k, v in parts["test"].items()}
+    extra = [CycleLog.load(p) for p in parts["payload_extra"]]
+    payload, selection = tr.select_payload(train, extra, validation, test)
+    chosen = selection["candidates"][selection["chosen"]]
+    recipe = {k: chosen[k] for k in ("cycles", "samples", "curl", "max_kept_ratio", "validation_median")}
+    return payload, {"recipe": recipe, "by": "benchmarks/transfer.py (select_payload, chosen on its validation loops)",
+                     "train_cycles": len(train), "extra_cycles": len(extra)}
 
 
 def load(files: list[str]) -> list[CycleLog]:
@@ -313,8 +344,8 @@ def main(argv: list[str] | None = None) -> int:
     train_files = [f for files in parts["train"].values() for f in files]
     print(f"train {len(train_files)} cycles in {len(parts['train'])} groups; validation "
           f"{sum(map(len, parts['validation'].values()))}; test {sum(map(len, parts['test'].values()))}", flush=True)
-    payload = fit_payload([CycleLog.load(f) for f in train_files])
-    print(f"payload {payload}", flush=True)
+    payload, payload_source = transfer_payload(args.data, args.results)
+    print(f"payload {payload} ({payload_source['recipe']})", flush=True)
     train = collect(parts["train_learn"], payload, "train")
     loops = collect(parts["train_loops"], payload, "train loops")
     val = collect(parts["validation_learn"], payload, "validation")
@@ -354,7 +385,7 @@ def main(argv: list[str] | None = None) -> int:
                         "contact smoothstep",
                 "chosen_by": "the lower median F_R RMSE from one cycle on the data/learn validation groups (forms)",
                 "inputs": list(INPUT_NAMES), "trusted_range": {"low": model.low.tolist(), "high": model.high.tolist()},
-                "payload": payload.to_dict(), "split": parts,
+                "payload": payload.to_dict(), "payload_source": payload_source, "split": parts,
                 "one_cycle_soils": {g["group"]: g["soils"] for g in train + loops + val + val_loops + test},
                 "training_samples": forms[chosen]["training_samples"], "forms": forms, "sigma_s": SIGMA,
                 "stride": STRIDE, "cross": CROSS}

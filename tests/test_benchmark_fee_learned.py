@@ -95,3 +95,15 @@ def test_the_loop_cycles_weigh_their_share():
     assert len(x) == 200 and w.sum() == pytest.approx(1.0)
     assert w[60:].sum() == pytest.approx(0.2)
     assert len(fl.stack(learn, loops=loops, loop_share=0.0)[0]) == 60
+
+
+def test_the_shipped_weights_keep_the_payload_the_transfer_benchmark_chooses():
+    # fee-learned's kept fill is the validated one: its payload is transfer.py's choice (docs/results/transfer)
+    import json
+
+    from wheelloader.estimator.payload import PayloadOptions
+
+    manifest = default_learned_model().manifest
+    chosen = json.loads((ROOT / "docs" / "results" / "transfer" / "transfer.json").read_text())["payload"]
+    assert default_learned_model().payload == PayloadOptions.from_dict(chosen)
+    assert manifest["payload_source"]["recipe"]["cycles"] == "train + extra"

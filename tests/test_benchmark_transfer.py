@@ -73,6 +73,23 @@ def test_the_payloads_extra_cycles_hold_no_test_family_and_no_held_out_soil_or_p
     assert {"cycles": "train", "samples": "path", "curl": False, "max_kept_ratio": None} in module.PAYLOAD_CANDIDATES
 
 
+def test_the_band_is_scaled_on_whole_learning_groups_no_model_trains_on():
+    from wheelloader.estimator.learned import default_learned_model
+
+    split = _split()
+    groups = split["band_validation"]
+    assert len(groups) >= 3 and all(len(files) == 3 for files in groups.values())
+    files = [f for fs in groups.values() for f in fs]
+    assert all(Path(ROOT / f).is_file() and "/learn/" in f for f in files)
+    test = [p for paths in split["test"].values() for p in paths]
+    assert set(files).isdisjoint(test + split["train"] + split["validation"])
+    learned = default_learned_model().manifest["split"]
+    trained = {Path(f).name for fs in learned["train"].values() for f in fs}
+    assert not trained & {Path(f).name for f in files}
+    # whole groups: every cycle of a held-out group (one soil, pile and edge), none of another
+    assert {Path(f).name[:7] for f in files}.isdisjoint({Path(f).name[:7] for f in trained})
+
+
 def test_band_scale_is_the_smallest_reaching_the_level():
     import numpy as np
 
@@ -83,6 +100,22 @@ def test_band_scale_is_the_smallest_reaching_the_level():
     # the median prediction (ratios |N(0, 1)|) holds 90 % of its samples from its 360th smallest ratio on
     assert k == pytest.approx(float(np.sort(records[1]["ratios"])[359]), rel=1e-6)
 
+
+
+def test_band_scale_of_families_weighs_each_family_the_same():
+    import numpy as np
+
+    module = _load("transfer")
+    rng = np.random.default_rng(1)
+    small = [{"ratios": np.abs(rng.normal(size=400)) * 2.0} for _ in range(3)]
+    large = [{"ratios": np.abs(rng.normal(size=400)) * 0.5} for _ in range(30)]
+    assert module.band_scale_families([large]) == pytest.approx(module.band_scale(large), rel=1e-12)
+    k = module.band_scale_families([small, large])
+    coverage = [np.median([np.mean(r["ratios"] <= k) for r in fam]) for fam in (small, large)]
+    assert np.mean(coverage) >= 0.9 > np.mean([np.median([np.mean(r["ratios"] <= 0.999 * k) for r in fam])
+                                              for fam in (small, large)])
+    # pooled, the ten times larger family would decide the scale; as families, the small one pulls it up
+    assert k > module.band_scale(small + large)
 
 
 def test_the_shipped_manifest_is_the_split():

@@ -260,9 +260,19 @@ def test_planner_plans_and_checks_with_the_model(name):
         assert out.check.fill == out.check.carved
         model_end = out.plan.fill[-1]
     else:
-        assert out.check.fill == pytest.approx(float(kept_volume(out.check.carved, cap, payload)), rel=1e-12)
-        assert out.check.fill < 0.8 * out.check.carved and out.check.fill <= payload.heap_factor * cap
-        model_end = float(kept_volume(out.plan.fill[-1], cap, payload))
+        # the heap sees the blade angle as the tip leaves the soil where the payload has a curl term
+        exit_angle = 0.0
+        if payload.curl_gain != 0.0:
+            from wheelloader.estimator import Bucket
+            from wheelloader.estimator.payload import exit_angle_profile
+
+            depth = contact_state(out.path.x, out.path.z, out.path.blade_angle, pile, Bucket()).depth
+            exit_angle = float(exit_angle_profile(out.path.blade_angle, depth)[-1])
+        heaped = max(payload.heap_factor + payload.curl_gain * np.sin(exit_angle), 0.0) * cap
+        assert out.check.fill == pytest.approx(float(kept_volume(out.check.carved, cap, payload, 0.0, exit_angle)),
+                                               rel=1e-9)
+        assert out.check.fill < 0.8 * out.check.carved and out.check.fill <= heaped
+        model_end = float(kept_volume(out.plan.fill[-1], cap, payload, 0.0, exit_angle))
     assert out.check.fill == pytest.approx(model_end, rel=0.1)  # the NLP's smooth surface against the pile's
     assert f"predicted fill {out.check.fill / cap:.0%}" in out.message
     if name == "fee-learned":  # inside the correction's trusted depth and speed (the NLP's smooth surface: 1 cm)
@@ -370,7 +380,7 @@ def test_adaptation_loop_calibrates_predicts_and_plans_with_one_model(name):
     assert asked == [{"force_model": name, "payload": payload}] * 3
     assert records[2].prediction_rmse_percent < 8.0
     assert records[2].fill_fraction == pytest.approx(logs[2].fill_volume[-1] / 0.2)
-    assert records[2].fill_fraction <= payload.heap_factor
+    assert records[2].fill_fraction <= payload.heap_factor + max(payload.curl_gain, 0.0)  # the curl term's heap
 
 
 @pytest.mark.parametrize("name", PAYLOAD_MODELS)
