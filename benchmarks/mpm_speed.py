@@ -12,6 +12,14 @@ offline-cache load, settling) and after it (the dig). Variants::
     new-2t          the new kernels, two threads (two lanes), settling computed and stored in the
                     benchmark's own settle cache (emptied first)
     new-2t-cached   the same scene again: settling restored from that cache (run twice if it missed)
+    new-1t-svdF     the new kernels, one thread, but every particle's F rebuilt from its SVD each step as the
+                    old kernels did (``MPMSettings(elastic_f="svd")``; a diagnostic)
+
+``--perturb order --members 1 2 3`` adds, for each chosen variant, members with a last-bit perturbation of
+the same scene (``VARIANT~order1`` ...: the particles stored in another order, so the scatter adds them in
+another order; ``ulp``: each initial coordinate moved by one unit in the last place). The old kernels'
+members give the cycle's own reproducibility envelope; the report compares every run with each of them
+(``reproducibility`` in the JSON; ``docs/results/mpm_speed/reproducibility.md``).
 
 Forces: the filtered resultant F_R (Gaussian, sigma 0.1 s) of each variant against the old one and the
 ``prev-2t`` one of the same invocation and against the committed cycle in ``data/mpm`` (made by the old
@@ -49,7 +57,12 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "new-1t": {"legacy": False, "threads": 1, "settle_cache": False},
     "new-2t": {"legacy": False, "threads": 2, "settle_cache": True},
     "new-2t-cached": {"legacy": False, "threads": 2, "settle_cache": True},
+    "new-1t-svdF": {"legacy": False, "threads": 1, "settle_cache": False, "elastic_f": "svd"},
 }
+#: Last-bit perturbations of ``--perturb`` (:class:`~wheelloader.references.mpm.SceneSettings`): a member
+#: ``VARIANT~orderS`` stores the particles in a random order drawn with seed S, ``VARIANT~ulpS`` moves each
+#: coordinate by one unit in the last place (seed S); the soil is the same, only rounding changes.
+PERTURBATIONS = {"order": "order_seed", "ulp": "ulp_seed"}
 #: The commit whose kernels ``prev-2t`` runs (the plant's default before the fused particle pass).
 PREV_REF = "1c35970"
 SIGMA_S = 0.1
@@ -66,10 +79,27 @@ def _log(progress: Path | None, message: str) -> None:
             fh.write(line + "\n")
 
 
+def split_variant(name: str) -> tuple[str, dict[str, int]]:
+    """``"old~order2"`` -> ``("old", {"order_seed": 2})``: the variant of :data:`VARIANTS` and the member's
+    perturbation (:data:`PERTURBATIONS`; empty for the unperturbed run)."""
+    base, _, member = name.partition("~")
+    if base not in VARIANTS:
+        raise ValueError(f"unknown variant {name!r}")
+    if not member:
+        return base, {}
+    kind = member.rstrip("0123456789")
+    if kind not in PERTURBATIONS or kind == member:
+        raise ValueError(f"unknown perturbation in {name!r}: expected VARIANT~KINDSEED, KIND one of "
+                         f"{list(PERTURBATIONS)}")
+    return base, {PERTURBATIONS[kind]: int(member[len(kind):])}
+
+
 # ------------------------------------------------------------------ worker (one variant in its own process)
 def worker(spec: dict[str, Any]) -> dict[str, Any]:
     """Dig one case (or run one verification scene) with one variant's settings; the result as JSON-able data."""
-    options = VARIANTS[spec["variant"]]
+    base, perturbation = split_variant(spec["variant"])
+    options = VARIANTS[base]
+    elastic_f = options.get("elastic_f", "exact")
     import wheelloader
 
     if options.get("ref") and Path(wheelloader.__file__).resolve().is_relative_to(ROOT):
@@ -84,21 +114,24 @@ def worker(spec: dict[str, Any]) -> dict[str, Any]:
             if not marks:
                 marks.append(time.process_time())
 
+        from wheelloader.references.mpm import SceneSettings
+
         settings = {"threads": options["threads"], "legacy": options["legacy"],
                     "settle_cache": options["settle_cache"], "cache_dir": spec.get("cache_dir")}
+        if elastic_f != "exact":
+            settings["elastic_f"] = elastic_f
         if spec["case"] == "tiny":  # the tiny scene of tests/test_mpm.py (a smoke run)
             from wheelloader.estimator import Bucket, Pile, bezier_path
-            from wheelloader.references.mpm import SceneSettings
 
             plant = MPMPlant(0.03, bucket=Bucket(floor_length=0.15, capacity=0.01), settle_time=0.1,
-                             scene=SceneSettings(bed_depth=0.1, wall_margin=0.2), **settings)
+                             scene=SceneSettings(bed_depth=0.1, wall_margin=0.2, **perturbation), **settings)
             path = bezier_path((-0.03, 0.05), (0.30, 0.03), (0.38, 0.30), duration=1.2, rate=30.0,
                                angle_start=math.radians(-5.0), angle_end=math.radians(40.0), curl_from=0.5)
             log = plant.dig(path, Pile.trapezoid(height=0.25, top_length=0.3, ground_before=0.2), "sand", seed=0,
                             observer=first_sample)
         else:
             case = next(c for c in cases() if c.name == spec["case"])
-            plant = MPMPlant(**settings)
+            plant = MPMPlant(scene=SceneSettings(**perturbation), **settings)
             log = plant.dig(path_by_key(case.paths[0]), case.pile(), case.soil, seed=0, observer=first_sample)
         meta = log.metadata
         return {"t": log.path.t.tolist(), "tangential": log.tangential.tolist(), "normal": log.normal.tolist(),
@@ -117,14 +150,18 @@ def worker(spec: dict[str, Any]) -> dict[str, Any]:
 
     # the frictional soil of tests/test_mpm_verification.py (phi 30 deg, delta 20 deg, 1600 kg/m^3)
     soil = ContinuumSoil(1600.0, math.radians(30.0), wall_friction_angle=math.radians(20.0))
+    if perturbation:
+        raise ValueError("the verification scenes take no --perturb members")
     if spec["kind"] == "blade":
-        res = run_blade(BLADE_DEPTH, soil, BLADE_DEPTH / 10, threads=options["threads"], legacy=options["legacy"])
+        res = run_blade(BLADE_DEPTH, soil, BLADE_DEPTH / 10, threads=options["threads"], legacy=options["legacy"],
+                        elastic_f=elastic_f)
         travel = res.extra["travel"]
         window = (travel >= 0.5 * BLADE_DEPTH) & (travel <= BLADE_DEPTH)
         return {"horizontal": float(-np.mean(res.force[window, 0])), "vertical": float(np.mean(res.force[window, 1])),
                 "mckyes_flat": mckyes_blade(BLADE_DEPTH, soil)["horizontal"], "steps": res.steps,
                 "particles": res.particles}
-    res = run_wall(WALL_HEIGHT, soil, WALL_DX, push=WALL_PUSH, threads=options["threads"], legacy=options["legacy"])
+    res = run_wall(WALL_HEIGHT, soil, WALL_DX, push=WALL_PUSH, threads=options["threads"], legacy=options["legacy"],
+                   elastic_f=elastic_f)
     return {"at_rest": float(-np.mean(res.force[(res.times > 0.45) & (res.times < 0.6), 0])),
             "passive": float(-np.mean(res.force[res.extra["displacement"] >= 0.04, 0])),
             "at_rest_closed_form": at_rest_force(WALL_HEIGHT, soil),
@@ -139,19 +176,21 @@ def prev_source(ref: str, into: Path) -> Path:
     return into / "src"
 
 
-def run_variant(spec: dict[str, Any], progress: Path | None, prev_src: Path | None = None) -> dict[str, Any]:
-    """Run :func:`worker` in a child process at ``nice 10``; its result with wall, CPU and load.
+def run_variant(spec: dict[str, Any], progress: Path | None, prev_src: Path | None = None,
+                niceness: int = 10) -> dict[str, Any]:
+    """Run :func:`worker` in a child process at ``niceness``; its result with wall, CPU and load.
 
     ``prev_src``: the package source the ``prev-*`` variants import (:func:`prev_source`)."""
     env = dict(os.environ)
-    if VARIANTS[spec["variant"]].get("ref"):
+    base = split_variant(spec["variant"])[0]
+    if VARIANTS[base].get("ref"):
         env["PYTHONPATH"] = os.pathsep.join([str(prev_src)] + [p for p in [env.get("PYTHONPATH")] if p])
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "result.json"
         cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", json.dumps(spec), "--worker-out", str(out)]
         load0 = list(os.getloadavg())
         t0 = time.perf_counter()
-        proc = subprocess.Popen(cmd, env=env, preexec_fn=lambda: os.nice(10))  # noqa: PLW1509 - only sets niceness
+        proc = subprocess.Popen(cmd, env=env, preexec_fn=lambda: os.nice(niceness))  # noqa: PLW1509 - only niceness
         _, status, usage = os.wait4(proc.pid, 0)
         wall = time.perf_counter() - t0
         proc.returncode = os.waitstatus_to_exitcode(status)
@@ -160,7 +199,7 @@ def run_variant(spec: dict[str, Any], progress: Path | None, prev_src: Path | No
         result = json.loads(out.read_text())
     result.update(wall_s=wall, cpu_s=usage.ru_utime + usage.ru_stime, user_s=usage.ru_utime, sys_s=usage.ru_stime,
                   loadavg_start=load0, loadavg_end=list(os.getloadavg()), spec=spec,
-                  threads=VARIANTS[spec["variant"]]["threads"])
+                  threads=VARIANTS[base]["threads"])
     _log(progress, f"{spec['kind']} {spec.get('case', '')} {spec['variant']}: wall {wall:.1f} s, CPU "
                    f"{result['cpu_s']:.1f} s, load {load0[0]:.1f} -> {result['loadavg_end'][0]:.1f}")
     return result
@@ -228,6 +267,129 @@ def compare(runs: dict[str, dict[str, Any]], case: str) -> dict[str, Any]:
     return out
 
 
+# ------------------------------------------------------------------ reproducibility envelope
+#: The last part of a cycle left out of the ``early`` figures [s] (the bucket leaving the pile, where the
+#: force jumps within 0.1 s).
+EXIT_S = 0.2
+
+
+def envelope(runs: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Every run's filtered F_R against each member of the old kernels' ensemble (``old``, ``old~...``) [%].
+
+    Distances are RMS differences of the filtered F_R over the mean |F_R| of ``old`` (so ``vs_old`` equals
+    :func:`compare`'s ``filtered_fr_vs_old_percent``), over the whole cycle and, ``early``, without its last
+    :data:`EXIT_S`. The old ensemble's ``spread`` is the distances between two of its members; a run is
+    ``inside`` the envelope when the median of its distances to the old members is at most the largest
+    distance between two old members (for an old member: to the other members). ``band_share`` is the share
+    of samples whose filtered F_R lies between the old members' lowest and highest.
+    """
+    names = list(runs)
+    t = np.array(runs[names[0]]["t"])
+    fr = {n: filtered_resultant(np.array(r["t"]), np.array(r["tangential"]), np.array(r["normal"]))
+          for n, r in runs.items()}
+    old = [n for n in names if split_variant(n)[0] == "old"]
+    scale = float(np.mean(np.abs(fr["old"])))
+    early = t <= t[-1] - EXIT_S
+
+    def dist(a: str, b: str, mask: np.ndarray | slice = slice(None)) -> float:
+        return float(100.0 * np.sqrt(np.mean((fr[a][mask] - fr[b][mask]) ** 2)) / scale)
+
+    pairs = [(a, b) for i, a in enumerate(old) for b in old[i + 1:]]
+    spread = {"whole": [dist(a, b) for a, b in pairs], "early": [dist(a, b, early) for a, b in pairs]}
+    limit = {k: max(v) for k, v in spread.items()}
+    low = np.min([fr[n] for n in old], axis=0)
+    high = np.max([fr[n] for n in old], axis=0)
+    old_mean = np.mean([fr[n] for n in old], axis=0)
+    rows: dict[str, Any] = {}
+    for n in names:
+        others = [m for m in old if m != n]
+        d = {"whole": [dist(n, m) for m in others], "early": [dist(n, m, early) for m in others]}
+        med = {k: float(np.median(v)) for k, v in d.items()}
+        rows[n] = {"variant": split_variant(n)[0], "perturbation": split_variant(n)[1],
+                   "vs_old": dist(n, "old") if n != "old" else 0.0,
+                   "vs_old_members": d["whole"], "vs_old_members_early": d["early"],
+                   "median_vs_old_members": med["whole"], "median_vs_old_members_early": med["early"],
+                   "vs_old_mean": float(100.0 * np.sqrt(np.mean((fr[n] - old_mean) ** 2)) / scale),
+                   "inside": bool(med["whole"] <= limit["whole"]), "inside_early": bool(med["early"] <= limit["early"]),
+                   "band_share": float(np.mean((fr[n] >= low - 1e-9) & (fr[n] <= high + 1e-9))),
+                   "fill_end": runs[n]["fill_end"]}
+    groups: dict[str, Any] = {}
+    for g in dict.fromkeys(split_variant(n)[0] for n in names):
+        members = [n for n in names if split_variant(n)[0] == g]
+        mean = np.mean([fr[n] for n in members], axis=0)
+        within = [dist(a, b) for i, a in enumerate(members) for b in members[i + 1:]]
+        groups[g] = {"members": members,
+                     "spread": {"min": min(within), "median": float(np.median(within)), "max": max(within)}
+                     if within else None,
+                     "mean_vs_old_mean": float(100.0 * np.sqrt(np.mean((mean - old_mean) ** 2)) / scale),
+                     "mean_vs_old_mean_early": float(100.0 * np.sqrt(np.mean((mean[early] - old_mean[early]) ** 2))
+                                                     / scale)}
+    return {"old_members": old, "scale_n": scale, "exit_s": EXIT_S,
+            "old_spread": {k: {"min": min(v), "median": float(np.median(v)), "max": max(v)} for k, v in spread.items()},
+            "runs": rows, "groups": groups}
+
+
+def envelope_table(case: str, env: dict[str, Any]) -> list[str]:
+    """Markdown lines: the old ensemble's spread and every run against it."""
+    s = env["old_spread"]
+    lines = ["", f"**{case}: the old kernels' own spread** (filtered F_R between two of {len(env['old_members'])} "
+             f"members): {s['whole']['min']:.2f}-{s['whole']['max']:.2f} % (median {s['whole']['median']:.2f} %); "
+             f"without the last {env['exit_s']:.1f} s {s['early']['min']:.2f}-{s['early']['max']:.2f} % "
+             f"(median {s['early']['median']:.2f} %).", "",
+             f"| {case} run | vs old | vs old members: median (min-max) | inside | without the last "
+             f"{env['exit_s']:.1f} s: median | inside | in the old band | fill end [m³] |", "|---" * 8 + "|"]
+    for name, r in env["runs"].items():
+        d = r["vs_old_members"]
+        lines.append(f"| {name} | {r['vs_old']:.2f} % | {r['median_vs_old_members']:.2f} % ({min(d):.2f}-{max(d):.2f}) "
+                     f"| {'yes' if r['inside'] else '**no**'} | {r['median_vs_old_members_early']:.2f} % | "
+                     f"{'yes' if r['inside_early'] else '**no**'} | {100 * r['band_share']:.0f} % | "
+                     f"{r['fill_end']:.4f} |")
+    lines += ["", f"| {case} kernels | members | spread between members: median (max) | ensemble mean vs the old "
+              f"ensemble's mean | without the last {env['exit_s']:.1f} s |", "|---|---|---|---|---|"]
+    for g, r in env["groups"].items():
+        spread = "–" if r["spread"] is None else f"{r['spread']['median']:.2f} % ({r['spread']['max']:.2f} %)"
+        lines.append(f"| {g} | {len(r['members'])} | {spread} | {r['mean_vs_old_mean']:.2f} % | "
+                     f"{r['mean_vs_old_mean_early']:.2f} % |")
+    return lines
+
+
+def _envelope_figure(out: Path, runs: dict[str, dict[str, dict[str, Any]]], envs: dict[str, Any]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(envs), 2, figsize=(12, 3.8 * len(envs)), squeeze=False)
+    colours = {"old": "0.3", "new-1t": "tab:blue", "new-2t": "tab:green", "new-1t-svdF": "tab:red"}
+    for row, (case, env) in zip(axes, envs.items(), strict=True):
+        by = runs[f"cycle-{case}"]
+        fr = {n: filtered_resultant(np.array(r["t"]), np.array(r["tangential"]), np.array(r["normal"]))
+              for n, r in by.items()}
+        t = np.array(by["old"]["t"])
+        old = np.array([fr[n] for n in env["old_members"]])
+        mean = old.mean(axis=0)
+        row[0].fill_between(t, old.min(axis=0), old.max(axis=0), color="0.8", label="old kernels' members (band)")
+        row[1].fill_between(t, old.min(axis=0) - mean, old.max(axis=0) - mean, color="0.8", label="old band")
+        seen: set[str] = set()
+        for n, f in fr.items():
+            base = split_variant(n)[0]
+            if base == "old":
+                continue
+            label = None if base in seen else base
+            seen.add(base)
+            colour = colours.get(base, "tab:purple")
+            row[0].plot(t, f, lw=0.8, color=colour, label=label)
+            row[1].plot(t, f - mean, lw=0.8, color=colour, label=label)
+        row[0].plot(t, mean, lw=1.0, color="k", ls="--", label="old members' mean")
+        row[0].set(xlabel="t [s]", ylabel="F_R filtered (sigma 0.1 s) [N]", title=f"{case}: filtered F_R")
+        row[1].set(xlabel="t [s]", ylabel="minus the old members' mean [N]", title=f"{case}: against the old ensemble")
+        row[0].legend(fontsize=7)
+        row[1].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "reproducibility.png", dpi=80)
+    plt.close(fig)
+
+
 # ------------------------------------------------------------------ report
 def report(out: Path) -> dict[str, Any]:
     runs: dict[str, dict[str, dict[str, Any]]] = {}
@@ -236,10 +398,15 @@ def report(out: Path) -> dict[str, Any]:
         runs.setdefault(kind_case, {})[variant] = json.loads(f.read_text())
     results: dict[str, Any] = {"cycles": {}, "verification": {}}
     order = {name: k for k, name in enumerate(VARIANTS)}
-    runs = {key: dict(sorted(v.items(), key=lambda item: order[item[0]])) for key, v in runs.items()}
+    def rank(name: str) -> tuple[int, str]:
+        return order[split_variant(name)[0]], name
+
+    runs = {key: dict(sorted(v.items(), key=lambda item: rank(item[0]))) for key, v in runs.items()}
     for key, by_variant in runs.items():
         if key.startswith("cycle-"):
             results["cycles"][key[len("cycle-"):]] = compare(by_variant, key[len("cycle-"):])
+            if sum(split_variant(name)[0] == "old" for name in by_variant) >= 2:
+                results.setdefault("reproducibility", {})[key[len("cycle-"):]] = envelope(by_variant)
         else:
             rows = {}
             for name, r in by_variant.items():
@@ -254,14 +421,19 @@ def report(out: Path) -> dict[str, Any]:
                 rows[name] = row
             results["verification"][key] = rows
     command = "python benchmarks/mpm_speed.py " + " ".join(sys.argv[1:])
-    previous = out / "mpm_speed.json"
-    if "--report" in sys.argv and previous.exists():  # a re-assembly keeps the command that ran the variants
-        command = json.loads(previous.read_text()).get("command", command)
+    previous = json.loads((out / "mpm_speed.json").read_text()) if (out / "mpm_speed.json").exists() else {}
+    commands = previous.get("commands", [previous["command"]] if "command" in previous else [])
+    if "--report" in sys.argv and previous:  # a re-assembly keeps the command that ran the variants
+        command = previous.get("command", command)
+    elif command not in commands:
+        commands.append(command)  # every invocation that added runs to this directory, in order
     summary = {"benchmark": "mpm_speed", "sigma_s": SIGMA_S, "machine_at_report": machine_info(),
-               "results": results, "command": command}
+               "results": results, "command": command, "commands": commands}
     (out / "mpm_speed.json").write_text(json.dumps(summary, indent=1))
     (out / "mpm_speed.md").write_text(table(results))
     _figure(out, runs, results)
+    if "reproducibility" in results:
+        _envelope_figure(out, runs, results["reproducibility"])
     return summary
 
 
@@ -287,6 +459,8 @@ def table(results: dict[str, Any]) -> str:
         if "cache_hit_bit_identical" in rows:
             notes.append(f"\nSettle-cache hit bit-identical to the miss ({case}): {rows['cache_hit_bit_identical']}.")
     lines += notes  # after the table: a note between rows would end the Markdown table
+    for case, env in results.get("reproducibility", {}).items():
+        lines += envelope_table(case, env)
     for scene, rows in results["verification"].items():
         lines += ["", f"| {scene} | threads | wall [s] | CPU [s] | values [N/m] | vs prev | vs old |",
                   "|---|---|---|---|---|---|---|"]
@@ -348,6 +522,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
     parser.add_argument("--verification", action="store_true", help="also the blade and wall scenes (old, new)")
     parser.add_argument("--prev-ref", default=PREV_REF, help="commit whose package the prev-2t variant runs")
+    parser.add_argument("--perturb", choices=list(PERTURBATIONS), default=None,
+                        help="add members of each variant with this last-bit perturbation (cycles only)")
+    parser.add_argument("--members", nargs="+", type=int, default=[1, 2, 3], help="the members' seeds (--perturb)")
+    parser.add_argument("--members-only", action="store_true", help="run only the --perturb members, not the variants")
+    parser.add_argument("--nice", type=int, default=10, help="niceness of the variants' processes (default 10)")
     parser.add_argument("--force", action="store_true", help="repeat runs that exist")
     parser.add_argument("--report", action="store_true", help="only assemble the JSON and PNG")
     parser.add_argument("--progress", default=None, help="append progress lines to this file")
@@ -364,7 +543,9 @@ def main(argv: list[str] | None = None) -> int:
 
     cache_dir = default_cache_dir() / "mpm_speed_benchmark"  # never inside the output (or shipped data)
     if not args.report:
-        jobs = [("cycle", case, v) for case in args.cycles for v in args.variants]
+        members = [f"~{args.perturb}{seed}" for seed in args.members] if args.perturb else []
+        jobs = [("cycle", case, v + m) for case in args.cycles for v in args.variants
+                for m in ([] if args.members_only else [""]) + members]
         if args.verification:
             jobs += [(kind, "", v) for kind in ("blade", "wall") for v in args.variants if v != "new-2t-cached"]
         tmp_prev = tempfile.TemporaryDirectory()
@@ -378,10 +559,10 @@ def main(argv: list[str] | None = None) -> int:
             spec = {"kind": kind, "case": case, "variant": variant, "cache_dir": str(cache_dir)}
             if kind == "cycle" and variant == "new-2t":
                 shutil.rmtree(cache_dir, ignore_errors=True)  # a cold start: settling computed, then stored
-            result = run_variant(spec, progress, prev_src)
+            result = run_variant(spec, progress, prev_src, args.nice)
             if kind == "cycle" and variant == "new-2t-cached" and result["settle_cache"] != "hit":
                 _log(progress, "the settle cache was empty: running the cached variant again")
-                result = run_variant(spec, progress, prev_src)
+                result = run_variant(spec, progress, prev_src, args.nice)
             target.write_text(json.dumps(result))
         shutil.rmtree(cache_dir, ignore_errors=True)
         tmp_prev.cleanup()

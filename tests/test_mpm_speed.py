@@ -3,11 +3,13 @@ Taichi processes)."""
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -33,3 +35,44 @@ def test_mpm_speed_benchmark_on_the_tiny_scene(tmp_path, monkeypatch):
     assert (out / "mpm_speed.png").stat().st_size > 0
     # nothing of the settle cache was written into the output
     assert not list(out.rglob("*.npz"))
+
+
+def _module():
+    spec = importlib.util.spec_from_file_location("mpm_speed", ROOT / "benchmarks" / "mpm_speed.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_members_name_their_variant_and_perturbation():
+    mod = _module()
+    assert mod.split_variant("old") == ("old", {})
+    assert mod.split_variant("old~order2") == ("old", {"order_seed": 2})
+    assert mod.split_variant("new-1t-svdF~ulp13") == ("new-1t-svdF", {"ulp_seed": 13})
+    for bad in ("older", "old~order", "old~shuffle1"):
+        with pytest.raises(ValueError):
+            mod.split_variant(bad)
+
+
+def test_envelope_puts_a_run_like_the_old_members_inside_and_a_biased_one_outside():
+    mod = _module()
+    t = np.arange(0.0, 3.0, 1.0 / 60.0)
+    rng = np.random.default_rng(0)
+    shape = 1000.0 * np.sin(np.pi * t / 3.0) ** 2 + 100.0
+
+    def run(scale: float, noise: float) -> dict:
+        tangential = shape * scale + noise * rng.standard_normal(t.size).cumsum()
+        return {"t": t.tolist(), "tangential": tangential.tolist(), "normal": np.zeros_like(t).tolist(),
+                "fill_end": 0.1}
+
+    runs = {"old": run(1.0, 2.0), "old~order1": run(1.0, 2.0), "old~order2": run(1.0, 2.0),
+            "new-1t": run(1.0, 2.0), "new-1t~order1": run(1.1, 2.0)}
+    env = mod.envelope(runs)
+    assert env["old_members"] == ["old", "old~order1", "old~order2"]
+    assert env["runs"]["old"]["vs_old"] == 0.0
+    assert 0.0 < env["old_spread"]["whole"]["min"] <= env["old_spread"]["whole"]["max"]
+    assert env["runs"]["new-1t"]["inside"] and not env["runs"]["new-1t~order1"]["inside"]
+    assert env["runs"]["new-1t~order1"]["vs_old"] > 5.0  # about the 10 % bias
+    assert env["groups"]["new-1t"]["members"] == ["new-1t", "new-1t~order1"]
+    lines = "\n".join(mod.envelope_table("case", env))
+    assert "**no**" in lines and "new-1t~order1" in lines

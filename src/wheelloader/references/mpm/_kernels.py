@@ -23,6 +23,11 @@ The mathematics is the module docstring of :mod:`.solver`; this is how it is lai
   called with its index only.
 * **Near-tool flags.** Whether a particle is near the tool is decided once per step (particle -> grid)
   and reused in grid -> particle (the particle has not moved in between).
+* **The elastic F kept as computed.** A particle that stays elastic keeps ``F = (I + dt C) F`` as
+  multiplied; a plastic one gets its stretches scaled in place. The old kernels rebuilt every ``F`` from
+  its SVD, ``U exp(log sigma) V^T``, every step; with ``svd_f=True`` these kernels do that too (the
+  return mapping then on the SVD's stretches), for comparisons only
+  (``docs/results/mpm_speed/reproducibility.md``: that rounding accumulates over a cycle's 34,000 steps).
 """
 
 # No ``from __future__ import annotations`` here: Taichi reads the kernels' annotations at definition.
@@ -39,10 +44,12 @@ FLOAT_PARAMS = ("x0", "z0", "dx", "dt", "p_vol", "p_mass", "mu", "lam", "sin_phi
 POSE_CHUNK = 1024
 
 
-def build_kernels(fields: Any, lanes: int, atomic: bool) -> tuple[Any, Any, Any]:  # noqa: C901 - one place
+def build_kernels(fields: Any, lanes: int, atomic: bool,  # noqa: C901 - the kernels in one place
+                  svd_f: bool = False) -> tuple[Any, Any, Any]:
     """Kernels ``(substep, reset_counters, init_stress)`` on ``fields`` for ``lanes`` lanes.
 
-    ``atomic``: parallel loops with atomic scatter (GPU backends; ``lanes`` must be 1).
+    ``atomic``: parallel loops with atomic scatter (GPU backends; ``lanes`` must be 1). ``svd_f``: rebuild
+    every particle's ``F`` from its SVD each step, as the old kernels did (for comparisons).
     """
     ti = fields.ti
     vec2, mat2 = ti.types.vector(2, ti.f32), ti.types.matrix(2, 2, ti.f32)
@@ -110,6 +117,29 @@ def build_kernels(fields: Any, lanes: int, atomic: bool) -> tuple[Any, Any, Any]
     def kirchhoff(U, e0, e1, mu: f32, lam: f32):
         tr = e0 + e1
         return U @ mat2([[2.0 * mu * e0 + lam * tr, 0.0], [0.0, 2.0 * mu * e1 + lam * tr]]) @ U.transpose()
+
+    @ti.func
+    def return_mapping(f0, f1, mu: f32, lam: f32, sin_phi: f32, cos_phi: f32, cohesion: f32):
+        """Mohr-Coulomb return mapping of the log stretches ``(f0, f1)``: the returned ones and whether it
+        yielded (the module docstring of :mod:`.solver`)."""
+        e0, e1 = f0, f1
+        tr = e0 + e1
+        p_mean = (lam + mu) * tr
+        q_dev = mu * ti.abs(e0 - e1)
+        plastic = 0
+        if sin_phi > 1e-6 and p_mean * sin_phi >= cohesion * cos_phi:
+            e_apex = cohesion * cos_phi / sin_phi / (2.0 * (lam + mu))
+            e0 = e_apex
+            e1 = e_apex
+            plastic = 1
+        else:
+            limit = cohesion * cos_phi - p_mean * sin_phi
+            if q_dev > limit:
+                half = 0.5 * (e0 - e1) * limit / q_dev
+                e0 = 0.5 * tr + half
+                e1 = 0.5 * tr - half
+                plastic = 1
+        return e0, e1, plastic
 
     # ------------------------------------------------------------ particle -> grid
     @ti.func
@@ -297,23 +327,14 @@ def build_kernels(fields: Any, lanes: int, atomic: bool) -> tuple[Any, Any, Any]
         e0 = 0.5 * ti.log(ti.max(l0, 1e-8))
         e1 = 0.5 * ti.log(ti.max(l1, 1e-8))
         r0, r1 = e0, e1
-        tr = e0 + e1
-        p_mean = (lam + mu) * tr
-        q_dev = mu * ti.abs(e0 - e1)
-        plastic = 0
-        if sin_phi > 1e-6 and p_mean * sin_phi >= cohesion * cos_phi:
-            e_apex = cohesion * cos_phi / sin_phi / (2.0 * (lam + mu))
-            e0 = e_apex
-            e1 = e_apex
-            plastic = 1
-        else:
-            limit = cohesion * cos_phi - p_mean * sin_phi
-            if q_dev > limit:
-                half = 0.5 * (e0 - e1) * limit / q_dev
-                e0 = 0.5 * tr + half
-                e1 = 0.5 * tr - half
-                plastic = 1
-        if plastic:
+        e0, e1, plastic = return_mapping(e0, e1, mu, lam, sin_phi, cos_phi, cohesion)
+        if ti.static(svd_f):
+            # the old kernels' update: the return mapping on the SVD's log stretches, F rebuilt from them
+            Us, sig, Vs = ti.svd(f_new)
+            g0, g1, _ = return_mapping(ti.log(ti.max(sig[0, 0], 1e-4)), ti.log(ti.max(sig[1, 1], 1e-4)), mu, lam,
+                                       sin_phi, cos_phi, cohesion)
+            F[p] = Us @ mat2([[ti.exp(g0), 0.0], [0.0, ti.exp(g1)]]) @ Vs.transpose()
+        elif plastic:
             # F = U diag(exp(e)) V^T with V^T = diag(exp(-r)) U^T f_new (r: the predictor's log stretches)
             F[p] = U @ mat2([[ti.exp(e0 - r0), 0.0], [0.0, ti.exp(e1 - r1)]]) @ U.transpose() @ f_new
         else:

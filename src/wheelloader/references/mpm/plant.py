@@ -18,7 +18,7 @@ from ._backend import BACKENDS, TAICHI_VERSION, initialised_backend, initialised
 from .scene import SceneSettings, bucket_scene, surface_columns
 from .settle_cache import SettleCache, settle_digest
 from .soil import DEFAULT_YOUNGS_MODULUS, ContinuumSoil
-from .solver import MPMSolver
+from .solver import ELASTIC_F, MPMSolver
 from .tool import Trajectory, bucket_shape
 
 #: Default grid cell size [m]; see :class:`MPMPlant` for how it was chosen (a convergence study).
@@ -56,6 +56,9 @@ class MPMSettings:
         ``"auto"`` (a GPU where Taichi finds one, else the CPU); effective at the process's first solver.
     legacy : bool
         Run the solver's old kernels (``MPMSolver(legacy=True)``; for comparisons, 2.4 times the cost).
+    elastic_f : str
+        ``"exact"`` (default) or ``"svd"``: how the new kernels update an elastic particle's deformation
+        gradient (``MPMSolver(elastic_f=...)``; ``"svd"`` as the legacy kernels, for comparisons).
     settle_cache : bool
         Keep the settled soil of a scene on disk and restore it when the same scene is dug again
         (:mod:`.settle_cache`; bit-identical forces; default True).
@@ -79,6 +82,7 @@ class MPMSettings:
     threads: int = 2
     backend: str = "cpu"
     legacy: bool = False
+    elastic_f: str = "exact"
     settle_cache: bool = True
     relax_pile_after: bool = True
     scene: SceneSettings = field(default_factory=SceneSettings)
@@ -95,6 +99,10 @@ class MPMSettings:
             raise ValueError(f"threads must be a positive integer, got {self.threads!r}")
         if self.backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
+        if self.elastic_f not in ELASTIC_F:
+            raise ValueError(f"elastic_f must be one of {ELASTIC_F}, got {self.elastic_f!r}")
+        if self.legacy and self.elastic_f != "exact":
+            raise ValueError("elastic_f applies to the new kernels; legacy=True always rebuilds F from its SVD")
         for name in ("legacy", "settle_cache"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
@@ -110,6 +118,9 @@ class MPMSettings:
                                              "relax_pile_after")}
         out["scene"] = {k: getattr(self.scene, k) for k in ("bed_depth", "wall_margin", "front_margin", "top_margin",
                                                             "jitter")}
+        out["scene"].update(self.scene.perturbations())  # only when set: logs dug without one compare equal
+        if self.elastic_f != "exact":
+            out["elastic_f"] = self.elastic_f
         return out
 
 
@@ -216,7 +227,7 @@ class MPMPlant:
         scene = bucket_scene(pile, domain, self.shape, cfg.resolution, seed, cfg.scene)
         solver = MPMSolver(material, scene.domain, cfg.resolution, scene.particles, tool=self.shape,
                            contact_band=cfg.contact_band, cfl=cfg.cfl, sticky_floor=True, threads=cfg.threads,
-                           legacy=cfg.legacy, backend=cfg.backend)
+                           legacy=cfg.legacy, backend=cfg.backend, elastic_f=cfg.elastic_f)
         try:
             cache_status = self._settle(solver, scene, material, domain, float(domain.t[0]))
         except BaseException:
@@ -310,6 +321,7 @@ class MPMPlant:
                       "contact_band": cfg.contact_band, "cfl": cfg.cfl, "settle_time": cfg.settle_time,
                       "settle_damping": cfg.settle_damping, "t0": t0, "t_first": float(traj.t[0]),
                       "pose": [float(v) for v in first], "kernels": solver.kernels, "lanes": solver.lanes,
+                      "elastic_f": solver.elastic_f,
                       "backend": initialised_backend(), "taichi": TAICHI_VERSION}
             digest = settle_digest({"particles": scene.particles, "overburden": scene.overburden}, values)
             state = self.cache.load(digest)

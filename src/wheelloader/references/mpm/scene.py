@@ -39,6 +39,15 @@ class SceneSettings:
     jitter : float
         Particles start on a lattice of spacing dx / 2, each moved by a uniform random offset of up to
         ``jitter`` times the spacing per axis (seeded). Default 0.25.
+    order_seed : int or None
+        None (default): the particles are stored in lattice order (column by column). An integer: in a
+        random order drawn with this seed. The soil is the same; only the order in which the particle ->
+        grid transfer adds the particles' contributions changes, so the forces change by rounding alone
+        (for measuring a cycle's reproducibility, ``benchmarks/mpm_speed.py --perturb order``).
+    ulp_seed : int or None
+        None (default): no change. An integer: each particle coordinate, as the solver stores it (32-bit
+        float), moved by -1, 0 or +1 unit in the last place (equally likely, drawn with this seed); the
+        initial stress is unchanged. A last-bit perturbation like ``order_seed``.
     """
 
     bed_depth: float = 0.2
@@ -46,6 +55,8 @@ class SceneSettings:
     front_margin: float = 0.1
     top_margin: float = 0.1
     jitter: float = DEFAULT_JITTER
+    order_seed: int | None = None
+    ulp_seed: int | None = None
 
     def __post_init__(self) -> None:
         for name in ("bed_depth", "wall_margin", "front_margin", "top_margin", "jitter"):
@@ -56,6 +67,16 @@ class SceneSettings:
             raise ValueError(f"SceneSettings.bed_depth must be > 0 m, got {self.bed_depth!r}")
         if self.jitter >= 0.5:
             raise ValueError(f"SceneSettings.jitter must be < 0.5 (particles would swap cells), got {self.jitter!r}")
+        for name in ("order_seed", "ulp_seed"):
+            value = getattr(self, name)
+            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer))
+                                      or value < 0):
+                raise ValueError(f"SceneSettings.{name} must be None or an integer >= 0, got {value!r}")
+
+    def perturbations(self) -> dict[str, int]:
+        """The last-bit perturbations that are set (``order_seed``, ``ulp_seed``), by name."""
+        return {name: int(getattr(self, name)) for name in ("order_seed", "ulp_seed")
+                if getattr(self, name) is not None}
 
 
 @dataclass(frozen=True, eq=False)
@@ -133,7 +154,28 @@ def bucket_scene(pile: Pile, trajectory: Trajectory, shape: ToolShape, dx: float
     spacing = dx / PARTICLES_PER_CELL
     rng = np.random.default_rng(seed)
     pts, depth = fill_particles(pile.surface_height, x_lo, x_hi, z_bed, spacing, rng, settings.jitter)
+    pts, depth = perturb_particles(pts, depth, settings.order_seed, settings.ulp_seed)
     return Scene(Domain(x_lo, z_bed, x_hi, z_hi), pts, depth, (x_lo, x_hi), spacing)
+
+
+def perturb_particles(pts: np.ndarray, depth: np.ndarray, order_seed: int | None = None,
+                      ulp_seed: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The particles (and their depths) reordered with ``order_seed`` and moved by one unit in the last place
+    of a 32-bit float with ``ulp_seed`` (:class:`SceneSettings`); unchanged where a seed is None.
+
+    Both change the forces by rounding only: the reordering keeps every position, the move keeps each
+    coordinate within one unit of the float the solver would store anyway.
+    """
+    if order_seed is not None:
+        order = np.random.default_rng(order_seed).permutation(len(pts))
+        pts, depth = pts[order], depth[order]
+    if ulp_seed is not None:
+        stored = np.asarray(pts, dtype=np.float32)
+        step = np.random.default_rng(ulp_seed).integers(-1, 2, size=stored.shape)
+        moved = np.where(step > 0, np.nextafter(stored, np.float32(np.inf)),
+                         np.where(step < 0, np.nextafter(stored, np.float32(-np.inf)), stored))
+        pts = moved.astype(float)
+    return pts, depth
 
 
 def surface_columns(positions: np.ndarray, x_lo: float, x_hi: float, spacing: float, z_bed: float,

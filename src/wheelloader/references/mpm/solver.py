@@ -66,6 +66,8 @@ PARTICLES_PER_CELL = 2
 WALL_NODES = 2
 #: Distance [cells] the particle guard keeps particles away from a plate.
 GUARD_CELLS = 0.25
+#: How the new kernels update an elastic particle's deformation gradient (``MPMSolver(elastic_f=...)``).
+ELASTIC_F = ("exact", "svd")
 
 
 @dataclass(frozen=True)
@@ -91,11 +93,13 @@ class _Fields:
 
     ``mode``: ``"lanes"`` (CPU, :mod:`._kernels` without atomics, ``lanes`` grid copies), ``"atomic"``
     (GPU, :mod:`._kernels` with atomic scatter) or ``"legacy"`` (:mod:`._legacy`, the old kernels).
+    ``svd_f``: :mod:`._kernels` rebuilding ``F`` from its SVD each step (``MPMSolver(elastic_f="svd")``).
     """
 
-    def __init__(self, ti: Any, particles: int, nx: int, nz: int, lanes: int, mode: str) -> None:
+    def __init__(self, ti: Any, particles: int, nx: int, nz: int, lanes: int, mode: str, svd_f: bool = False) -> None:
         self.ti = ti
         self.particles, self.nx, self.nz, self.lanes, self.mode = particles, nx, nz, lanes, mode
+        self.svd_f = svd_f
         self.in_use = False
         fb = ti.FieldsBuilder()
         self.x = ti.Vector.field(2, ti.f32)
@@ -137,7 +141,7 @@ class _Fields:
             self.substep, self.reset_counters = build_legacy_kernels(self)
             self.init_stress = None
         else:
-            self.substep, self.reset_counters, self.init_stress = build_kernels(self, lanes, mode == "atomic")
+            self.substep, self.reset_counters, self.init_stress = build_kernels(self, lanes, mode == "atomic", svd_f)
 
     def destroy(self) -> None:
         self.tree.destroy()
@@ -146,21 +150,23 @@ class _Fields:
 _POOL: list[_Fields] = []
 
 
-def _acquire_fields(ti: Any, particles: int, nx: int, nz: int, lanes: int, mode: str) -> _Fields:
+def _acquire_fields(ti: Any, particles: int, nx: int, nz: int, lanes: int, mode: str, svd_f: bool = False) -> _Fields:
+    def same_kernels(f: _Fields) -> bool:
+        return not f.in_use and f.mode == mode and f.lanes == lanes and f.svd_f == svd_f
+
     for fields in _POOL:
-        if (not fields.in_use and fields.mode == mode and fields.lanes == lanes and fields.particles >= particles
-                and fields.nx >= nx and fields.nz >= nz):
+        if same_kernels(fields) and fields.particles >= particles and fields.nx >= nx and fields.nz >= nz:
             fields.in_use = True
             return fields
     # grow with spare room so that slightly larger scenes reuse the allocation (and the compiled kernels)
     cap_p = int(math.ceil(particles * 1.25 / 4096.0)) * 4096
     cap_x = int(math.ceil(nx * 1.1 / 16.0)) * 16
     cap_z = int(math.ceil(nz * 1.1 / 16.0)) * 16
-    for old in [f for f in _POOL if not f.in_use and f.mode == mode and f.lanes == lanes]:
+    for old in [f for f in _POOL if same_kernels(f)]:
         cap_p, cap_x, cap_z = max(cap_p, old.particles), max(cap_x, old.nx), max(cap_z, old.nz)
         old.destroy()
         _POOL.remove(old)
-    fields = _Fields(ti, cap_p, cap_x, cap_z, lanes, mode)
+    fields = _Fields(ti, cap_p, cap_x, cap_z, lanes, mode, svd_f)
     fields.in_use = True
     _POOL.append(fields)
     return fields
@@ -206,12 +212,18 @@ class MPMSolver:
     scatter : str
         ``"auto"`` (default: ``"lanes"`` on the CPU, ``"atomic"`` on a GPU), ``"lanes"`` or ``"atomic"``
         (the GPU kernels, also runnable on the CPU, e.g. to test them where no GPU is).
+    elastic_f : str
+        ``"exact"`` (default): a particle that stays elastic keeps its deformation gradient as multiplied,
+        ``F <- (I + dt C) F``. ``"svd"``: every ``F`` is rebuilt from its SVD each step, ``U exp(log sigma) V^T``,
+        as the legacy kernels did; a rounding that accumulates over a long run (it moved the cohesive dirt
+        cycle's force by several per cent, ``docs/results/mpm_speed/reproducibility.md``). For comparisons;
+        not with ``legacy=True``, which always does it.
     """
 
     def __init__(self, soil: ContinuumSoil, domain: Domain, dx: float, particles: np.ndarray, *,
                  tool: ToolShape | None = None, contact_band: float = 1.0, cfl: float = 0.3,
                  sticky_floor: bool = True, threads: int = 1, legacy: bool = False, backend: str = "cpu",
-                 scatter: str = "auto") -> None:
+                 scatter: str = "auto", elastic_f: str = "exact") -> None:
         if not isinstance(soil, ContinuumSoil):
             raise ValueError(f"soil must be a ContinuumSoil, got {type(soil).__name__}")
         if not (isinstance(dx, (int, float)) and math.isfinite(dx) and dx > 0.0):
@@ -245,6 +257,10 @@ class MPMSolver:
         self._bounds = (float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1]))
         if not isinstance(legacy, bool):
             raise ValueError(f"legacy must be True or False, got {legacy!r}")
+        if elastic_f not in ELASTIC_F:
+            raise ValueError(f"elastic_f must be one of {ELASTIC_F}, got {elastic_f!r}")
+        if legacy and elastic_f != "exact":
+            raise ValueError("elastic_f applies to the new kernels; legacy=True always rebuilds F from its SVD")
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
         ti = taichi_module(threads, backend)
@@ -255,7 +271,8 @@ class MPMSolver:
             scatter = "lanes" if initialised_backend() == "cpu" else "atomic"
         self.kernels = "legacy" if legacy else scatter
         self.lanes = threads if self.kernels == "lanes" else 1
-        self._f = _acquire_fields(ti, self.n, self.nx, self.nz, self.lanes, self.kernels)
+        self.elastic_f = elastic_f
+        self._f = _acquire_fields(ti, self.n, self.nx, self.nz, self.lanes, self.kernels, elastic_f == "svd")
         self._finalizer = weakref.finalize(self, _release, self._f)
         self._load(pts)
 

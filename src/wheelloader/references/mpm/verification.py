@@ -194,8 +194,7 @@ def blade_motion(depth: float, speed: float = 0.2, travel: float | None = None
 
 def run_blade(depth: float, soil: ContinuumSoil, dx: float, *, speed: float = 0.2, travel: float | None = None,
               contact_band: float = 1.0, seed: int = 0, threads: int = 1, samples_per_s: float = 60.0,
-              legacy: bool = False
-              ) -> CaseResult:
+              legacy: bool = False, elastic_f: str = "exact") -> CaseResult:
     """A vertical blade ``depth`` [m] deep pushed at ``speed`` [m/s] through a flat bed.
 
     The bed is ``depth + max(0.1, depth)`` deep on a sticky floor, long enough for the travel plus three
@@ -233,7 +232,7 @@ def run_blade(depth: float, soil: ContinuumSoil, dx: float, *, speed: float = 0.
 
     wall0 = time.perf_counter()
     with MPMSolver(soil, domain, dx, pts, tool=blade, contact_band=contact_band, threads=threads,
-                   legacy=legacy) as solver:
+                   legacy=legacy, elastic_f=elastic_f) as solver:
         solver.set_geostatic_stress(over)
         times, force = _run(solver, traj, 0.2, duration, int(round(duration * samples_per_s)), observe=observe_heap)
         steps = solver.steps
@@ -250,7 +249,7 @@ def run_blade(depth: float, soil: ContinuumSoil, dx: float, *, speed: float = 0.
 
 def run_wall(height: float, soil: ContinuumSoil, dx: float, *, push: float = 0.0, speed: float = 0.05,
              length: float | None = None, rest: float = 0.6, seed: int = 0, threads: int = 1,
-             legacy: bool = False) -> CaseResult:
+             legacy: bool = False, elastic_f: str = "exact") -> CaseResult:
     """A smooth vertical wall (no friction, no adhesion) against a soil block ``height`` [m] high.
 
     The block starts stress-free and settles under gravity for ``rest`` [s] against the fixed wall on a
@@ -276,7 +275,7 @@ def run_wall(height: float, soil: ContinuumSoil, dx: float, *, push: float = 0.0
     traj = Trajectory(t, xs, np.zeros_like(t), np.zeros_like(t))
     wall0 = time.perf_counter()
     with MPMSolver(wall_soil, domain, dx, pts, tool=plate, sticky_floor=False, threads=threads,
-                   legacy=legacy) as solver:
+                   legacy=legacy, elastic_f=elastic_f) as solver:
         solver.time = 0.0
         samples = int(round(duration * 60))
         times = np.linspace(0.0, duration, samples + 1)
