@@ -76,3 +76,23 @@ def test_envelope_puts_a_run_like_the_old_members_inside_and_a_biased_one_outsid
     assert env["groups"]["new-1t"]["members"] == ["new-1t", "new-1t~order1"]
     lines = "\n".join(mod.envelope_table("case", env))
     assert "**no**" in lines and "new-1t~order1" in lines
+
+
+def test_tolerance_holds_the_plant_kernels_and_the_at_rest_wall_of_the_svd_diagnostic():
+    mod = _module()
+    env = {"runs": {"old": {"variant": "old", "inside": True, "inside_early": True},
+                    "new-1t": {"variant": "new-1t", "inside": True, "inside_early": True},
+                    "new-1t~order1": {"variant": "new-1t", "inside": False, "inside_early": True},
+                    "new-1t-svdF": {"variant": "new-1t-svdF", "inside": False, "inside_early": False}}}
+    verification = {"wall": {"old": {"percent_vs_old": {"at_rest": 0.0, "passive": 0.0}},
+                             "new-2t": {"percent_vs_old": {"at_rest": -6.5, "passive": -0.6}},
+                             "new-1t-svdF": {"percent_vs_old": {"at_rest": -0.7, "passive": -0.3}}}}
+    check = mod.tolerance({"reproducibility": {"case": env}, "verification": verification})
+    assert check["cycles"]["case"] == {"runs": 2, "inside": 1, "inside_early": 2, "met": False, "met_early": True}
+    assert set(check["verification"]) == {"wall passive (new-2t)", "wall at_rest (new-1t-svdF)"}
+    assert all(v["met"] for v in check["verification"].values())
+    assert check["met"] is False
+    env["runs"]["new-1t~order1"]["inside"] = True
+    assert mod.tolerance({"reproducibility": {"case": env}, "verification": verification})["met"] is True
+    verification["wall"]["new-2t"]["percent_vs_old"]["passive"] = 1.5
+    assert mod.tolerance({"reproducibility": {"case": env}, "verification": verification})["met"] is False

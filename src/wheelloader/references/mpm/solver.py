@@ -216,7 +216,7 @@ class MPMSolver:
         ``"exact"`` (default): a particle that stays elastic keeps its deformation gradient as multiplied,
         ``F <- (I + dt C) F``. ``"svd"``: every ``F`` is rebuilt from its SVD each step, ``U exp(log sigma) V^T``,
         as the legacy kernels did; a rounding that accumulates over a long run (it moved the cohesive dirt
-        cycle's force by several per cent, ``docs/results/mpm_speed/reproducibility.md``). For comparisons;
+        cycle's force by several per cent, ``docs/results/mpm_reproducibility.md``). For comparisons;
         not with ``legacy=True``, which always does it.
     """
 
