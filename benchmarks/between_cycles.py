@@ -62,7 +62,7 @@ def run_settings(run: Path) -> tuple[dict, Path]:
     st = json.loads(run.read_text(encoding="utf-8"))["settings"]
     payload = st.get("payload")
     loop = {"cycles": int(st["cycles"]), "failure_angle": st["failure_angle"], "objective": st["objective"],
-            "fill_limit": st.get("fill_limit_used"), "lookahead": bool(st.get("lookahead", False)),
+            "fill_limit": st.get("fill_limit_used"), "lookahead": st.get("lookahead", False),
             "prior": st.get("prior", "none"), "descend_clearance": st.get("descend_clearance"),
             "payload": None if payload is None else _payload(ROOT / payload, PayloadOptions),
             "force_model": st.get("force_model", "fee"), **planner_physics(argparse.Namespace(**st))}

@@ -18,6 +18,10 @@
 #   LANES   the plant's --threads (lanes; the results depend on it; default 2, as the v3 run)
 #   TI_THREADS  the threads Taichi runs (--taichi-threads; default 1)
 #   SEED_FROM   saved loops to start greedy from (e.g. data/results/loop_mpm_v3/cycles/loops; default none)
+#   LOOKAHEAD   the look-ahead's setting: full (default; its arm ``lookahead``) or kept (KEPT_CANDIDATES, for the
+#               kept objective: its arm ``lookahead_kept``)
+#   FINAL       1 (default): the closing pass over every soil x seed into OUT/ARM; 0: none (the report reads the
+#               parts)
 set -euo pipefail
 OUT=${1:-docs/results/lookahead_mpm}
 CYCLES=${2:-data/results/lookahead_mpm/cycles}
@@ -26,13 +30,16 @@ RES=${RES:-0.02}
 N=${N:-10}
 SOILS=${SOILS:-gravel sand}
 SEEDS=${SEEDS:-2}
+LOOKAHEAD=${LOOKAHEAD:-full}
+case "$LOOKAHEAD" in full) ARM=lookahead; FLAG=(--lookahead) ;; kept) ARM=lookahead_kept; FLAG=(--lookahead kept) ;;
+  *) echo "LOOKAHEAD must be full or kept, got $LOOKAHEAD" >&2; exit 2 ;; esac
 COMMON=(--plant mpm --resolution "$RES" --threads "${LANES:-2}" --taichi-threads "${TI_THREADS:-1}" --ray off
         --cycles "$N" --failure-angle min_weight_force --heel-clearance 0 --end-blade-angle 55
         --curl-out-intervals 8 --midpoints off --objective kept_per_energy --prior held --descend-clearance 0.1
         --payload docs/results/transfer/transfer.json --strategies ours)
 greedy() { "$PY" benchmarks/plant_adaptation.py "${COMMON[@]}" --stale error --cycles-dir "$CYCLES/greedy" "$@"; }
-lookahead() { "$PY" benchmarks/plant_adaptation.py "${COMMON[@]}" --lookahead --stale redig \
-    --cycles-dir "$CYCLES/lookahead" "$@"; }
+lookahead() { "$PY" benchmarks/plant_adaptation.py "${COMMON[@]}" "${FLAG[@]}" --stale redig \
+    --cycles-dir "$CYCLES/$ARM" "$@"; }
 copy_new() {  # copy_new SRC DST: the saved cycles of SRC that DST does not have
   mkdir -p "$2"
   for f in "$1"/cycle*.xz; do [ -e "$f" ] && { [ -e "$2/$(basename "$f")" ] || cp "$f" "$2/"; }; done; return 0
@@ -42,14 +49,16 @@ for soil in $SOILS; do
     echo "$soil seed $seed: greedy ($(date -u))"
     [ -n "${SEED_FROM:-}" ] && copy_new "$SEED_FROM/$soil/seed$seed/ours" "$CYCLES/greedy/$soil/seed$seed/ours"
     greedy --soils "$soil" --seeds $((seed + 1)) --out "$OUT/parts/greedy_${soil}_$seed"
-    echo "$soil seed $seed: look-ahead ($(date -u))"
-    copy_new "$CYCLES/greedy/$soil/seed$seed/ours" "$CYCLES/lookahead/$soil/seed$seed/ours"
-    lookahead --soils "$soil" --seeds $((seed + 1)) --out "$OUT/parts/lookahead_${soil}_$seed"
+    echo "$soil seed $seed: look-ahead $LOOKAHEAD ($(date -u))"
+    copy_new "$CYCLES/greedy/$soil/seed$seed/ours" "$CYCLES/$ARM/$soil/seed$seed/ours"
+    lookahead --soils "$soil" --seeds $((seed + 1)) --out "$OUT/parts/${ARM}_${soil}_$seed"
   done
 done
-echo "all: greedy and the look-ahead over every soil x seed (resumed) ($(date -u))"
-# shellcheck disable=SC2086
-greedy --soils $SOILS --seeds "$SEEDS" --out "$OUT/greedy"
-# shellcheck disable=SC2086
-lookahead --soils $SOILS --seeds "$SEEDS" --out "$OUT/lookahead"
+if [ "${FINAL:-1}" = 1 ]; then
+  echo "all: greedy and the look-ahead over every soil x seed (resumed) ($(date -u))"
+  # shellcheck disable=SC2086
+  greedy --soils $SOILS --seeds "$SEEDS" --out "$OUT/greedy"
+  # shellcheck disable=SC2086
+  lookahead --soils $SOILS --seeds "$SEEDS" --out "$OUT/$ARM"
+fi
 echo "done ($(date -u))"

@@ -280,7 +280,8 @@ def markdown(result: dict[str, Any], cycles: Path | None = None) -> str:
               + ("" if not s.get("curl_out_intervals") else f" `--curl-out-intervals {s['curl_out_intervals']}`")
               + ("" if s.get("midpoints") is None else f"; `--midpoints {s['midpoints']}`")
               + ("" if s.get("objective", "fill_energy") == "fill_energy" else f"; `--objective {s['objective']}`")
-              + ("" if not s.get("lookahead") else "; `--lookahead`")
+              + ("" if not s.get("lookahead") else "; `--lookahead`" + ("" if s["lookahead"] is True
+                                                                           else f" {s['lookahead']}"))
               + ("" if s.get("prior", "none") == "none" else f"; ours with `--prior {s['prior']}`")
               + ("" if s.get("force_model", "fee") == "fee" else f"; ours with `--force-model {s['force_model']}`")
               + ("" if s.get("descend_clearance") is None else f"; `--descend-clearance {s['descend_clearance']:g}`")
@@ -335,8 +336,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--objective", choices=("fill_energy", "kept_per_energy"), default="fill_energy",
                         help="the planner's objective for every strategy that plans: carved fill against energy "
                              "(default) or energy per m^3 of kept soil with the lift to the dump height (#33)")
-    parser.add_argument("--lookahead", action="store_true",
-                        help="choose each plan with the cycle after it in view (planner/lookahead.py)")
+    parser.add_argument("--lookahead", nargs="?", const=True, default=False, choices=("full", "fast", "kept"),
+                        help="choose each plan with the cycle after it in view (planner/lookahead.py; bare: the "
+                             "full setting; kept: its candidates for the kept objective)")
     parser.add_argument("--stale", choices=("error", "redig", "keep"), default="error",
                         help="a saved cycle dug along another path than the one planned now (other code, settings "
                              "or machine: plans can change with the last bits of the calibrated parameters): stop "

@@ -284,11 +284,11 @@ def _kept_note(plan: Plan, check: PlanCheck, params: SoilParams, pile: Pile, opt
 
 def _kept_target(pile: Pile, opt, rate: float, exit_min_fill: float) -> float:
     """The kept objective's least kept fill [m^3]: the options' ``kept_target`` or the fixed Bezier path's kept
-    fill on ``pile`` (:func:`~wheelloader.planner.kept.fixed_kept_fill`)."""
+    fill on ``pile`` (:func:`~wheelloader.planner.kept.fixed_kept_fill`), times ``kept_target_scale``."""
     options = opt.options
     if options.kept_target is not None:
-        return options.kept_target * opt.bucket.capacity
-    return fixed_kept_fill(pile, opt.bucket, options.kept_payload, rate, exit_min_fill)
+        return options.kept_target_scale * options.kept_target * opt.bucket.capacity
+    return options.kept_target_scale * fixed_kept_fill(pile, opt.bucket, options.kept_payload, rate, exit_min_fill)
 
 
 def _kept_terms(plan: Plan, check: PlanCheck, params: SoilParams, pile: Pile, opt) -> KeptTerms:

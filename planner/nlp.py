@@ -122,7 +122,8 @@ def _smooth_work(v):
 #: of the expressions: as parameters, CasADi differentiates ``F_T / (margin * F_max)`` in another floating-point
 #: order, and the plans would change in their last bits.)
 _NOT_STRUCTURAL = ("max_iter", "max_wall_time", "ipopt_warm_start", "tolerance", "energy_weight", "fill_limit",
-                   "blade_angle_limits", "lift_headroom", "kept_target", "solver", "qp_solver", "compiled")
+                   "blade_angle_limits", "lift_headroom", "kept_target", "kept_target_scale", "solver", "qp_solver",
+                   "compiled")
 #: The derivatives each nlpsol plugin needs, by their nlpsol option name and the name of the solver's own function.
 _DERIVATIVES = {"ipopt": (("grad_f", "nlp_grad_f"), ("jac_g", "nlp_jac_g"), ("hess_lag", "nlp_hess_l")),
                 "sqpmethod": (("jac_fg", "nlp_jac_fg"), ("hess_lag", "nlp_hess_l"))}

@@ -152,6 +152,9 @@ class PlannerOptions:
     kept_target : float, optional
         Least kept fill as a fraction of the nominal capacity (default None: the fixed Bezier path's kept fill on
         the same pile, :func:`~wheelloader.planner.kept.fixed_kept_fill`, as :func:`plan_next_cycle` sets it).
+    kept_target_scale : float
+        Factor on that least kept fill (default 1; in (0, 2]): e.g. 1.05 asks 5 % more kept soil than the fixed
+        path keeps on the pile (the look-ahead's ``KEPT_CANDIDATES``, :mod:`wheelloader.planner.lookahead`).
     force_model : str
         The force model the plan is made and checked with, a name of :data:`~wheelloader.estimator.FORCE_MODELS`
         (as ``force_model=`` of :func:`~wheelloader.estimator.calibrate` and the env): ``"fee"`` (default, the
@@ -199,6 +202,7 @@ class PlannerOptions:
     payload: PayloadOptions | None = None
     dump_height: float | None = None
     kept_target: float | None = None
+    kept_target_scale: float = 1.0
     force_model: str = DEFAULT_FORCE_MODEL
 
     @property
@@ -250,6 +254,7 @@ class PlannerOptions:
             check_finite("PlannerOptions.dump_height", self.dump_height, error=err)
         if self.kept_target is not None:
             check_range("PlannerOptions.kept_target", self.kept_target, 0.0, 10.0, error=err)
+        check_range("PlannerOptions.kept_target_scale", self.kept_target_scale, 0.0, 2.0, low_open=True, error=err)
         check_choice("PlannerOptions.failure_angle", self.failure_angle, ("min_n_gamma", "min_weight_force"),
                      error=err)
         if self.cut_angle is not None:

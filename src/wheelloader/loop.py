@@ -260,7 +260,7 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
                     fill_limit: float | None = None, heel_clearance: float | None = None,
                     end_blade_angle: float | None = None, curl_out_intervals: int = 0,
                     midpoints: bool | None = None, objective: str = "fill_energy",
-                    lookahead: bool = False, rl_policy: str | None = None,
+                    lookahead: bool | str = False, rl_policy: str | None = None,
                     prior: str = "none", descend_clearance: float | None = None,
                     payload: Mapping[str, float] | None = None, force_model: str = "fee") -> dict[str, Any]:
     """One loop of :func:`run_loop` on the trapezoid pile as a unit of :mod:`wheelloader.sweep` (picklable
@@ -279,8 +279,9 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
     constrained at the intervals' midpoints too (default: :func:`~wheelloader.adaptation.default_planner`'s),
     ``objective`` the planner's objective (``"kept_per_energy"``: energy per m^3 of kept soil with the lift to the
     dump height, :mod:`wheelloader.planner.kept`) and ``lookahead`` whether each plan is chosen with the cycle
-    after it in view (:func:`~wheelloader.planner.lookahead.plan_with_lookahead`); both for every strategy that
-    plans. ``rl_policy``: the PPO ``.zip`` of the ``rl`` (a controller: the FEE env plant only) and ``rl_path``
+    after it in view (:func:`~wheelloader.planner.lookahead.plan_with_lookahead`; a setting of
+    :func:`~wheelloader.adaptation.default_planner`); both for every strategy that plans. ``rl_policy``: the PPO
+    ``.zip`` of the ``rl`` (a controller: the FEE env plant only) and ``rl_path``
     strategies (:class:`~wheelloader.adaptation.PolicyPath`: the policy's path in the FEE env, dug in the plant).
     ``prior``: the calibration prior of ``ours`` (a name of :data:`~wheelloader.loop_prior.LOOP_PRIORS`,
     centred on ``ours``' nominal soil). ``descend_clearance``: the planner's opt-in height above the surface

@@ -56,13 +56,15 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
     followed by the greedy plan of the next cycle, each plan within the same budgets as greedy's; ``"fast"``
     :data:`~wheelloader.planner.lookahead.FAST` (greedy and one candidate warm-started from it within 20 IPOPT
     iterations, the next cycle scored with the geometric Bezier placement; cheaper, and worse than greedy in the
-    FEE env, ``docs/results/lookahead.md``); ``descend_clearance``: the opt-in height above the surface above
+    FEE env, ``docs/results/lookahead.md``); ``"kept"`` the full setting with
+    :data:`~wheelloader.planner.lookahead.KEPT_CANDIDATES` (for the kept objective: the greedy plan and its kept
+    target 5 % lower and higher); ``descend_clearance``: the opt-in height above the surface above
     which the tip may not move down [m]; ``payload``: the payload state of the kept objective (and of the payload
     force models; None: the model's default) (:class:`~wheelloader.planner.PlannerOptions`); ``compiled``:
     IPOPT's derivatives as C compiled once per machine (``PlannerOptions.compiled``; the same plans, bit for bit).
     """
-    if lookahead not in (False, True, "fast", "full"):
-        raise WheelloaderError(f"lookahead must be False, True, 'fast' or 'full', got {lookahead!r}")
+    if lookahead not in (False, True, "fast", "full", "kept"):
+        raise WheelloaderError(f"lookahead must be False, True, 'fast', 'full' or 'kept', got {lookahead!r}")
     extra = {} if fill_limit is None else {"fill_limit": fill_limit}
     if midpoints is None:
         midpoints = LOOP_PLANNER_MIDPOINTS and not mpc
@@ -74,10 +76,11 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
     # when a plan first fails its check (once per process: planner.optimizer_for)
     optimizer_for(options=options)
     if lookahead:
-        from wheelloader.planner.lookahead import FAST, plan_with_lookahead
+        from wheelloader.planner.lookahead import FAST, KEPT_CANDIDATES, plan_with_lookahead
 
+        setting = {"fast": FAST, "kept": {"candidates": KEPT_CANDIDATES}}.get(lookahead, {})
         return functools.partial(plan_with_lookahead, mpc=mpc, options=options,
                                  replan_within_iterations=BETWEEN_CYCLES_REPLAN_ITER,
-                                 exit_min_fill=LOOP_EXIT_MIN_FILL, **(FAST if lookahead == "fast" else {}))
+                                 exit_min_fill=LOOP_EXIT_MIN_FILL, **setting)
     return functools.partial(plan_next_cycle, mpc=mpc, options=options,
                              replan_within_iterations=BETWEEN_CYCLES_REPLAN_ITER, exit_min_fill=LOOP_EXIT_MIN_FILL)
