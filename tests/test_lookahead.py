@@ -10,7 +10,7 @@ import pytest
 from wheelloader.estimator import Pile, WheelloaderError
 from wheelloader.planner import PlannerOptions, bezier_on_face
 from wheelloader.planner.kept import KeptTerms
-from wheelloader.planner.lookahead import FAST, plan_with_lookahead, two_cycle_cost
+from wheelloader.planner.lookahead import FAST, KEPT_CANDIDATES, plan_with_lookahead, two_cycle_cost
 from wheelloader.planner.next_cycle import PlanOutcome
 
 CANDS = (("greedy", {}), ("fill limit 0.80", {"fill_limit": 0.80}), ("energy weight 0.04/kJ", {"energy_weight": 0.04}))
@@ -80,6 +80,9 @@ def test_the_loop_selects_it():
     full = default_planner(lookahead="full")
     assert "second" not in full.keywords and "candidates" not in full.keywords
     assert "second" not in planner.keywords  # True: the full look-ahead (the fast one lost to greedy)
+    kept = default_planner(lookahead="kept", objective="kept_per_energy")
+    assert kept.keywords["candidates"] == KEPT_CANDIDATES and "second" not in kept.keywords
+    assert [dict(c).get("kept_target_scale", 1.0) for _, c in KEPT_CANDIDATES] == [1.0, 0.95, 1.05]
     with pytest.raises(WheelloaderError, match="lookahead"):
         default_planner(lookahead="deep")
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import casadi as ca
@@ -60,8 +61,10 @@ def test_options_and_structural_key():
                                              payload=PayloadOptions(0.8, 0.7, 2.0))) != base
     assert structural_options(PlannerOptions(objective="kept_per_energy", midpoints=True, dump_height=1.5)) != base
     assert structural_options(PlannerOptions(objective="kept_per_energy", midpoints=True, kept_target=0.4)) == base
+    assert structural_options(PlannerOptions(objective="kept_per_energy", midpoints=True,
+                                             kept_target_scale=0.95)) == base
     for bad in ({"objective": "kept"}, {"payload": {"retention": 0.9}}, {"dump_height": math.nan},
-                {"kept_target": -0.1}):
+                {"kept_target": -0.1}, {"kept_target_scale": 0.0}, {"kept_target_scale": 2.5}):
         with pytest.raises(PlanningError):
             PlannerOptions(**bad)
 
@@ -94,6 +97,12 @@ def test_plan_keeps_the_fixed_paths_fill():
     assert target > 0.3 * bucket.capacity
     assert kept >= target - 0.01 * bucket.capacity
     assert "kept" in out.message
+    # kept_target_scale scales that least kept fill (the message's target); 5 % more than the fixed path keeps is
+    # infeasible on this pile, 10 % less is not
+    less = plan_next_cycle("gravel", pile, options=replace(KEPT, kept_target_scale=0.9), mpc=False,
+                           exit_min_fill=LOOP_EXIT_MIN_FILL, replan_within_iterations=260)
+    assert less.success, less.message
+    assert f"(target {0.9 * target / bucket.capacity:.0%})" in less.message
 
 
 
