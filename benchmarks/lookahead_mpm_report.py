@@ -52,20 +52,52 @@ CHOICE = re.compile(r"look-ahead chose (?P<name>.+?) \((?P<costs>.+?) kJ/m\^3 ke
                     r"(?P<iterations>\d+) IPOPT it")
 
 
-def arm_rows(out: Path, arm: str) -> tuple[list[dict[str, Any]], dict[str, Any]]:
-    """The arm's rows (the whole run's JSON, else its parts') and the settings and machine of the last one read."""
+def arm_rows(out: Path, arm: str, cycles: Path | None = None) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """The arm's rows (the whole run's JSON, else its parts'; then, with ``cycles``, those of its loops that no JSON
+    has, from the saved cycles: :func:`saved_rows`) and the settings and machine of the last JSON read."""
     whole = out / arm / "plant_adaptation.json"
     paths = [whole] if whole.is_file() else sorted(out.glob(f"parts/{arm}_*/plant_adaptation.json"),
                                                    key=lambda p: p.stat().st_mtime)
-    if not paths:
-        raise SystemExit(f"{out}: no plant_adaptation.json of the {arm} arm (benchmarks/lookahead_mpm.sh)")
     rows: dict[tuple, dict[str, Any]] = {}
     last: dict[str, Any] = {}
     for path in paths:
         last = json.loads(path.read_text())
         for r in last["rows"]:
             rows[(r["soil"], r["seed"], r["cycle"])] = r
-    return list(rows.values()), {"settings": last["settings"], "machine": last["machine"]}
+    if cycles is not None:
+        loops = {(soil, seed) for soil, seed, _ in rows}
+        rows.update({(r["soil"], r["seed"], r["cycle"]): r for r in saved_rows(cycles / arm, arm)
+                     if (r["soil"], r["seed"]) not in loops})
+    if not rows:
+        raise SystemExit(f"{out}: no plant_adaptation.json and no saved cycles of the {arm} arm "
+                         "(benchmarks/lookahead_mpm.sh)")
+    return list(rows.values()), {"settings": last.get("settings", {}), "machine": last.get("machine", {})}
+
+
+def saved_rows(folder: Path, arm: str) -> list[dict[str, Any]]:
+    """Rows of a loop cut short before its invocation wrote its JSON, from its saved cycles: the plant's fill and
+    work (:func:`wheelloader.references.metrics.cycle_work`, as the loop measures a plant), the plan's message and
+    seconds; no calibration seconds or prediction error (NaN). A look-ahead arm's folder starts as a copy of
+    greedy's cycles: its cycles count up to the last one its look-ahead planned ("look-ahead chose" in the
+    message; the copies before it were the same paths, or it would have dug them again), not the copies after."""
+    from wheelloader.references.metrics import cycle_work
+    from wheelloader.saved_loops import load_saved_cycle
+
+    rows = []
+    for loop in sorted(folder.glob("*/seed*/ours")):
+        soil, seed = loop.parent.parent.name, int(loop.parent.name.removeprefix("seed"))
+        found = []
+        while (log := load_saved_cycle(loop, len(found) + 1, check=False)) is not None:
+            found.append(log)
+        plans = [log.metadata.get("plan") or {} for log in found]
+        last = len(found) if arm == "greedy" else max(
+            (k + 1 for k, plan in enumerate(plans) if "look-ahead chose" in str(plan.get("message", ""))), default=0)
+        for k, (log, plan) in enumerate(zip(found[:last], plans, strict=False), start=1):
+            rows.append({"soil": soil, "seed": seed, "cycle": k, "fill_m3": float(log.fill_volume[-1]),
+                         "energy_J": cycle_work(log), "plan_ok": bool(plan.get("ok", False)),
+                         "plan_message": str(plan.get("message", "")), "calibration_s": math.nan,
+                         "planning_s": float(plan.get("seconds", math.nan)), "prediction_rmse_percent": math.nan})
+    return rows
 
 
 def plan_iterations(arm: str, message: str) -> float:
@@ -87,21 +119,22 @@ def predicted_gain(message: str) -> tuple[str, float] | None:
     return m.group("name"), gain
 
 
-def collect(out: Path, cycles: Path) -> dict[str, Any]:
-    """Per cycle rows of both arms with the lifted energy and the plant's failures."""
+def collect(out: Path, cycles: Path, versus: str = "lookahead") -> dict[str, Any]:
+    """Per cycle rows of greedy and the look-ahead arm ``versus`` (its folder under OUT and CYCLES; its rows are
+    labelled ``"lookahead"``) with the lifted energy and the plant's failures."""
     from wheelloader.planner.kept import dump_height
     from wheelloader.references.metrics import above_loader_limits, lifted_work
     from wheelloader.saved_loops import load_saved_cycle
 
     z_ref = dump_height()
     rows, runs = [], {}
-    for arm in ARMS:
-        found, runs[arm] = arm_rows(out, arm)
+    for arm, folder in zip(ARMS, ("greedy", versus), strict=True):
+        found, runs[arm] = arm_rows(out, folder, cycles)
         for r in found:
-            log = load_saved_cycle(cycles / arm / r["soil"] / f"seed{r['seed']}" / "ours", r["cycle"], check=False)
+            log = load_saved_cycle(cycles / folder / r["soil"] / f"seed{r['seed']}" / "ours", r["cycle"], check=False)
             if log is None:
-                raise SystemExit(f"cycle {r['cycle']} of {r['soil']} seed {r['seed']} ({arm}) is not saved under "
-                                 f"{cycles / arm}")
+                raise SystemExit(f"cycle {r['cycle']} of {r['soil']} seed {r['seed']} ({folder}) is not saved under "
+                                 f"{cycles / folder}")
             row = {"arm": arm, **{k: r[k] for k in ("soil", "seed", "cycle", "fill_m3", "energy_J", "plan_ok",
                                                      "plan_message", "calibration_s", "planning_s",
                                                      "prediction_rmse_percent")}}
@@ -111,7 +144,7 @@ def collect(out: Path, cycles: Path) -> dict[str, Any]:
                        iterations=plan_iterations(arm, r["plan_message"]))
             rows.append(row)
     rows.sort(key=lambda r: (r["soil"], r["seed"], ARMS.index(r["arm"]), r["cycle"]))
-    return {"z_ref_m": z_ref, "runs": runs, "rows": rows}
+    return {"z_ref_m": z_ref, "versus": versus, "runs": runs, "rows": rows}
 
 
 def loop_figures(rows: list[dict[str, Any]], volume: float = MOVE_VOLUME) -> dict[str, Any]:
@@ -124,7 +157,8 @@ def loop_figures(rows: list[dict[str, Any]], volume: float = MOVE_VOLUME) -> dic
             to_move = r["cycle"]
             break
     later = [r for r in rows if r["cycle"] >= 2]
-    med = (lambda key: statistics.median(r[key] for r in later)) if later else (lambda key: math.nan)  # noqa: E731
+    timed = [r for r in later if math.isfinite(r["calibration_s"] + r["planning_s"])]  # not from saved cycles
+    med = (lambda key: statistics.median(r[key] for r in timed)) if timed else (lambda key: math.nan)  # noqa: E731
     iterations = [r["iterations"] for r in later if math.isfinite(r["iterations"])]
     choices = [c for r in rows if (c := predicted_gain(r["plan_message"])) is not None]
     gains = [g for _, g in choices if math.isfinite(g)]
@@ -134,8 +168,8 @@ def loop_figures(rows: list[dict[str, Any]], volume: float = MOVE_VOLUME) -> dic
             "kept_m3": fill, "cycles_to_move": to_move,
             "failed_plans": sum(not r["plan_ok"] for r in rows),
             "above_limits": sum(bool(r.get("above_limits")) for r in rows),
-            "between_total_s_median": statistics.median(r["calibration_s"] + r["planning_s"] for r in later)
-            if later else math.nan,
+            "between_total_s_median": statistics.median(r["calibration_s"] + r["planning_s"] for r in timed)
+            if timed else math.nan,
             "calibration_s_median": med("calibration_s"), "planning_s_median": med("planning_s"),
             "iterations_median": statistics.median(iterations) if iterations else math.nan,
             "s_per_iteration_median": statistics.median(r["planning_s"] / r["iterations"] for r in later
@@ -172,8 +206,8 @@ def summarise(data: dict[str, Any], volume: float = MOVE_VOLUME) -> dict[str, An
         pooled = {arm: loop_figures([r for r in rows if r["arm"] == arm and f"{r['soil']} seed {r['seed']}" in per_loop
                                      and r["cycle"] <= per_loop[f"{r['soil']} seed {r['seed']}"]["cycles"]], volume)
                   for arm in ARMS}
-        between = {arm: [r["calibration_s"] + r["planning_s"] for r in rows if r["arm"] == arm and r["cycle"] >= 2
-                         and f"{r['soil']} seed {r['seed']}" in per_loop] for arm in ARMS}
+        between = {arm: [v for r in rows if r["arm"] == arm and r["cycle"] >= 2 and f"{r['soil']} seed {r['seed']}"
+                         in per_loop and math.isfinite(v := r["calibration_s"] + r["planning_s"])] for arm in ARMS}
         out.update(gain_percent_median=statistics.median(gains), gain_percent_min=min(gains),
                    gain_percent_max=max(gains),
                    gain_percent_pooled=100.0 * (pooled["lookahead"]["kJ_per_kept_m3"]
@@ -212,7 +246,9 @@ def markdown(data: dict[str, Any], summary: dict[str, Any], command: str) -> str
             f = q[arm]
             chose = (f"{f['non_greedy_choices']}/{f['choices']} ({f['predicted_gain_percent_median']:.1f} %)"
                      if arm == "lookahead" and f["choices"] else "–")
-            lines.append(f"| {name} | {q['cycles']} | {arm} | {f['kJ_per_kept_m3']:.1f} kJ/m³ | {f['kept_fill']:.1%} | "
+            label = arm if arm == "greedy" else data.get("versus", arm)
+            lines.append(f"| {name} | {q['cycles']} | {label} | {f['kJ_per_kept_m3']:.1f} kJ/m³ | "
+                         f"{f['kept_fill']:.1%} | "
                          f"{_moves(f['cycles_to_move'])} | {f['failed_plans']} / {f['above_limits']} | {chose} | "
                          f"{f['between_total_s_median']:.1f} s ({f['calibration_s_median']:.2f} + "
                          f"{f['planning_s_median']:.1f} s) | {f['iterations_median']:.0f} |")
@@ -233,14 +269,18 @@ def markdown(data: dict[str, Any], summary: dict[str, Any], command: str) -> str
                   f"| between cycles ≤ 1 s median, look-ahead included | look-ahead "
                   f"{between['lookahead']:.1f} s, greedy {between['greedy']:.1f} s (wall) | "
                   f"{yes[summary['verdict_between']]} |"]
-    run = data["runs"]["lookahead"]
+    run = data["runs"]["lookahead"] if data["runs"]["lookahead"].get("settings") else data["runs"]["greedy"]
     from wheelloader.provenance import commit_label, load_label
 
     st = run["settings"]
+    cut = "" if data["runs"]["lookahead"].get("settings") else (
+        " (the look-ahead's loop was cut short before it wrote its JSON: its rows are its saved cycles', without "
+        "calibration seconds)")
     lines += ["", f"*`{command}` (MPM dx {st['resolution']} m, {st['threads']} lanes, Taichi threads "
               f"{st.get('taichi_threads') or st['threads']}; held prior, kept objective, descend clearance "
-              f"{st.get('descend_clearance')} m) at {commit_label(run['machine'])}; load average at the look-ahead "
-              f"arm's last invocation's end {load_label(run['machine'])}. Energy per m³ kept: the plant's work plus "
+              f"{st.get('descend_clearance')} m; look-ahead arm `{data.get('versus', 'lookahead')}`{cut}) at "
+              f"{commit_label(run['machine'])}; load average at the last invocation's end "
+              f"{load_label(run['machine'])}. Energy per m³ kept: the plant's work plus "
               f"the lift of its kept load from the path's end to {z:.2f} m, over the plant's kept fill, pooled over "
               "the cycles both arms dug; gain: look-ahead over greedy − 1 (negative: less energy). Between cycles: "
               "the loop's wall seconds from cycle 2 on a shared 2-core machine.*"]
@@ -285,18 +325,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default="docs/results/lookahead_mpm", help="lookahead_mpm.sh's OUT (read, written)")
     parser.add_argument("--cycles", default="data/results/lookahead_mpm/cycles", help="lookahead_mpm.sh's CYCLES")
     parser.add_argument("--volume", type=float, default=MOVE_VOLUME, help="kept volume to move [m^3]")
+    parser.add_argument("--versus", default="lookahead",
+                        help="the look-ahead arm compared with greedy (lookahead or lookahead_kept; outputs named "
+                             "with it unless lookahead)")
     parser.add_argument("--command", default="bash benchmarks/lookahead_mpm.sh",
                         help="the run's command, quoted in the table's note")
     args = parser.parse_args(argv)
     if not args.volume > 0:
         parser.error(f"--volume must be positive, got {args.volume}")
     out = Path(args.out)
-    data = collect(out, Path(args.cycles))
+    data = collect(out, Path(args.cycles), args.versus)
     summary = summarise(data, args.volume)
-    (out / "lookahead_mpm.json").write_text(json.dumps({**data, "summary": summary}, indent=1, default=str))
+    tag = "" if args.versus == "lookahead" else f"_{args.versus}"
+    (out / f"lookahead_mpm{tag}.json").write_text(json.dumps({**data, "summary": summary}, indent=1, default=str))
     text = markdown(data, summary, args.command)
-    (out / "table.md").write_text(text)
-    plot(data, summary, out / "lookahead_mpm.png")
+    (out / f"table{tag}.md").write_text(text)
+    plot(data, summary, out / f"lookahead_mpm{tag}.png")
     print(text)
     return 0
 

@@ -81,3 +81,37 @@ def test_only_the_cycles_both_arms_dug_are_compared():
     assert summary["loops"]["gravel seed 0"]["greedy"]["kJ_per_kept_m3"] == pytest.approx(50.0)
     assert summary["gain_percent_median"] == pytest.approx(-20.0)
     assert report.summarise({"rows": [r for r in rows if r["arm"] == "greedy"]})["loops"] == {}
+
+
+def test_a_loop_cut_short_is_read_from_its_saved_cycles(tmp_path):
+    """Rows from the saved cycles where no JSON was written: greedy's every cycle; the look-ahead's up to the last
+    one it planned (its folder started as a copy of greedy's cycles)."""
+    import numpy as np
+
+    from wheelloader.estimator import BucketPath, CycleLog, Pile
+    from wheelloader.saved_loops import save_cycle
+
+    report = _load()
+    t = np.linspace(0.0, 1.0, 6)
+    path = BucketPath(t, 0.5 * t, 0.2 * t, 0 * t)
+
+    def save(arm, k, fill, message):
+        log = CycleLog(path, np.full(6, 100.0), np.zeros(6), Pile.trapezoid(), fill_volume=np.full(6, fill),
+                       metadata={"plan": {"ok": True, "message": message, "seconds": 2.0 * k}})
+        save_cycle(tmp_path / arm / "gravel" / "seed0" / "ours", k, log)
+
+    for k in (1, 2, 3):
+        save("greedy", k, 0.1, "IPOPT iterate 60 of 80")
+    save("lookahead", 1, 0.1, "IPOPT iterate 60 of 80")  # greedy's copy, the same path as the look-ahead's
+    save("lookahead", 2, 0.12, CHOSE)  # dug by the look-ahead
+    save("lookahead", 3, 0.1, "IPOPT iterate 60 of 80")  # greedy's copy after the look-ahead stopped
+    greedy = report.saved_rows(tmp_path / "greedy", "greedy")
+    ahead = report.saved_rows(tmp_path / "lookahead", "lookahead")
+    assert [r["cycle"] for r in greedy] == [1, 2, 3] and [r["cycle"] for r in ahead] == [1, 2]
+    assert ahead[1]["fill_m3"] == 0.12 and ahead[1]["planning_s"] == 4.0 and math.isnan(ahead[1]["calibration_s"])
+    assert greedy[0]["energy_J"] == pytest.approx(100.0 * 0.5)  # cycle_work: F_T = 100 N resists +x at 0.5 m/s, 1 s
+    rows = [dict(r, arm="greedy", lifted_J=r["energy_J"], capacity_m3=0.2, iterations=80.0) for r in greedy]
+    rows += [dict(r, arm="lookahead", lifted_J=r["energy_J"], capacity_m3=0.2, iterations=80.0) for r in ahead]
+    summary = report.summarise({"rows": rows})
+    assert summary["loops"]["gravel seed 0"]["cycles"] == 2
+    assert math.isnan(summary["loops"]["gravel seed 0"]["lookahead"]["between_total_s_median"])
