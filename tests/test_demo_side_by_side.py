@@ -77,11 +77,11 @@ def test_a_line_said_after_the_cancel_stops_that_run():
         streams.say(0, "too late")
 
 
-def test_default_jobs_is_one_per_cpu_and_at_most_one_per_seed(monkeypatch):
+def test_default_jobs_is_one_per_seed_up_to_two_per_cpu_and_one_on_one_cpu(monkeypatch):
     import os
 
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
-    assert default_jobs(3) == 2 and default_jobs(1) == 1
+    assert default_jobs(3) == 3 and default_jobs(1) == 1 and default_jobs(20) == 4
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0}, raising=False)
     assert default_jobs(3) == 1
 

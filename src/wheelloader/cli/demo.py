@@ -48,9 +48,24 @@ def register(subparsers: Any) -> None:
                         "else CasADi's virtual machine with a warning)")
     p.add_argument("--jobs", type=int, default=None,
                    help="run the seeds side by side in this many threads (the same table and output; default: one "
-                        "per CPU available, at most --seeds; with the fee-env plant and the planner, without --mpc)")
+                        "per seed, at most two per CPU, 1 on one CPU; with the fee-env plant and the planner, "
+                        "without --mpc)")
     add_force_flag(p)
     p.set_defaults(func=run)
+
+
+def _one_malloc_arena() -> None:
+    """Ask glibc's malloc for one arena: by default each thread that allocates while another does gets its own, and
+    the seeds side by side (``--jobs``) then held about 20 MB more at the peak (measured with 3 seeds: 285 against
+    265 MB, the same CPU time). Elsewhere (no ``mallopt``) nothing changes."""
+    import ctypes
+
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):  # pragma: no cover - not glibc
+        return
+    m_arena_max = -8  # glibc's M_ARENA_MAX
+    mallopt(ctypes.c_int(m_arena_max), ctypes.c_int(1))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -85,6 +100,7 @@ def run(args: argparse.Namespace) -> int:
             import taichi  # noqa: F401
         except ImportError:
             raise ParameterError("--plant mpm needs the mpm extra (Taichi): pip install 'wheelloader[mpm]'") from None
+    _one_malloc_arena()
     run = OutputRun(force=args.force)
     out = run.directory("-o/--out", args.out, fresh=not args.force)
     with run:
