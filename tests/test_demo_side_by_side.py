@@ -166,3 +166,28 @@ def test_seeds_side_by_side_need_the_env_plant_with_the_planner_and_no_mpc(tmp_p
 
     with pytest.raises(ParameterError, match="jobs > 1"):
         run_demo(tmp_path, cycles=1, seeds=2, jobs=2, **kwargs)
+
+
+def test_a_saved_figure_is_the_same_png_without_the_second_layout_pass(tmp_path):
+    """``plotting.finish_figure`` drops the place-holder layout engine ``tight_layout`` leaves before ``savefig``
+    (which then skips an undrawn pass over the figure): the file is byte for byte the one saved with it."""
+    from wheelloader import plotting
+
+    def figure():
+        fig, axes = plotting.new_figure(1, 2, (6, 3))
+        axes[0].plot([0, 1, 2], [3, 1, 2], "o-", label="a")
+        axes[1].plot([0, 1], [1, 0], "--", label="b")
+        for ax in axes:
+            ax.set_xlabel("x [m]")
+            ax.legend(fontsize=7)
+        return fig
+
+    kept = figure()
+    kept.suptitle("title")
+    kept.tight_layout()
+    assert kept.get_layout_engine() is not None  # what savefig would make its second pass for
+    kept.savefig(tmp_path / "kept.png", dpi=120)
+    plotting.finish_figure(kept)  # closes nothing (no file): the figure is left to the caller
+    kept.clf()
+    plotting.finish_figure(figure(), tmp_path / "dropped.png", title="title")
+    assert (tmp_path / "dropped.png").read_bytes() == (tmp_path / "kept.png").read_bytes()
