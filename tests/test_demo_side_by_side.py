@@ -187,7 +187,6 @@ def test_a_saved_figure_is_the_same_png_without_the_second_layout_pass(tmp_path)
     kept.tight_layout()
     assert kept.get_layout_engine() is not None  # what savefig would make its second pass for
     kept.savefig(tmp_path / "kept.png", dpi=120)
-    plotting.finish_figure(kept)  # closes nothing (no file): the figure is left to the caller
-    kept.clf()
+    plotting._pyplot().close(kept)
     plotting.finish_figure(figure(), tmp_path / "dropped.png", title="title")
     assert (tmp_path / "dropped.png").read_bytes() == (tmp_path / "kept.png").read_bytes()
