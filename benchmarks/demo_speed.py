@@ -10,7 +10,9 @@ load. Every run's ``table.md`` must be byte-identical to the committed ``docs/re
 ``summary.json`` equal to the first baseline run's without the timing and machine fields.
 
 ``--stages`` also runs the current demo once more, in-process with a progress hook, and records the CPU time and
-resident memory at each of its progress lines (where the time and the memory go).
+resident memory at each of its progress lines (where the time and the memory go), with the thread that printed the
+line, that thread's own CPU time and its time spent waiting for a CPU (the seeds run side by side in threads:
+``wheelloader demo --jobs``).
 
 Run: ``python benchmarks/demo_speed.py --baseline REV [--rounds 2] [--stages] [--compiled]
 [--out docs/results/demo_speed]``; ``--compiled`` runs the current version as ``wheelloader demo --compiled``
@@ -22,11 +24,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -121,17 +125,34 @@ def stages_worker(out: Path, compiled: bool = False) -> int:
     from wheelloader.demo import run_demo
 
     cpu0 = time.process_time()
+    wall0 = time.perf_counter()
     stages = []
 
     def hook(line: str) -> None:
-        stages.append({"cpu_s": time.process_time() - cpu0,
-                       "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, "line": line})
+        # the seeds run side by side in threads (--jobs): each line also says which thread printed it, with that
+        # thread's own CPU time and its time spent waiting for a CPU so far (Linux's schedstat; else NaN)
+        thread_cpu, queued = _thread_times()
+        stages.append({"cpu_s": time.process_time() - cpu0, "wall_s": time.perf_counter() - wall0,
+                       "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, "line": line,
+                       "thread": threading.current_thread().name, "thread_cpu_s": thread_cpu,
+                       "thread_queued_s": queued})
 
     out.mkdir(parents=True, exist_ok=True)
     run_demo(out, seeds=3, progress=hook, compiled=compiled)
     hook("figures and summary written")
     print(json.dumps(stages))
     return 0
+
+
+def _thread_times() -> tuple[float, float]:
+    """The calling thread's CPU time and its time waiting for a CPU [s] (``/proc``'s schedstat on Linux; elsewhere
+    its CPU time and NaN)."""
+    try:
+        with open(f"/proc/self/task/{threading.get_native_id()}/schedstat", encoding="ascii") as f:
+            cpu, queued = f.read().split()[:2]
+        return int(cpu) / 1e9, int(queued) / 1e9
+    except (OSError, ValueError, AttributeError):
+        return time.thread_time(), math.nan
 
 
 def stages(cache: Path, compiled: bool = False) -> list[dict]:

@@ -28,6 +28,8 @@ from wheelloader.estimator import preset
 
 PLAN = ["plan", "{params}", "--pareto", "--weights", "0,0.05", "-o", "{out}/plan.csv", "--plot", "{out}/plan.png"]
 DEMO = ["demo", "--cycles", "2", "--seeds", "1", "-o", "{out}"]
+#: Two seeds side by side in two threads (wheelloader.planner.lanes): a Ctrl-C cancels both lanes.
+DEMO_SIDE_BY_SIDE = ["demo", "--cycles", "2", "--seeds", "2", "--jobs", "2", "-o", "{out}"]
 
 
 def _snapshot(folder: Path) -> dict[str, bytes]:
@@ -118,7 +120,7 @@ def test_ctrl_c_at_three_moments_of_plan_pareto(tmp_path, params):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("template", [DEMO, PLAN], ids=["demo", "plan-pareto"])
+@pytest.mark.parametrize("template", [DEMO, DEMO_SIDE_BY_SIDE, PLAN], ids=["demo", "demo-side-by-side", "plan-pareto"])
 def test_ctrl_c_at_twenty_random_moments(tmp_path, params, template):
     _check_moments(tmp_path, params, template, moments=20, seed=2029)
 
