@@ -10,9 +10,9 @@ load. Every run's ``table.md`` must be byte-identical to the committed ``docs/re
 ``summary.json`` equal to the first baseline run's without the timing and machine fields.
 
 ``--stages`` also runs the current demo once more, in-process with a progress hook, and records the CPU time and
-resident memory at each of its progress lines (where the time and the memory go), with the thread that printed the
-line, that thread's own CPU time and its time spent waiting for a CPU (the seeds run side by side in threads:
-``wheelloader demo --jobs``).
+resident memory at each of its progress lines (where the time and the memory go), and each thread's own CPU time
+and its time spent waiting for a CPU (the seeds run side by side in threads, ``wheelloader demo --jobs``; sampled
+every 0.1 s).
 
 Run: ``python benchmarks/demo_speed.py --baseline REV [--rounds 2] [--stages] [--compiled]
 [--out docs/results/demo_speed]``; ``--compiled`` runs the current version as ``wheelloader demo --compiled``
@@ -129,33 +129,45 @@ def stages_worker(out: Path, compiled: bool = False) -> int:
     stages = []
 
     def hook(line: str) -> None:
-        # the seeds run side by side in threads (--jobs): each line also says which thread printed it, with that
-        # thread's own CPU time and its time spent waiting for a CPU so far (Linux's schedstat; else NaN)
-        thread_cpu, queued = _thread_times()
         stages.append({"cpu_s": time.process_time() - cpu0, "wall_s": time.perf_counter() - wall0,
-                       "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, "line": line,
-                       "thread": threading.current_thread().name, "thread_cpu_s": thread_cpu,
-                       "thread_queued_s": queued})
+                       "max_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, "line": line})
 
+    # the seeds run side by side in threads (wheelloader demo --jobs; a seed's lines are printed when the seeds
+    # before it are done): every 0.1 s each thread's own CPU time and its wait for a CPU so far, the last sample kept
+    threads: dict[str, dict] = {}
+    stop = threading.Event()
+
+    def sample() -> None:
+        while not stop.wait(0.1):
+            for thread in threading.enumerate():
+                if thread.native_id is not None and thread is not sampler:
+                    cpu, queued = _thread_times(thread.native_id)
+                    threads[thread.name] = {"cpu_s": cpu, "queued_s": queued}
+
+    sampler = threading.Thread(target=sample, name="sampler", daemon=True)
+    sampler.start()
     out.mkdir(parents=True, exist_ok=True)
     run_demo(out, seeds=3, progress=hook, compiled=compiled)
     hook("figures and summary written")
-    print(json.dumps(stages))
+    stop.set()
+    sampler.join()
+    threads["MainThread"] = dict(zip(("cpu_s", "queued_s"), _thread_times(threading.main_thread().native_id),
+                                     strict=True))
+    print(json.dumps({"lines": stages, "threads": threads}))
     return 0
 
 
-def _thread_times() -> tuple[float, float]:
-    """The calling thread's CPU time and its time waiting for a CPU [s] (``/proc``'s schedstat on Linux; elsewhere
-    its CPU time and NaN)."""
+def _thread_times(native_id: int) -> tuple[float, float]:
+    """A thread's CPU time and its time waiting for a CPU so far [s] (Linux's ``/proc`` schedstat; NaN elsewhere)."""
     try:
-        with open(f"/proc/self/task/{threading.get_native_id()}/schedstat", encoding="ascii") as f:
+        with open(f"/proc/self/task/{native_id}/schedstat", encoding="ascii") as f:
             cpu, queued = f.read().split()[:2]
         return int(cpu) / 1e9, int(queued) / 1e9
-    except (OSError, ValueError, AttributeError):
-        return time.thread_time(), math.nan
+    except (OSError, ValueError):
+        return math.nan, math.nan
 
 
-def stages(cache: Path, compiled: bool = False) -> list[dict]:
+def stages(cache: Path, compiled: bool = False) -> dict:
     """:func:`stages_worker` of the current code in a fresh process (with the NLP cache ``cache``, filled by the
     current version's runs)."""
     with tempfile.TemporaryDirectory(prefix="demo-stages-") as tmp:
