@@ -5,7 +5,8 @@ NLP (its expressions and derivatives, ~150 MB for 40 intervals) is built once an
 gets its own IPOPT solver of it (made from the first lane's derivative functions, no new differentiation, so its
 iterates are bit-identical), with its own iteration callback and statistics, and its own warm start in each
 :class:`~wheelloader.planner.TrajectoryOptimizer`. The lane of a thread is 0 until :func:`lane` says otherwise.
-Ipopt 3.14 serialises its calls into MUMPS itself (MUMPS is not thread-safe).
+Ipopt (3.14 and later; CasADi 3.8 ships 3.14.19) serialises its calls into MUMPS itself, which is not
+thread-safe (coin-or/Ipopt#733).
 
 A lane may carry a cancel event: once it is set, every IPOPT solve of that lane stops at its next iteration
 (the iteration callback asks IPOPT to stop), e.g. when the main thread got a Ctrl-C.
