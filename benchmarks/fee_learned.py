@@ -77,7 +77,7 @@ SEED = 0
 ENSEMBLE = 3
 #: The loop cycles' share of the training weight (carved piles in two soils: not the test's path family).
 LOOP_SHARE = 0.2
-VERSION = "4"
+VERSION = "5"
 COMMAND = "python benchmarks/fee_learned.py --out estimator/learned_weights"
 TEST_ROWS = {"gravel": "gravel", "sand": "sand", "modified_sand": "modified_sand (unseen soil)",
              "dirt": "dirt (held-out soil)", "gravel_slope25": "25 deg pile (held-out pile)"}
@@ -352,9 +352,11 @@ def main(argv: list[str] | None = None) -> int:
     val_loops = collect(parts["validation_loops"], payload, "validation loops")
     test = collect(parts["test"], payload, "test")
     no_soil = np.array([0.0 if n in SOIL_INPUTS else 1.0 for n in INPUT_NAMES])
+    no_kept = np.array([0.0 if n == "kept_fill_fraction" else 1.0 for n in INPUT_NAMES])
     # the forms compared: (hidden units a seed, L2, loop share, input mask)
     specs = {f"mlp {HIDDEN} units, L2 {L2}, loops {LOOP_SHARE}": (HIDDEN, L2, LOOP_SHARE, None),
              f"mlp {HIDDEN} units, L2 {L2}, no loops": (HIDDEN, L2, 0.0, None),
+             f"mlp {HIDDEN} units, L2 {L2}, no loops, no kept-fill input": (HIDDEN, L2, 0.0, no_kept),
              f"mlp {HIDDEN} units, L2 {L2}, loops {LOOP_SHARE}, no soil inputs": (HIDDEN, L2, LOOP_SHARE, no_soil),
              f"mlp 8 units, L2 0.01, loops {LOOP_SHARE} (v2's size)": (8, 1e-2, LOOP_SHARE, None)}
     base_name = f"{LEARNED_BASE} (no correction)"
