@@ -27,7 +27,7 @@ The mathematics is the module docstring of :mod:`.solver`; this is how it is lai
   multiplied; a plastic one gets its stretches scaled in place. The old kernels rebuilt every ``F`` from
   its SVD, ``U exp(log sigma) V^T``, every step; with ``svd_f=True`` these kernels do that too (the
   return mapping then on the SVD's stretches), for comparisons only
-  (``docs/results/mpm_reproducibility.md``: that rounding accumulates over a cycle's 34,000 steps).
+  (``docs/results/mpm_reproducibility.md``: that rounding makes the smooth wall's at-rest force creep).
 """
 
 # No ``from __future__ import annotations`` here: Taichi reads the kernels' annotations at definition.

@@ -215,9 +215,9 @@ class MPMSolver:
     elastic_f : str
         ``"exact"`` (default): a particle that stays elastic keeps its deformation gradient as multiplied,
         ``F <- (I + dt C) F``. ``"svd"``: every ``F`` is rebuilt from its SVD each step, ``U exp(log sigma) V^T``,
-        as the legacy kernels did; a rounding that accumulates over a long run (it moved the cohesive dirt
-        cycle's force by several per cent, ``docs/results/mpm_reproducibility.md``). For comparisons;
-        not with ``legacy=True``, which always does it.
+        as the legacy kernels did: a rounding that accumulates where the soil should rest (it makes the smooth
+        wall's at-rest force creep, and accounts for the old and new kernels' 6.5 % difference there;
+        ``docs/results/mpm_reproducibility.md``). For comparisons; not with ``legacy=True``, which always does it.
     """
 
     def __init__(self, soil: ContinuumSoil, domain: Domain, dx: float, particles: np.ndarray, *,
