@@ -260,7 +260,7 @@ def markdown(data: dict) -> str:
                          f"{s['calibration_cpu_s_median']:.2f} s | {s['plan_cpu_s_median']:.2f} s | "
                          f"{s['solve_cpu_s_median']:.2f} s | {s['plan_rest_cpu_s_median']:.2f} s |")
     command = (f"--baseline {data['baseline']}" if "run" not in data else
-               f"--run {data['run']} --single --loops {' '.join(data['loops'])}")
+               f"--run {data['run']} --single --cycles {data['settings']['cycles']} --loops {' '.join(data['loops'])}")
     versions = (f"current = {data['current_commit'][:10]}" if "run" in data else
                 f"baseline = {data['baseline_commit'][:10]}, current = {data['current_commit'][:10]}")
     lines += ["", f"*`python benchmarks/between_cycles.py {command}` ({versions}); CPU seconds of this "

@@ -56,8 +56,9 @@ def arm_rows(out: Path, arm: str, cycles: Path | None = None) -> tuple[list[dict
     """The arm's rows (the whole run's JSON, else its parts'; then, with ``cycles``, those of its loops that no JSON
     has, from the saved cycles: :func:`saved_rows`) and the settings and machine of the last JSON read."""
     whole = out / arm / "plant_adaptation.json"
-    paths = [whole] if whole.is_file() else sorted(out.glob(f"parts/{arm}_*/plant_adaptation.json"),
-                                                   key=lambda p: p.stat().st_mtime)
+    parts = [p for p in out.glob(f"parts/{arm}_*/plant_adaptation.json")  # ARM_SOIL_SEED, not ARM_kept_...
+             if re.fullmatch(rf"{re.escape(arm)}_[^_]+_\d+", p.parent.name)]
+    paths = [whole] if whole.is_file() else sorted(parts, key=lambda p: p.stat().st_mtime)
     rows: dict[tuple, dict[str, Any]] = {}
     last: dict[str, Any] = {}
     for path in paths:
