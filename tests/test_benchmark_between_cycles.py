@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import shutil
 import subprocess
@@ -10,17 +9,11 @@ import sys
 from pathlib import Path
 
 import pytest
+from benchmark_scripts import load_benchmark
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "benchmarks" / "between_cycles.py"
 RESULTS = ROOT / "docs" / "results" / "between_cycles"
-
-
-def _module():
-    spec = importlib.util.spec_from_file_location("between_cycles", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _event(kind, cpu, iterations=0, builds=0, ok=True):
@@ -32,7 +25,7 @@ def _event(kind, cpu, iterations=0, builds=0, ok=True):
 
 
 def test_each_cycle_counts_the_calibration_before_it_and_its_plan():
-    bc = _module()
+    bc = load_benchmark("between_cycles")
     events = [_event("plan", 0.5, 40), _event("calibration", 0.25), _event("plan", 1.0, 130),
               _event("calibration", 0.125), _event("plan", 4.0, 300, builds=2, ok=False)]
     cycles = bc.between(events)
@@ -47,7 +40,7 @@ def test_each_cycle_counts_the_calibration_before_it_and_its_plan():
 
 
 def test_the_summary_is_over_cycles_from_the_second():
-    bc = _module()
+    bc = load_benchmark("between_cycles")
     loop = {"cycles": bc.between([_event("plan", 9.0, 500), _event("calibration", 0.5), _event("plan", 1.0, 100),
                                   _event("calibration", 0.5), _event("plan", 2.0, 200, builds=1)])}
     s = bc.summarise({"loops": {"a": loop, "b": loop}})
@@ -82,7 +75,7 @@ def test_a_replay_makes_the_committed_plans_and_counts_their_work(tmp_path, monk
     out = tmp_path / "replay.json"
     subprocess.run([sys.executable, str(SCRIPT), "--worker", str(out), "--cycles", "2", "--loops", "gravel/0/ours"],
                    check=True, capture_output=True)
-    cycles = _module().between(json.loads(out.read_text())["loops"]["gravel/0/ours"]["events"])
+    cycles = load_benchmark("between_cycles").between(json.loads(out.read_text())["loops"]["gravel/0/ours"]["events"])
     assert [c["cycle"] for c in cycles] == [1, 2]
     assert all(c["iterations"] > 0 and c["plan_ok"] for c in cycles)
     assert cycles[0]["calibration_cpu_s"] == 0.0 < cycles[1]["calibration_cpu_s"]

@@ -1,22 +1,12 @@
 """benchmarks/env_speed_load.py: one row per block length, positive rates, ratios from the rates."""
 
-import importlib.util
-from pathlib import Path
 
 import pytest
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def _module():
-    spec = importlib.util.spec_from_file_location("env_speed_load", ROOT / "benchmarks" / "env_speed_load.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from benchmark_scripts import load_benchmark
 
 
 def test_rows_per_block_with_rates_and_their_ratio():
-    rows = _module().measure(steps=40, tries=2, blocks=[40, 10])
+    rows = load_benchmark("env_speed_load").measure(steps=40, tries=2, blocks=[40, 10])
     assert [r["block"] for r in rows] == [40, 10]
     for r in rows:
         assert r["steps_per_s"] > 0.0 and r["cartpole_steps_per_s"] > 0.0

@@ -2,27 +2,19 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 import pytest
+from benchmark_scripts import load_benchmark
 
 from wheelloader.estimator.learned import INPUT_NAMES, contact_gate, default_learned_model
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _load():
-    spec = importlib.util.spec_from_file_location("wheelloader_benchmark_fee_learned", ROOT / "benchmarks" /
-                                                  "fee_learned.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_training_is_seeded_and_learns_a_known_function():
-    fl = _load()
+    fl = load_benchmark("fee_learned")
     rng = np.random.default_rng(1)
     x = rng.uniform(-1.0, 1.0, (400, len(INPUT_NAMES)))
     x[:, 1] = rng.uniform(0.05, 2.0, len(x))  # the contact ramp: the gate is below 1 under 1
@@ -35,7 +27,7 @@ def test_training_is_seeded_and_learns_a_known_function():
 
 
 def test_a_form_without_the_soil_inputs_ignores_them():
-    fl = _load()
+    fl = load_benchmark("fee_learned")
     rng = np.random.default_rng(2)
     x = rng.uniform(-1.0, 1.0, (200, len(INPUT_NAMES)))
     r = np.column_stack([x[:, 0], x[:, 9]])
@@ -49,7 +41,7 @@ def test_a_form_without_the_soil_inputs_ignores_them():
 
 def test_the_shipped_weights_name_their_build_and_split():
     manifest = default_learned_model().manifest
-    fl = _load()
+    fl = load_benchmark("fee_learned")
     assert manifest["command"] == fl.COMMAND
     split = manifest["split"]
     assert set(split["test"]) == {"gravel", "sand", "modified_sand", "dirt", "gravel_slope25"}
@@ -58,18 +50,18 @@ def test_the_shipped_weights_name_their_build_and_split():
 
 
 def test_a_missing_folder_is_one_line_exit_2(tmp_path, capsys):
-    assert _load().main(["--out", str(tmp_path), "--data", str(tmp_path / "none")]) == 2
+    assert load_benchmark("fee_learned").main(["--out", str(tmp_path), "--data", str(tmp_path / "none")]) == 2
     assert capsys.readouterr().err.startswith("wheelloader: error:")
 
 
 @pytest.mark.parametrize("count", [1, 3])
 def test_r2_of_a_perfect_prediction_is_one(count):
     r = np.arange(2.0 * 5 * count).reshape(-1, 2) ** 1.5
-    assert _load().r2(r, r) == [1.0, 1.0]
+    assert load_benchmark("fee_learned").r2(r, r) == [1.0, 1.0]
 
 
 def test_the_mean_network_is_the_mean_of_its_members():
-    fl = _load()
+    fl = load_benchmark("fee_learned")
     rng = np.random.default_rng(3)
     x = rng.uniform(-1.0, 1.0, (150, len(INPUT_NAMES)))
     x[:, 1] = rng.uniform(0.0, 1.5, len(x))
@@ -83,7 +75,7 @@ def test_the_mean_network_is_the_mean_of_its_members():
 
 
 def test_the_loop_cycles_weigh_their_share():
-    fl = _load()
+    fl = load_benchmark("fee_learned")
     rng = np.random.default_rng(4)
 
     def group(n):

@@ -3,26 +3,16 @@ tiny run (slow)."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
-from pathlib import Path
 
 import pytest
+from benchmark_scripts import load_benchmark
 
 from wheelloader.estimator import GRAVITY, Bucket
 from wheelloader.estimator.force_models import DEFAULT_PAYLOAD
 from wheelloader.estimator.payload import kept_volume
 from wheelloader.planner.kept import dump_height
-
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "kept_lookahead.py"
-
-
-def _load():
-    spec = importlib.util.spec_from_file_location("wheelloader_benchmark_kept_lookahead", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _cycle(bench, fill, energy, z_end, fixed=None):
@@ -34,7 +24,7 @@ def _cycle(bench, fill, energy, z_end, fixed=None):
 
 
 def test_judge_known_answer():
-    bench = _load()
+    bench = load_benchmark("kept_lookahead")
     row = bench.judge(0.18, 5000.0, 0.9, 1700.0)
     kept = float(kept_volume(0.18, Bucket().capacity, DEFAULT_PAYLOAD))
     assert row["kept_m3"] == pytest.approx(kept)
@@ -44,7 +34,7 @@ def test_judge_known_answer():
 
 
 def test_figures_and_report(tmp_path):
-    bench = _load()
+    bench = load_benchmark("kept_lookahead")
     cap = Bucket().capacity
     greedy = {"soil": "gravel", "seed": 0, "strategy": "greedy",
               "cycles": [_cycle(bench, 0.18, 5000.0, 1.2, (0.17, 12000.0, 1.2)) for _ in range(6)]}
@@ -70,7 +60,7 @@ def test_figures_and_report(tmp_path):
 
 @pytest.mark.slow
 def test_quick_run(tmp_path):
-    bench = _load()
+    bench = load_benchmark("kept_lookahead")
     assert bench.main(["--quick", "--out", str(tmp_path), "--strategies", "fixed", "kept"]) == 0
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert [lp["strategy"] for lp in summary["loops"]] == ["fixed", "kept"]
@@ -78,7 +68,7 @@ def test_quick_run(tmp_path):
 
 
 def test_lookahead_stats_from_the_messages():
-    bench = _load()
+    bench = load_benchmark("kept_lookahead")
     rows = [_cycle(bench, 0.18, 5000.0, 1.2) for _ in range(4)]
     rows[0]["plan_message"] = ("look-ahead chose greedy (greedy 40.0, fill limit 0.80 41.0, energy weight 0.04/kJ "
                                "45.0 kJ/m^3 kept over two cycles; 200 IPOPT it.): IPOPT ...")

@@ -3,28 +3,17 @@ synthetic rows."""
 
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 
 import pytest
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def _load():
-    spec = importlib.util.spec_from_file_location("wheelloader_benchmark_lookahead_mpm_report",
-                                                  ROOT / "benchmarks" / "lookahead_mpm_report.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from benchmark_scripts import load_benchmark
 
 
 def _row(arm, cycle, fill, lifted, seed=0, soil="gravel", message="IPOPT iterate 60 of 80 (the best)", ok=True):
     return {"arm": arm, "soil": soil, "seed": seed, "cycle": cycle, "fill_m3": fill, "energy_J": lifted,
             "lifted_J": lifted, "capacity_m3": 0.2, "plan_ok": ok, "plan_message": message, "calibration_s": 0.2,
             "planning_s": 1.0 if arm == "greedy" else 6.0, "prediction_rmse_percent": 20.0, "above_limits": False,
-            "z_end": 1.2, "iterations": _load().plan_iterations(arm, message)}
+            "z_end": 1.2, "iterations": load_benchmark("lookahead_mpm_report").plan_iterations(arm, message)}
 
 
 CHOSE = ("look-ahead chose fill limit 0.80 (greedy 50.0, fill limit 0.80 45.0, energy weight 0.04 inf kJ/m^3 kept "
@@ -32,7 +21,7 @@ CHOSE = ("look-ahead chose fill limit 0.80 (greedy 50.0, fill limit 0.80 45.0, e
 
 
 def test_messages_give_iterations_and_the_predicted_gain():
-    report = _load()
+    report = load_benchmark("lookahead_mpm_report")
     assert report.plan_iterations("greedy", "IPOPT iterate 60 of 80 (the best that passes)") == 80
     assert report.plan_iterations("greedy", "IPOPT Solve_Succeeded in 70 it.; kept 49 %") == 70
     assert report.plan_iterations("lookahead", CHOSE) == 420  # every candidate's, not the chosen plan's 70
@@ -43,7 +32,7 @@ def test_messages_give_iterations_and_the_predicted_gain():
 
 
 def test_gain_cycles_to_move_and_verdicts_known_answers():
-    report = _load()
+    report = load_benchmark("lookahead_mpm_report")
     # greedy keeps 0.1 m^3 for 5 kJ each cycle (50 kJ/m^3); the look-ahead 0.12 m^3 for 5.4 kJ (45 kJ/m^3): -10 %
     rows = [_row("greedy", k, 0.10, 5000.0) for k in range(1, 11)]
     rows += [_row("lookahead", 1, 0.10, 5000.0)]  # the same first cycle (it chose greedy's plan there)
@@ -71,7 +60,7 @@ def test_gain_cycles_to_move_and_verdicts_known_answers():
 
 
 def test_only_the_cycles_both_arms_dug_are_compared():
-    report = _load()
+    report = load_benchmark("lookahead_mpm_report")
     rows = [_row("greedy", k, 0.10, 5000.0) for k in range(1, 11)]
     rows += [_row("lookahead", k, 0.10, 4000.0) for k in range(1, 4)]  # a run cut short after 3 cycles
     rows += [_row("greedy", k, 0.10, 5000.0, seed=1) for k in range(1, 11)]  # seed 1: no look-ahead yet
@@ -91,7 +80,7 @@ def test_a_loop_cut_short_is_read_from_its_saved_cycles(tmp_path):
     from wheelloader.estimator import BucketPath, CycleLog, Pile
     from wheelloader.saved_loops import save_cycle
 
-    report = _load()
+    report = load_benchmark("lookahead_mpm_report")
     t = np.linspace(0.0, 1.0, 6)
     path = BucketPath(t, 0.5 * t, 0.2 * t, 0 * t)
 

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import subprocess
@@ -11,16 +10,9 @@ import sys
 from pathlib import Path
 
 import pytest
+from benchmark_scripts import load_benchmark
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def _load():
-    spec = importlib.util.spec_from_file_location("wheelloader_benchmark_loop_mpm_report",
-                                                  ROOT / "benchmarks" / "loop_mpm_report.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _row(strategy, cycle, fill, lifted, seed=0, soil="gravel", error=20.0, floor=None, plan_ok=True):
@@ -33,7 +25,7 @@ def _row(strategy, cycle, fill, lifted, seed=0, soil="gravel", error=20.0, floor
 
 
 def test_acceptance_figures_known_answers():
-    report = _load()
+    report = load_benchmark("loop_mpm_report")
     rows = [_row("fixed", k, 0.10, 5000.0) for k in (1, 2, 3)]
     rows += [_row("ours", k, 0.11, 4000.0, error=12.0, floor=9.0, plan_ok=k != 2) for k in (1, 2, 3)]
     rows += [_row("oracle", k, 0.11, 3900.0, error=10.0, floor=9.0) for k in (1, 2, 3)]
@@ -69,7 +61,7 @@ def test_acceptance_figures_known_answers():
 
 
 def test_gap_table_compares_the_same_loops():
-    report = _load()
+    report = load_benchmark("loop_mpm_report")
     mpm = [_row("ours", 1, 0.10, 5000.0), _row("ours", 1, 0.10, 7000.0, seed=1)]
     fee = [_row("ours", 1, 0.12, 3000.0)]
     gap = report.gap_table(mpm, fee)
@@ -78,12 +70,11 @@ def test_gap_table_compares_the_same_loops():
     assert gap["ours"]["kept_gap_points"] == pytest.approx(-10.0)
 
 
-
 def test_one_cycle_loops_have_no_between_cycles_time():
     # a run of one cycle per loop (the slow test's N=1) has no cycle 2: the median is NaN, not an error
     import math
 
-    report = _load()
+    report = load_benchmark("loop_mpm_report")
     rows = [_row(name, 1, 0.10, 5000.0, seed=seed) for name in ("fixed", "ours") for seed in (0, 1)]
     loops = report.summarise({"rows": rows, "fixed_on_ours": []})["loops"]
     assert loops["ours"]["cycles"] == 2 and math.isnan(loops["ours"]["between_cycles_s_median"])
@@ -98,7 +89,7 @@ def test_policy_rows_failures_and_the_closed_loops_gap():
 
     from wheelloader.estimator import BucketPath, CycleLog, Pile
 
-    report = _load()
+    report = load_benchmark("loop_mpm_report")
     rows = [_row("rl_closed (fee-payload)", 1, 0.10, 5000.0), _row("ours", 1, 0.10, 4000.0),
             _row("rl_path", 1, 0.10, 9000.0)]
     rows[0].update(end="stall", stalled=True, above_limits=True)

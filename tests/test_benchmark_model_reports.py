@@ -4,23 +4,16 @@ side by side on a tiny reference set (two MPM cycles), figures equal to a direct
 from __future__ import annotations
 
 import hashlib
-import importlib.util
 import json
 import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
+from benchmark_scripts import load_benchmark
 
 ROOT = Path(__file__).resolve().parents[1]
 CYCLES = ("gravel_path1", "gravel_path2")
-
-
-def _load(name: str):
-    spec = importlib.util.spec_from_file_location(f"wheelloader_benchmark_{name}", ROOT / "benchmarks" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +44,7 @@ def _direct(data: Path, train: str, test: str, force_model: str):
 @pytest.fixture(scope="module")
 def error_run(tiny, tmp_path_factory):
     out = tmp_path_factory.mktemp("error")
-    assert _load("error_analysis").main(["--data", str(tiny), "--out", str(out),
+    assert load_benchmark("error_analysis").main(["--data", str(tiny), "--out", str(out),
                                          "--force-models", "fee", "fee-payload"]) == 0
     return json.loads((out / "error_analysis.json").read_text()), out
 
@@ -85,7 +78,7 @@ def test_learned_terms_add_up_to_the_prediction_after_exit(tiny):
     from wheelloader.estimator.learned import DEFAULT_ARTIFACT
     from wheelloader.references import dem
 
-    module = _load("error_analysis")
+    module = load_benchmark("error_analysis")
     log = dem.filtered(dem.load_reference("gravel_path1", tiny), 0.1)
     cal = calibrate(log, options=CalibrationOptions(force_model="fee-learned"))
     pred = predict(cal, log)
@@ -102,7 +95,7 @@ def test_learned_terms_add_up_to_the_prediction_after_exit(tiny):
 
 
 def test_paper_experiments_force_models_beside_the_method_tables(tiny, tmp_path):
-    module = _load("paper_experiments")
+    module = load_benchmark("paper_experiments")
     assert module.main(["--data", str(tiny), "--out", str(tmp_path), "--methods", "default",
                         "--no-estimator-study", "--force-models", "fee", "fee-learned"]) == 0
     results = json.loads((tmp_path / "results.json").read_text())
@@ -124,7 +117,7 @@ def test_paper_experiments_force_models_beside_the_method_tables(tiny, tmp_path)
 
 @pytest.mark.parametrize("name", ["error_analysis", "paper_experiments"])
 def test_an_unknown_force_model_is_refused(name, tiny, tmp_path, capsys):
-    assert _load(name).main(["--data", str(tiny), "--out", str(tmp_path / "out"), "--force-models", "fee",
+    assert load_benchmark(name).main(["--data", str(tiny), "--out", str(tmp_path / "out"), "--force-models", "fee",
                              "bogus"]) == 2
     assert "wheelloader: error: unknown force model 'bogus'" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()

@@ -5,21 +5,11 @@ The full benchmark (five soils, five repeats) takes minutes and is marked ``slow
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
-
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "planner.py"
-
-
-def _load_benchmark():
-    """Import ``benchmarks/planner.py`` as a module (a leaf script: it imports only the package)."""
-    spec = importlib.util.spec_from_file_location("wheelloader_benchmark_planner", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from benchmark_scripts import load_benchmark
 
 
 def _check_results(out: Path, soils: list[str]) -> dict:
@@ -54,7 +44,7 @@ def _check_results(out: Path, soils: list[str]) -> dict:
 
 def test_planner_benchmark_smoke(tmp_path):
     """One soil, one repeat, two fixed paths, an MPC re-plan once a second: JSON and PNGs written."""
-    bench = _load_benchmark()
+    bench = load_benchmark("planner")
     out = tmp_path / "planner"
     rc = bench.main(["--out", str(out), "--soils", "sand", "--repeats", "1", "--paths", "1", "2",
                      "--replan-every", "60", "--no-compiled"])
@@ -66,7 +56,7 @@ def test_planner_benchmark_smoke(tmp_path):
 
 @pytest.mark.slow
 def test_planner_benchmark_quick(tmp_path):
-    bench = _load_benchmark()
+    bench = load_benchmark("planner")
     out = tmp_path / "planner"
     assert bench.main(["--quick", "--out", str(out), "--no-compiled"]) == 0
     results = _check_results(out, ["gravel", "sand", "dirt"])

@@ -2,30 +2,23 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 from pathlib import Path
 
 import pytest
+from benchmark_scripts import load_benchmark
 
 from wheelloader.estimator import CycleLog
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _load(name: str):
-    spec = importlib.util.spec_from_file_location(f"wheelloader_benchmark_{name}", ROOT / "benchmarks" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def _split():
     cwd = os.getcwd()
     os.chdir(ROOT)
     try:
-        return _load("transfer").split(Path("data/mpm"), Path("data/results"))
+        return load_benchmark("transfer").split(Path("data/mpm"), Path("data/results"))
     finally:
         os.chdir(cwd)
 
@@ -69,7 +62,7 @@ def test_the_payloads_extra_cycles_hold_no_test_family_and_no_held_out_soil_or_p
     assert set(extra).isdisjoint(test + split["train"] + split["validation"])
     assert not any(s in p for p in extra for s in ("dirt", "modified_sand", "slope25", "data/mpm", "end55"))
     # the candidates include the plain fit of the training cycles (the payload before the recipe was chosen)
-    module = _load("transfer")
+    module = load_benchmark("transfer")
     assert {"cycles": "train", "samples": "path", "curl": False, "max_kept_ratio": None} in module.PAYLOAD_CANDIDATES
 
 
@@ -93,7 +86,7 @@ def test_the_band_is_scaled_on_whole_learning_groups_no_model_trains_on():
 def test_band_scale_is_the_smallest_reaching_the_level():
     import numpy as np
 
-    module = _load("transfer")
+    module = load_benchmark("transfer")
     rng = np.random.default_rng(0)
     records = [{"ratios": np.abs(rng.normal(size=400)) * s} for s in (0.5, 1.0, 2.0)]
     k = module.band_scale(records, 0.9)
@@ -101,11 +94,10 @@ def test_band_scale_is_the_smallest_reaching_the_level():
     assert k == pytest.approx(float(np.sort(records[1]["ratios"])[359]), rel=1e-6)
 
 
-
 def test_band_scale_of_families_weighs_each_family_the_same():
     import numpy as np
 
-    module = _load("transfer")
+    module = load_benchmark("transfer")
     rng = np.random.default_rng(1)
     small = [{"ratios": np.abs(rng.normal(size=400)) * 2.0} for _ in range(3)]
     large = [{"ratios": np.abs(rng.normal(size=400)) * 0.5} for _ in range(30)]
@@ -124,7 +116,7 @@ def test_the_shipped_manifest_is_the_split():
 
 
 def test_the_force_models_benchmark_fits_the_default_payload_to_its_stated_cycles():
-    module = _load("force_models")
+    module = load_benchmark("force_models")
     paths = module.payload_cycles(ROOT / "data" / "mpm", ROOT / "data" / "results")
     assert len(paths) == 254
     assert not any(p.name.startswith("dirt") or "slope25" in p.name for p in paths)

@@ -1,25 +1,17 @@
 """``benchmarks/lift_study.py``: the tie of the lift coefficient to path features, and the tied form's fit."""
 
-import importlib.util
 import math
 from pathlib import Path
 
 import numpy as np
+from benchmark_scripts import load_benchmark
 
 ROOT = Path(__file__).resolve().parents[1]
 LOG = ROOT / "data" / "mpm" / "sand_path1.csv"
 
 
-def _study():
-    spec = importlib.util.spec_from_file_location("wheelloader_benchmark_lift_study",
-                                                  ROOT / "benchmarks" / "lift_study.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_tie_recovers_a_linear_dependence_and_clips_at_zero():
-    ls = _study()
+    ls = load_benchmark("lift_study")
     rng = np.random.default_rng(3)
     x = rng.uniform(0.0, 1.0, size=(40, len(ls.FEATURES)))
     c = 2.0 - 3.0 * x[:, 1] + 0.5 * x[:, 3]
@@ -32,7 +24,7 @@ def test_tie_recovers_a_linear_dependence_and_clips_at_zero():
 def test_tied_lift_is_the_free_lift_with_its_coefficient_tied_to_gamma():
     """The tied form's F_T equals model_form's ``+ lift`` with the lift coefficient set to gamma * c; a path's
     features are dimensionless and finite; the tied fit recovers forces it can express."""
-    ls = _study()
+    ls = load_benchmark("lift_study")
     mf = ls.mf
     case = ls.load_cases([str(LOG)], mf.DEFAULT_PAYLOAD)[0]
     assert case.features.shape == (len(ls.FEATURES),) and np.all(np.isfinite(case.features))

@@ -3,7 +3,6 @@ Taichi processes)."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import subprocess
 import sys
@@ -11,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from benchmark_scripts import load_benchmark
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -37,15 +37,8 @@ def test_mpm_speed_benchmark_on_the_tiny_scene(tmp_path, monkeypatch):
     assert not list(out.rglob("*.npz"))
 
 
-def _module():
-    spec = importlib.util.spec_from_file_location("mpm_speed", ROOT / "benchmarks" / "mpm_speed.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_members_name_their_variant_and_perturbation():
-    mod = _module()
+    mod = load_benchmark("mpm_speed")
     assert mod.split_variant("old") == ("old", {})
     assert mod.split_variant("old~order2") == ("old", {"order_seed": 2})
     assert mod.split_variant("new-1t-svdF~ulp13") == ("new-1t-svdF", {"ulp_seed": 13})
@@ -55,7 +48,7 @@ def test_members_name_their_variant_and_perturbation():
 
 
 def test_envelope_puts_a_run_like_the_old_members_inside_and_a_biased_one_outside():
-    mod = _module()
+    mod = load_benchmark("mpm_speed")
     t = np.arange(0.0, 3.0, 1.0 / 60.0)
     rng = np.random.default_rng(0)
     shape = 1000.0 * np.sin(np.pi * t / 3.0) ** 2 + 100.0
@@ -79,7 +72,7 @@ def test_envelope_puts_a_run_like_the_old_members_inside_and_a_biased_one_outsid
 
 
 def test_tolerance_holds_the_plant_kernels_and_the_at_rest_wall_of_the_svd_diagnostic():
-    mod = _module()
+    mod = load_benchmark("mpm_speed")
     env = {"runs": {"old": {"variant": "old", "inside": True, "inside_early": True},
                     "new-1t": {"variant": "new-1t", "inside": True, "inside_early": True},
                     "new-1t~order1": {"variant": "new-1t", "inside": False, "inside_early": True},

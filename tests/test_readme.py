@@ -9,20 +9,14 @@ import shlex
 from pathlib import Path
 
 import pytest
+from benchmark_scripts import load_benchmark
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _readme_tables():
-    spec = importlib.util.spec_from_file_location("readme_tables", ROOT / "benchmarks" / "readme_tables.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_generated_tables_are_up_to_date():
     """README.md and every result page: each generated block is its benchmark file, byte for byte."""
-    tool = _readme_tables()
+    tool = load_benchmark("readme_tables")
     pages = tool.pages()
     assert ROOT / "README.md" in pages and any(p.parent == ROOT / "docs" / "results" for p in pages)
     for page in pages:
@@ -31,7 +25,7 @@ def test_generated_tables_are_up_to_date():
 
 
 def test_render_replaces_only_the_block(tmp_path):
-    tool = _readme_tables()
+    tool = load_benchmark("readme_tables")
     (tmp_path / "t.md").write_text("| a |\n|---|\n| 1 |\n")
     text = "intro\n<!-- BEGIN generated: t.md -->\nold\n<!-- END generated -->\nrest\n"
     assert tool.render(text, tmp_path) == "intro\n<!-- BEGIN generated: t.md -->\n| a |\n|---|\n| 1 |\n" \
@@ -39,7 +33,7 @@ def test_render_replaces_only_the_block(tmp_path):
 
 
 def test_check_names_a_stale_page(tmp_path, capsys):
-    tool = _readme_tables()
+    tool = load_benchmark("readme_tables")
     page = tmp_path / "page.md"
     page.write_text("<!-- BEGIN generated: docs/results/demo/table.md -->\nold\n<!-- END generated -->\n")
     assert tool.main(["--check", "--readme", str(page)]) == 1
