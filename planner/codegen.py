@@ -31,7 +31,7 @@ import casadi as ca
 
 from . import nlp_cache
 
-__all__ = ["FLAGS", "LOG", "SPLIT_STATEMENTS", "compiled", "compiled_by_key", "compiler"]
+__all__ = ["FLAGS", "LOG", "SPLIT_STATEMENTS", "compiled", "compiled_by_key", "compiler", "present_by_key"]
 
 logger = logging.getLogger(__name__)
 
@@ -46,8 +46,9 @@ LOG: list[dict] = []
 #: share their intermediate values through CasADi's work vector ``w`` (the same operations in the same order).
 SPLIT_STATEMENTS = 2000
 SPLIT_FUNCTIONS = 10
-#: Version of the split layout (part of the library's digest).
-SPLIT_FORMAT = 1
+#: Version of the split layout (part of the library's digest). 2: the functions pass through CasADi's common
+#: subexpression elimination (:func:`_without_repeats`) before their C is generated.
+SPLIT_FORMAT = 2
 _TEMP_DIR: Path | None = None
 
 
@@ -179,21 +180,53 @@ def compiled_by_key(key: str, names: dict[str, str], make: Callable[[], dict[str
     LOG.append(entry)
     if cc is None:
         return _no_compiler(entry)
-    library = _library(name, [key, cc, " ".join(FLAGS), ca.__version__, str(SPLIT_FORMAT), str(SPLIT_STATEMENTS),
-                              str(SPLIT_FUNCTIONS)], entry)
+    library = _library(name, _key_parts(key, cc), entry)
     if library.exists():
         loaded = _load(names, library, entry, "loaded")
         if loaded is not None:
             return loaded
     try:
         functions = make()
-        source = _c_source(name, (functions[key_] for key_ in names))
+        source = _c_source(name, (_without_repeats(functions[key_]) for key_ in names))
         entry["source_bytes"] = len(source)
         library.parent.mkdir(parents=True, exist_ok=True)
         _compile_split(_split(source, name), cc, library, entry)
     except (OSError, ValueError, subprocess.CalledProcessError) as exc:
         return _compile_failed(entry, exc)
     return _load(names, library, entry, "compiled")
+
+
+def _without_repeats(function: ca.Function) -> ca.Function:
+    """``function`` (an SX Function) with CasADi's common subexpression elimination: each repeated operation on
+    the same operands is computed once and its value reused, so the outputs are bit for bit the same. IPOPT's
+    Hessian of the demo's 40-interval NLP goes from 1.16M to 0.83M instructions (8 s of CPU here), its C
+    from 30 to 22 MB, and one evaluation in CasADi's virtual machine from 5.2 to 3.6 ms. Other Functions are
+    returned as they are."""
+    if not function.is_a("SXFunction"):
+        return function
+    symbols = function.sx_in()
+    return ca.Function(function.name(), symbols, function.call(symbols), function.name_in(), function.name_out(),
+                       {"cse": True})
+
+
+def present_by_key(key: str, names: dict[str, str], name: str) -> dict[str, ca.Function] | None:
+    """The library :func:`compiled_by_key` made for ``key`` (the same ``names`` and ``name``), loaded, if this
+    machine has it; ``None`` (nothing compiled, nothing logged) when it does not or there is no C compiler."""
+    cc = compiler()
+    if cc is None:
+        return None
+    entry: dict = {"name": name, "functions": sorted(names.values())}
+    library = _library(name, _key_parts(key, cc), entry)
+    if not library.exists():
+        return None
+    LOG.append(entry)
+    return _load(names, library, entry, "loaded")
+
+
+def _key_parts(key: str, cc: str) -> list[str]:
+    """What names :func:`compiled_by_key`'s library besides ``key``: the compiler, its flags, CasADi's version and
+    the split layout."""
+    return [key, cc, " ".join(FLAGS), ca.__version__, str(SPLIT_FORMAT), str(SPLIT_STATEMENTS), str(SPLIT_FUNCTIONS)]
 
 
 _FUNCTION = re.compile(r"static int (casadi_f\d+)\(const casadi_real\*\* arg, casadi_real\*\* res, casadi_int\* iw, "

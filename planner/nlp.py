@@ -72,8 +72,8 @@ from .kept import KEPT_OBJECTIVE_SCALE, kept_terms, smooth_lift
 from .nlp_solver import make_solver, solver_settings
 from .options import PlannerOptions
 
-__all__ = ["VALIDITY_RELAX", "build", "handle", "hold_margin_variants", "origin", "problem_function", "release",
-           "structural_options"]
+__all__ = ["VALIDITY_RELAX", "build", "compiled_if_present", "handle", "hold_margin_variants", "origin",
+           "problem_function", "release", "structural_options"]
 
 #: The NLPs of this process by (bucket, loader, structural options): expressions, layout, derivatives, solvers.
 _CACHE: dict[tuple, dict] = {}
@@ -202,8 +202,11 @@ def _build(bucket: Bucket, loader: Loader, options: PlannerOptions):
             with lanes.lane(0):  # lane 0's solver differentiates; the other lanes' solvers reuse its derivatives
                 _build(bucket, loader, options)
         derivatives = entry["derivatives"].get(plugin)
+        from_library = False
         if lane != 0:
-            derivatives = (options.compiled and entry.get(f"compiled {plugin}")) or derivatives
+            use_library = options.compiled or _POLICY["compiled_if_present"]
+            from_library = bool(use_library and entry.get(f"compiled {plugin}"))
+            derivatives = entry[f"compiled {plugin}"] if from_library else derivatives
         elif options.compiled and options.solver == "sqp":  # the derivatives as compiled C (once per machine)
             if derivatives is None:  # the virtual machine's solver first: its derivative functions
                 _build(bucket, loader, replace(options, compiled=False))
@@ -218,8 +221,16 @@ def _build(bucket: Bucket, loader: Loader, options: PlannerOptions):
                     dict(_DERIVATIVES[plugin]), lambda: _virtual_derivatives(bucket, loader, options, plugin),
                     f"planner_{plugin}")
             derivatives = entry[f"compiled {plugin}"] or _virtual_derivatives(bucket, loader, options, plugin)
+        elif plugin == "ipopt" and _POLICY["compiled_if_present"] and derivatives is None:
+            # the library a compiled run made for this NLP, if this machine has one (nothing is compiled here)
+            found = entry.get(f"compiled {plugin}") or guarded(
+                codegen.present_by_key, nlp_cache.cache_key(bucket, loader, structural), dict(_DERIVATIVES[plugin]),
+                f"planner_{plugin}")
+            if found:
+                entry[f"compiled {plugin}"] = derivatives = found
+                from_library = True
         solver, monitor = guarded(make_solver, entry["problem"], settings, derivatives)
-        if plugin not in entry["derivatives"] and not options.compiled:
+        if plugin not in entry["derivatives"] and not options.compiled and not from_library:
             entry["derivatives"][plugin] = {name: solver.get_function(own) for name, own in _DERIVATIVES[plugin]
                                             if solver.has_function(own)}
         entry["solvers"][(settings, lane)] = (solver, {**entry["functions"], "monitor": monitor})
@@ -267,8 +278,22 @@ def handle(bucket: Bucket, loader: Loader, options: PlannerOptions) -> Callable[
     return get
 
 
-#: This process's memory rule for the NLPs (:func:`hold_margin_variants`).
-_POLICY = {"hold_margin_variants": True}
+#: This process's memory rule for the NLPs (:func:`hold_margin_variants`) and its use of compiled derivatives
+#: found on disk (:func:`compiled_if_present`).
+_POLICY = {"hold_margin_variants": True, "compiled_if_present": False}
+
+
+def compiled_if_present(use: bool) -> bool:
+    """Whether IPOPT solvers of ``compiled=False`` settings evaluate the NLP's derivatives from the compiled
+    library that a ``compiled=True`` run left on this machine (:func:`.codegen.present_by_key`, found by the NLP's
+    key, so never a stale one) when it is there; returns the previous rule. Nothing is ever compiled for it:
+    without the library the solver differentiates in CasADi's virtual machine as before. The derivatives are the
+    same numbers either way, so the plans are too. ``wheelloader demo`` turns it on."""
+    if not isinstance(use, bool):
+        raise PlanningError(f"use must be True or False, got {use!r}")
+    previous = _POLICY["compiled_if_present"]
+    _POLICY["compiled_if_present"] = use
+    return previous
 
 
 def hold_margin_variants(hold: bool) -> bool:

@@ -6,7 +6,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from wheelloader.estimator import Pile
+from wheelloader.estimator import Pile, PlanningError
 from wheelloader.planner import PlannerOptions, TrajectoryOptimizer, codegen, cycle_duration, default_start, nlp
 
 needs_cc = pytest.mark.skipif(codegen.compiler() is None, reason="no C compiler")
@@ -125,3 +125,59 @@ def test_demo_flag_reaches_the_planner(tmp_path, monkeypatch):
         with pytest.raises(Stop):
             main(["demo", "-o", str(tmp_path / f"demo{len(seen)}"), *flags])
         assert seen[-1] == {"mpc": False, "compiled": compiled}
+
+
+def test_common_subexpressions_go_and_the_values_stay_bit_for_bit():
+    x = ca.SX.sym("x", 2)
+    shared = ca.sin(x[0] * x[1])
+    # the same operation on the same operands, built twice: two instructions until the elimination
+    f = ca.Function("wl_repeats", [x], [ca.sin(x[0] * x[1]) * shared + ca.exp(ca.sin(x[0] * x[1]))], ["x"], ["y"])
+    g = codegen._without_repeats(f)
+    assert g.n_instructions() < f.n_instructions()
+    assert (g.name(), g.name_in(), g.name_out()) == (f.name(), f.name_in(), f.name_out())
+    rng = np.random.default_rng(5)
+    for _ in range(50):
+        point = rng.normal(size=2) * 3
+        assert np.array(f(point)).tobytes() == np.array(g(point)).tobytes()
+
+
+def test_without_a_library_the_compiled_if_present_rule_plans_in_the_virtual_machine(tmp_path, monkeypatch):
+    monkeypatch.setenv("WHEELLOADER_NLP_CACHE", str(tmp_path))
+    monkeypatch.setattr(nlp, "_CACHE", {})
+    plain = _plan(PlannerOptions(intervals=6))
+    monkeypatch.setattr(nlp, "_CACHE", {})
+    logged = len(codegen.LOG)
+    previous = nlp.compiled_if_present(True)
+    try:
+        ruled = _plan(PlannerOptions(intervals=6))
+    finally:
+        nlp.compiled_if_present(previous)
+    assert len(codegen.LOG) == logged  # nothing compiled, nothing loaded
+    assert not (tmp_path / "compiled").exists()
+    (entry,) = nlp._CACHE.values()
+    assert entry["derivatives"]  # differentiated in CasADi's virtual machine
+    _same(plain, ruled)
+    with pytest.raises(PlanningError):
+        nlp.compiled_if_present("yes")
+
+
+@pytest.mark.slow
+@needs_cc
+def test_compiled_if_present_loads_the_library_a_compiled_run_left(tmp_path, monkeypatch):
+    """A ``compiled=True`` run compiles the derivatives of a 10-interval NLP; a later process (an emptied memory
+    cache) with ``compiled=False`` under :func:`nlp.compiled_if_present` loads that library: the same plan."""
+    monkeypatch.setenv("WHEELLOADER_NLP_CACHE", str(tmp_path))
+    monkeypatch.setattr(nlp, "_CACHE", {})
+    plain = _plan(PlannerOptions(intervals=10))
+    _plan(PlannerOptions(intervals=10, compiled=True))
+    assert codegen.LOG[-1]["status"] == "compiled"
+    monkeypatch.setattr(nlp, "_CACHE", {})
+    previous = nlp.compiled_if_present(True)
+    try:
+        found = _plan(PlannerOptions(intervals=10))
+    finally:
+        nlp.compiled_if_present(previous)
+    assert codegen.LOG[-1]["status"] == "loaded"
+    (entry,) = nlp._CACHE.values()
+    assert not entry["derivatives"]  # nothing was differentiated in CasADi's virtual machine
+    _same(plain, found)

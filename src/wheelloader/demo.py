@@ -55,7 +55,10 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     :data:`wheelloader.adaptation.DEFAULT_WINDOW`). ``prior``: ours' calibration prior at the nominal soil
     (:data:`wheelloader.adaptation.PRIOR_NAMES`; default :data:`DEMO_PRIOR`). ``compiled``: the planner's
     IPOPT derivatives as C compiled once per machine (``PlannerOptions.compiled``; minutes of CPU the first time,
-    cached; the same plans and table; without a C compiler CasADi's virtual machine, with a warning). ``jobs``:
+    cached; the same plans and table; without a C compiler CasADi's virtual machine, with a warning); without it
+    the demo still uses such a library where this machine has one for its NLP
+    (:func:`wheelloader.planner.nlp.compiled_if_present`),
+    else CasADi's virtual machine. ``jobs``:
     seeds run side by side in this many threads (:func:`default_jobs` when None; the fee-env plant with the
     planner and without ``mpc`` only, else 1), each planning in its own lane (:mod:`wheelloader.planner.lanes`):
     the same results and progress lines as one after another, in less wall time where the CPUs are free.
@@ -85,15 +88,20 @@ def run_demo(out: Path, cycles: int = DEFAULT_CYCLES, seed: int = 0, use_planner
     hidden = hidden_default_soil()
     if use_planner:
         say("building the planner's CasADi NLP (once, a few seconds) ...")
-    from wheelloader.planner.nlp import hold_margin_variants
+        if compiled:
+            say("its derivatives as compiled C (compiled once per machine: minutes of CPU the first time) ...")
+    from wheelloader.planner.nlp import compiled_if_present, hold_margin_variants
 
     # the demo's memory budget: a wider-margin re-plan's NLP takes the place of the plan's (rebuilt when needed)
     held = hold_margin_variants(False)
+    # the derivatives a --compiled run compiled for the demo's NLP, where this machine has them: the same table
+    found = compiled_if_present(True)
     try:
         return _run_demo(out, cycles, seed, use_planner, say, mpc, plant, resolution, window, seeds, prior, start,
                          hidden, compiled, min(jobs, seeds))
     finally:
         hold_margin_variants(held)
+        compiled_if_present(found)
 
 
 def _run_demo(out: Path, cycles: int, seed: int, use_planner: bool, say: Any, mpc: bool, plant: str,
