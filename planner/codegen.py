@@ -25,6 +25,7 @@ import subprocess
 import tempfile
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import casadi as ca
@@ -46,6 +47,8 @@ LOG: list[dict] = []
 #: share their intermediate values through CasADi's work vector ``w`` (the same operations in the same order).
 SPLIT_STATEMENTS = 2000
 SPLIT_FUNCTIONS = 10
+#: :func:`compiled_by_key`: translation units compiled at once (at most one per CPU).
+COMPILE_JOBS = 4
 #: Version of the split layout (part of the library's digest). 2: the functions pass through CasADi's common
 #: subexpression elimination (:func:`_without_repeats`) before their C is generated.
 SPLIT_FORMAT = 2
@@ -303,12 +306,17 @@ def _compile_split(units: list[str], cc: str, library: Path, entry: dict) -> Non
     with tempfile.TemporaryDirectory(dir=library.parent) as work:
         wall, before = time.perf_counter(), os.times()
         objects = []
+        commands = []
         for k, unit in enumerate(units):
             c_file = Path(work) / f"unit{k}.c"
             c_file.write_text(unit)
             objects.append(str(c_file.with_suffix(".o")))
-            subprocess.run([cc, *flags, "-c", str(c_file), "-o", objects[-1]], check=True, capture_output=True,
-                           text=True)
+            commands.append([cc, *flags, "-c", str(c_file), "-o", objects[-1]])
+        # one compiler per CPU (at most COMPILE_JOBS): the units are independent, the link takes them in order
+        jobs = max(1, min(COMPILE_JOBS, os.cpu_count() or 1, len(commands)))
+        with ThreadPoolExecutor(jobs) as pool:
+            for done in pool.map(lambda command: subprocess.run(command, capture_output=True, text=True), commands):
+                done.check_returncode()
         out = Path(work) / library.name
         subprocess.run([cc, "-shared", *objects, "-o", str(out), "-lm"], check=True, capture_output=True, text=True)
         after = os.times()
@@ -316,6 +324,7 @@ def _compile_split(units: list[str], cc: str, library: Path, entry: dict) -> Non
         entry["compile_cpu_seconds"] = (after.children_user + after.children_system
                                         - before.children_user - before.children_system)
         entry["units"] = len(units)
+        entry["compile_jobs"] = jobs
         os.replace(out, library)
 
 
