@@ -43,9 +43,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--resolution", type=float, default=None,
                    help="MPM grid spacing [m], 0.005-0.1, with --plant mpm only (default: 0.02, the verified one)")
     p.add_argument("--compiled", action="store_true",
-                   help="evaluate the planner's derivatives as C code compiled once per machine and cached with the "
-                        "NLP cache (minutes of CPU the first time, then faster; the same table; needs a C compiler, "
-                        "else CasADi's virtual machine with a warning)")
+                   help="compile the planner's derivatives to C once per machine, cached with the NLP cache "
+                        "(minutes of CPU the first time; the same table; needs a C compiler, else CasADi's virtual "
+                        "machine with a warning); later runs, with or without this flag, use that library")
     p.add_argument("--jobs", type=int, default=None,
                    help="run the seeds side by side in this many threads (the same table and output; default: one "
                         "per seed, at most two per CPU, 1 on one CPU; with the fee-env plant and the planner, "
