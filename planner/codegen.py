@@ -11,7 +11,8 @@ CasADi version, in the ``compiled`` folder of the NLP cache (:func:`.nlp_cache.c
 a temporary folder for this process). A library is compiled into a temporary file and renamed into place
 (atomic), so concurrent processes never load a half-written one. No C compiler, a failed compile or a library
 that cannot be loaded: a warning is logged and ``None`` returned (the caller keeps CasADi's virtual machine).
-Every compile and load is recorded in :data:`LOG` (what, where, the compile's CPU and wall seconds).
+Every compile and load is recorded in :data:`LOG` (what, where, the compile's CPU and wall seconds). The folder
+keeps the :data:`MAX_LIBRARIES` most recently used libraries.
 """
 
 from __future__ import annotations
@@ -32,7 +33,8 @@ import casadi as ca
 
 from . import nlp_cache
 
-__all__ = ["FLAGS", "LOG", "SPLIT_STATEMENTS", "compiled", "compiled_by_key", "compiler", "present_by_key"]
+__all__ = ["FLAGS", "LOG", "MAX_LIBRARIES", "SPLIT_STATEMENTS", "compiled", "compiled_by_key", "compiler",
+           "present_by_key"]
 
 logger = logging.getLogger(__name__)
 
@@ -47,6 +49,8 @@ LOG: list[dict] = []
 #: share their intermediate values through CasADi's work vector ``w`` (the same operations in the same order).
 SPLIT_STATEMENTS = 2000
 SPLIT_FUNCTIONS = 10
+#: Libraries kept in the cache's ``compiled`` folder (the most recently used; :func:`_prune` after each compile).
+MAX_LIBRARIES = 8
 #: :func:`compiled_by_key`: translation units compiled at once (at most one per CPU).
 COMPILE_JOBS = 4
 #: Version of the split layout (part of the library's digest). 2: the functions pass through CasADi's common
@@ -336,4 +340,25 @@ def _load(names: dict[str, str], library: Path, entry: dict, how: str) -> dict[s
         logger.warning("%s: CasADi's virtual machine is used", entry["status"])
         return None
     entry["status"] = how
+    try:
+        os.utime(library)  # its last use: the pruning keeps the most recently used libraries
+    except OSError:
+        pass
+    if how == "compiled":
+        _prune(library.parent)
     return loaded
+
+
+def _prune(directory: Path) -> None:
+    """Keep the :data:`MAX_LIBRARIES` most recently used libraries of ``directory`` (a library for the NLP of an
+    older version of the code is never loaded again). A library another process has loaded stays usable there
+    (on Linux its file lives on until unmapped); a file that cannot be removed is left."""
+    try:
+        libraries = sorted(directory.glob("*.so"), key=lambda path: path.stat().st_mtime, reverse=True)
+    except OSError:
+        return
+    for old in libraries[MAX_LIBRARIES:]:
+        try:
+            old.unlink()
+        except OSError:
+            pass

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -181,3 +183,23 @@ def test_compiled_if_present_loads_the_library_a_compiled_run_left(tmp_path, mon
     (entry,) = nlp._CACHE.values()
     assert not entry["derivatives"]  # nothing was differentiated in CasADi's virtual machine
     _same(plain, found)
+
+
+@needs_cc
+def test_the_compiled_folder_keeps_the_most_recently_used_libraries(tmp_path, monkeypatch):
+    monkeypatch.setenv("WHEELLOADER_NLP_CACHE", str(tmp_path))
+    monkeypatch.setattr(codegen, "MAX_LIBRARIES", 2)
+    x = ca.SX.sym("x")
+    libraries = []
+    for k in range(3):
+        f = ca.Function("wl_prune", [x], [ca.sin(x) + k])
+        made = codegen.compiled_by_key(f"prune-{k}", {"f": "wl_prune"}, lambda f=f: {"f": f}, "wl_prune")
+        assert made is not None and float(made["f"](0.5)) == float(f(0.5))
+        libraries.append(codegen.LOG[-1]["library"])
+        if k == 1:  # the first one used again (loaded) before the third is compiled: the second one goes
+            os.utime(libraries[0], (1, 1))
+            os.utime(libraries[1], (2, 2))
+            assert codegen.present_by_key("prune-0", {"f": "wl_prune"}, "wl_prune") is not None
+    kept = sorted(str(path) for path in (tmp_path / "compiled").glob("*.so"))
+    assert kept == sorted([libraries[0], libraries[2]])
+    assert codegen.present_by_key("prune-1", {"f": "wl_prune"}, "wl_prune") is None
