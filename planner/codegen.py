@@ -318,9 +318,12 @@ def _compile_split(units: list[str], cc: str, library: Path, entry: dict) -> Non
             commands.append([cc, *flags, "-c", str(c_file), "-o", objects[-1]])
         # one compiler per CPU (at most COMPILE_JOBS): the units are independent, the link takes them in order
         jobs = max(1, min(COMPILE_JOBS, os.cpu_count() or 1, len(commands)))
-        with ThreadPoolExecutor(jobs) as pool:
+        pool = ThreadPoolExecutor(jobs)
+        try:
             for done in pool.map(lambda command: subprocess.run(command, capture_output=True, text=True), commands):
                 done.check_returncode()
+        finally:  # a failed unit or a Ctrl-C: the units not started are dropped, the running ones awaited
+            pool.shutdown(wait=True, cancel_futures=True)
         out = Path(work) / library.name
         subprocess.run([cc, "-shared", *objects, "-o", str(out), "-lm"], check=True, capture_output=True, text=True)
         after = os.times()

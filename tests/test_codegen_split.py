@@ -203,3 +203,29 @@ def test_the_compiled_folder_keeps_the_most_recently_used_libraries(tmp_path, mo
     kept = sorted(str(path) for path in (tmp_path / "compiled").glob("*.so"))
     assert kept == sorted([libraries[0], libraries[2]])
     assert codegen.present_by_key("prune-1", {"f": "wl_prune"}, "wl_prune") is None
+
+
+def test_a_failed_unit_stops_the_compile_and_falls_back(tmp_path, monkeypatch, caplog):
+    """The units compile side by side; the first one that fails ends the compile (the rest are not started) and
+    the caller keeps CasADi's virtual machine."""
+    monkeypatch.setenv("WHEELLOADER_NLP_CACHE", str(tmp_path))
+    monkeypatch.setattr(codegen, "SPLIT_STATEMENTS", 3)
+    monkeypatch.setattr(codegen, "SPLIT_FUNCTIONS", 1)
+    monkeypatch.setattr(codegen, "COMPILE_JOBS", 1)
+    functions = _functions()
+    units = len(codegen._split(codegen._c_source("wl_split_fail", map(codegen._without_repeats, functions.values())),
+                               "wl_split_fail"))
+    assert units > 5
+    # the first unit fails at once, the later ones would take 0.2 s each
+    script = tmp_path / "cc"
+    calls_file = tmp_path / "calls"
+    script.write_text(f"#!/bin/sh\nif [ -e {calls_file} ]; then sleep 0.2; echo unit >> {calls_file}; exit 0; fi\n"
+                      f"echo unit >> {calls_file}\necho 'no such luck' >&2\nexit 1\n")
+    script.chmod(0o755)
+    monkeypatch.setenv("CC", str(script))
+    assert codegen.compiled_by_key("k-fail", {key: f.name() for key, f in functions.items()}, lambda: functions,
+                                   "wl_split_fail") is None
+    calls = calls_file.read_text().split()
+    assert codegen.LOG[-1]["status"] == "failed: no such luck" and "virtual machine is used" in caplog.text
+    assert len(calls) < units  # the units after the failure were not compiled
+    assert not list((tmp_path / "compiled").glob("*.so"))
