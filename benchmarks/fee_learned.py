@@ -20,7 +20,8 @@ Split by case family (soil x pile x path family), never by sample:
   (``data/learn``, :mod:`wheelloader.references.mpm.learning_set`) except the validation groups;
 * **validation**: the end55 path family (``adaptation_mpm_end55``, ``paired_mpm_end55``: the loops
   ``benchmarks/transfer.py`` scales its bands on, so that scale is not taken on training cycles) and every fourth
-  group of ``data/learn`` from the second on (a soil, pile and edge with its three paths; whole);
+  group of ``data/learn`` by its number, 01, 05, 09, ... (a soil, pile and edge with its three paths; whole; the
+  rule of :func:`wheelloader.references.mpm.learning_set.group_part`, stated in ``data/learn/manifest.json``);
 * **test**: ``data/mpm``'s smooth paths (gravel, sand: soils seen, paths not; modified sand and dirt: soils never
   seen; gravel path 1 on the 25 deg pile: a pile angle never seen). Nothing here is fitted to a test cycle.
 
@@ -66,6 +67,7 @@ from wheelloader.estimator.learned import (
 from wheelloader.estimator.payload import PayloadOptions, payload_contact_state
 from wheelloader.provenance import machine_info
 from wheelloader.references.filtering import filtered
+from wheelloader.references.mpm.learning_set import group_part
 
 SIGMA = 0.1
 STRIDE = 3
@@ -105,12 +107,12 @@ def split(data: Path, results: Path, learn: Path) -> dict:
                 dropped.append(str(f))
                 continue
             (val_loops if run.endswith("end55") else loops).setdefault(key, []).append(str(f))
-    groups = sorted({p.name[:7] for p in learn.glob("learn*.csv.xz")})
-    for k, g in enumerate(groups):
+    for g in sorted({p.name[:7] for p in learn.glob("learn*.csv.xz")}):
         files = sorted(str(p) for p in learn.glob(f"{g}?.csv.xz"))
-        (val if k % 4 == 1 else train)[f"learn/{g}"] = files
+        (val if group_part(g) == "validation" else train)[f"learn/{g}"] = files
     return {"rule": "split by case family (soil x pile x path family), never by sample; train: the data/learn "
-                    "groups (smooth, varied paths, soils, piles, edges) but every fourth from the second, and, "
+                    "groups (smooth, varied paths, soils, piles, edges) but every fourth by number from 01 on "
+                    "(learning_set.group_part: 01, 05, 09, ...), and, "
                     f"down-weighted to {LOOP_SHARE} of the training weight, the saved MPM loops of the base and "
                     "curl-out runs (gravel, sand; carved piles) less cycles equal to a test cycle; validation: "
                     "those data/learn groups (soil, pile, edge, three paths; the form is chosen on them) and the "

@@ -19,8 +19,16 @@ three paths (shallow, middle, deep control point) on one soil, pile and edge: a 
 
 Each case is a unit of :mod:`wheelloader.sweep` (``--ray off|local|auto|ADDRESS``; serial without Ray) and is
 written as soon as it finishes (``NAME.csv.xz`` + ``NAME.json.xz``) with its entry
-in ``manifest.json`` (the drawn inputs, cost, load); a case whose files exist is skipped, so an interrupted run
-resumes. Progress lines go to ``OUT/progress.log``.
+in ``manifest.json`` (the drawn inputs, cost, load, the commit it was dug at); a case whose files exist is skipped,
+so an interrupted run resumes. Progress lines go to ``OUT/progress.log``. Sets dug apart (other machines, other
+folders) join with ``--merge DIR ...``: their files are copied in (never over a file that differs) and their
+entries merged, each source's provenance kept under ``batches``.
+
+The split (:func:`group_part`), fixed by the group's number before any cycle is dug, so a larger design adds
+groups to both parts the same way: every :data:`VALIDATION_EVERY`-th group from group
+:data:`VALIDATION_OFFSET` on (01, 05, 09, ...) is validation, the rest train. The manifest states it (``split``).
+The test cycles are not here: ``data/mpm``'s smooth paths, whose soils ``dirt`` and ``modified_sand`` and
+25 deg pile the design never draws.
 """
 
 from __future__ import annotations
@@ -55,6 +63,13 @@ COHESIVE_SHARE = 0.4
 BLUNT_SHARE = 0.5
 #: Paths per group (one soil, pile and edge).
 PATHS_PER_GROUP = 3
+#: Every VALIDATION_EVERY-th group, from number VALIDATION_OFFSET on, is validation (:func:`group_part`).
+VALIDATION_EVERY = 4
+VALIDATION_OFFSET = 1
+SPLIT_RULE = (f"by case family (a group: one soil, pile and edge with its {PATHS_PER_GROUP} paths; whole), fixed by "
+              f"the group's number before digging: group number % {VALIDATION_EVERY} == {VALIDATION_OFFSET} is "
+              "validation, the rest train; test: data/mpm's smooth paths (never here; their soils dirt and "
+              "modified_sand and their 25 deg pile are never drawn)")
 
 
 @dataclass(frozen=True)
@@ -159,6 +174,20 @@ def max_depth(log: CycleLog) -> float:
     return float(np.max(np.asarray(log.pile.surface_height(log.path.x)) - log.path.z))
 
 
+def group_part(name: str) -> str:
+    """``"validation"`` or ``"train"`` for a case or group name (``learnGG`` or ``learnGGx``): the split rule
+    (module docstring, :data:`SPLIT_RULE`)."""
+    number = int(name[5:7])
+    return "validation" if number % VALIDATION_EVERY == VALIDATION_OFFSET else "train"
+
+
+def manifest_split(names: Sequence[str]) -> dict[str, Any]:
+    """The manifest's ``split``: the rule and the groups of ``names`` (case names) per part."""
+    groups = sorted({n[:7] for n in names})
+    return {"rule": SPLIT_RULE, **{part: [g for g in groups if group_part(g) == part]
+                                   for part in ("train", "validation")}}
+
+
 def _manifest(out: Path) -> dict[str, Any]:
     fname = out / "manifest.json"
     if fname.exists():
@@ -177,17 +206,64 @@ def write_cycle(case: LearnCase, log: CycleLog, out: Path) -> dict[str, Any]:
              "seed": m.get("seed"), "resolution": m.get("resolution"), "particles": m.get("particles"),
              "steps": m.get("steps"), "wall_s": m.get("wall_s"), "cpu_s": m.get("cpu_s"),
              "taichi_threads": m.get("taichi_threads"), "loadavg_start": m.get("loadavg_start"),
-             "loadavg_end": m.get("loadavg_end"), "command": m.get("regenerate")}
+             "loadavg_end": m.get("loadavg_end"), "command": m.get("regenerate"), "git": machine_info()["git"]}
     manifest = _manifest(out)
     manifest["cycles"] = sorted([e for e in manifest["cycles"] if e["name"] != case.name] + [entry],
                                 key=lambda e: e["name"])
     manifest["generated_with"] = {k: v for k, v in machine_info().items() if k != "loadavg_1_5_15min"}
-    manifest["notes"] = ("Plane-strain MPM cycles for the learned correction (wheelloader.references.mpm.learning_set; "
-                         "design in the module docstring). Forces [N] for the default 1 m wide bucket.")
-    tmp = out / "manifest.json.tmp"
-    tmp.write_text(json.dumps(manifest, indent=1))
-    tmp.replace(out / "manifest.json")
+    _write_manifest(out, manifest)
     return entry
+
+
+def _write_manifest(out: Path, manifest: dict[str, Any]) -> None:
+    manifest.setdefault("notes", "Plane-strain MPM cycles for the learned correction "
+                        "(wheelloader.references.mpm.learning_set; design in the module docstring). Forces [N] for "
+                        "the default 1 m wide bucket.")
+    manifest["split"] = manifest_split([e["name"] for e in manifest["cycles"]])
+    tmp = out / "manifest.json.tmp"
+    tmp.write_text(json.dumps(manifest, indent=1) + "\n")
+    tmp.replace(out / "manifest.json")
+
+
+def merge(out: Path, sources: Sequence[Path]) -> list[str]:
+    """Copy the cycles ``sources`` (learning-set folders) list into ``out`` and merge their manifest entries
+    (sorted by name); each source's ``generated_with`` is kept under ``batches``. A file already in ``out`` is
+    never overwritten: the same bytes are skipped, other bytes are refused (ValueError), as is an entry whose
+    name ``out`` lists with another case. Returns the names added."""
+    import shutil
+
+    out.mkdir(parents=True, exist_ok=True)
+    manifest = _manifest(out)
+    entries = {e["name"]: e for e in manifest["cycles"]}
+    plan: list[tuple[Path, Path]] = []
+    added: list[str] = []
+    batches = manifest.setdefault("batches", [])
+    for src in sources:
+        theirs = _manifest(src)
+        if not theirs["cycles"]:
+            raise ValueError(f"{src} has no manifest.json with cycles")
+        for e in theirs["cycles"]:
+            if e["name"] in entries and entries[e["name"]]["case"] != e["case"]:
+                raise ValueError(f"{e['name']}: {src} and {out} list different cases")
+            for fname in (f"{e['name']}.csv.xz", f"{e['name']}.json.xz"):
+                a, b = src / fname, out / fname
+                if not a.is_file():
+                    raise ValueError(f"{a} is listed in its manifest but missing")
+                if b.exists() and b.read_bytes() != a.read_bytes():
+                    raise ValueError(f"{b} exists with other contents; not overwritten")
+                if not b.exists():
+                    plan.append((a, b))
+        names = sorted(e["name"] for e in theirs["cycles"] if e["name"] not in entries)
+        entries.update({e["name"]: e for e in theirs["cycles"] if e["name"] in names})
+        added += names
+        if names:
+            batches.append({"cycles": f"{names[0]}-{names[-1]}", "count": len(names), "merged_from": str(src),
+                            "generated_with": theirs.get("generated_with")})
+    for a, b in plan:
+        shutil.copyfile(a, b)
+    manifest["cycles"] = sorted(entries.values(), key=lambda e: e["name"])
+    _write_manifest(out, manifest)
+    return sorted(added)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -201,10 +277,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--threads", type=int, default=1, help="Taichi CPU threads per case")
     parser.add_argument("--rate", type=float, default=60.0, help="path sample rate [Hz] (default 60)")
     parser.add_argument("--list", action="store_true", help="list the cases and exit")
+    parser.add_argument("--merge", nargs="+", type=Path, default=None, metavar="DIR",
+                        help="copy the cycles of learning-set folders DIR into --out and merge their manifests")
     add_ray_arguments(parser)
     args = parser.parse_args(argv)
     if args.count < 1:
         parser.error(f"--count must be >= 1, got {args.count}")
+    if args.merge:
+        try:
+            added = merge(Path(args.out), args.merge)
+        except (ValueError, OSError) as exc:
+            parser.exit(2, f"wheelloader: error: {exc}\n")
+        print(f"{len(added)} cycles added to {args.out}: {' '.join(added)}")
+        return 0
     cases = {c.name: c for c in design(args.count, args.seed)}
     if args.list:
         for c in cases.values():
