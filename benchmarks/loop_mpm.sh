@@ -19,7 +19,8 @@
 #   PRIOR   ours' calibration prior (plant_adaptation.py --prior: none, nominal or held; default none)
 #   DESCEND the planner's --descend-clearance [m] (the tip moves down only this near the surface; default off)
 #   PAYLOAD the kept objective's payload (--payload JSON, e.g. docs/results/transfer/transfer.json; default off)
-#   FORCE_MODEL ours' force model (--force-model: fee, fee-payload or fee-payload-depth; default fee)
+#   TI_THREADS  the threads Taichi runs (--taichi-threads; default: the lanes, 2); the lanes stay 2
+#   FORCE_MODEL ours' force model (--force-model: fee, fee-payload, fee-payload-depth or fee-learned; default fee)
 #   RL_POLICY  a PPO model.zip (train/ppo.py): after phase 2, its path (rolled out in the FEE env of the
 #           nominal soil on each pile, adaptation.PolicyPath) dug in the plant, seed 0 of both soils (OUT/rl)
 set -euo pipefail
@@ -29,12 +30,13 @@ PY=${PY:-python}
 RES=${RES:-0.02}
 N=${N:-5}
 PRIOR=${PRIOR:-none}
-COMMON=(--plant mpm --resolution "$RES" --threads 2 --ray off --cycles "$N" --failure-angle min_weight_force
+TI=(${TI_THREADS:+--taichi-threads "$TI_THREADS"})
+COMMON=(--plant mpm --resolution "$RES" --threads 2 "${TI[@]}" --ray off --cycles "$N" --failure-angle min_weight_force
         --heel-clearance 0 --end-blade-angle 55 --curl-out-intervals 8 --midpoints off
         --objective kept_per_energy --stale error --prior "$PRIOR" --force-model "${FORCE_MODEL:-fee}"
         ${DESCEND:+--descend-clearance "$DESCEND"} ${PAYLOAD:+--payload "$PAYLOAD"})
 adapt() { "$PY" benchmarks/plant_adaptation.py "${COMMON[@]}" --cycles-dir "$CYCLES/loops" "$@"; }
-paired() { "$PY" benchmarks/plant_paired.py --plant mpm --resolution "$RES" --threads 2 --ray off \
+paired() { "$PY" benchmarks/plant_paired.py --plant mpm --resolution "$RES" --threads 2 "${TI[@]}" --ray off \
     --cycles "$CYCLES/loops" --cycles-dir "$CYCLES/paired" --out "$OUT/paired"; }
 echo "phase 1: seed 0, gravel and sand: ours, then the fixed path on its piles ($(date -u))"
 adapt --soils gravel sand --seeds 1 --strategies ours --out "$OUT/phase1"

@@ -41,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from wheelloader.arguments import add_planner_physics_arguments, planner_physics
+from wheelloader.estimator.force_models import FORCE_MODELS
 from wheelloader.provenance import commit_label, load_label, machine_info
 from wheelloader.ray_mode import add_ray_arguments
 from wheelloader.references import PLANT_NAMES
@@ -356,8 +357,9 @@ def main(argv: list[str] | None = None) -> int:
                              "with the PayloadOptions fields or transfer.json's 'payload' (e.g. "
                              "docs/results/transfer/transfer.json: kept fill with the curl term; default: the "
                              "force model's default payload)")
-    parser.add_argument("--force-model", choices=("fee", "fee-payload", "fee-payload-depth"), default="fee",
-                        help="the force model ours calibrates and plans with (default fee)")
+    parser.add_argument("--force-model", choices=FORCE_MODELS, default="fee",
+                        help="the force model ours calibrates and plans with (wheelloader.estimator.FORCE_MODELS; "
+                             "fee-learned: the learned correction on fee-payload-depth; default fee)")
     add_ray_arguments(parser)
     parser.add_argument("--report", action="store_true",
                         help="only rewrite the Markdown and the figure from OUT/plant_adaptation.json")

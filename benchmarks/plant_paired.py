@@ -148,6 +148,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         raise SystemExit(f"--cycles {root}: no saved loop of {args.strategies}")
     if args.quick:
         found = {k: v[:1] for k, v in list(found.items())[:1]}
+    if args.plant == "mpm" and args.taichi_threads is not None:  # Taichi's threads; the lanes (results): --threads
+        from wheelloader.references.mpm import taichi_module
+
+        taichi_module(args.taichi_threads)
     plant = (make_plant("mpm", resolution=args.resolution, threads=args.threads) if args.plant == "mpm"
              else make_plant(args.plant))
     started = time.perf_counter()
@@ -185,6 +189,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--resolution", type=float, default=0.02, help="MPM grid spacing [m] (the run's; default 0.02)")
     parser.add_argument("--threads", type=int, default=1,
                         help="MPM lanes/threads (the run's: the plant's settings must match; default 1)")
+    parser.add_argument("--taichi-threads", type=int, default=None, metavar="N",
+                        help="MPM plant: the CPU threads Taichi runs (default --threads; the lanes, and so the "
+                             "results, stay --threads)")
     parser.add_argument("--strategies", nargs="+", default=["ours"], help="whose piles (default ours)")
     parser.add_argument("--quick", action="store_true", help="smoke run: the first cycle of one loop")
     parser.add_argument("--force", action="store_true",

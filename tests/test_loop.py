@@ -257,6 +257,36 @@ def test_plant_loop_unit_passes_the_planner_settings_on(monkeypatch):
     assert seen["objective"] == "kept_per_energy" and seen["lookahead"] is True
 
 
+def test_plant_loop_unit_runs_ours_with_the_learned_model_end_to_end(tmp_path, monkeypatch):
+    """``--force-model fee-learned`` (benchmarks/loop_mpm.sh's FORCE_MODEL, #33): ours calibrates with the learned
+    correction, its planner is called with that model and the run's payload, and a failed plan falls back to the
+    Bezier path placed by the learned model; two cycles on the FEE env plant (the planner stubbed: fast)."""
+    import wheelloader.adaptation as adaptation
+    from wheelloader.estimator.learned import default_learned_model
+    from wheelloader.loop import plant_loop_unit
+
+    calls = []
+
+    def stub_planner(params, pile, **model):
+        calls.append(model)
+        return PlanOutcome(None, False, "stub: no plan", 0.0)
+
+    monkeypatch.setattr(adaptation, "default_planner", lambda **kwargs: stub_planner)
+    payload = json.loads((ROOT / "docs/results/transfer/transfer.json").read_text())["payload"]
+    out = plant_loop_unit(FEEEnvPlant(sensor_noise=0.0), "ours", "gravel", cycles=2, seed=0, cache=tmp_path / "c",
+                          failure_angle="min_weight_force", prior="held", payload=payload, force_model="fee-learned")
+    first, second = out["records"]
+    assert second["calibration_ok"] and second["calibration_message"].startswith("F_R fit"), second
+    assert [c["force_model"] for c in calls] == ["fee-learned", "fee-learned"]
+    assert calls[0]["payload"].to_dict() == pytest.approx(payload)
+    assert default_learned_model().payload.to_dict() == pytest.approx(payload)  # the payload fitted with it
+    assert not first["plan_ok"] and "fell back" in first["plan_message"] and first["fill_m3"] > 0.0
+    # the loop's prediction of each cycle is the learned model's (its error differs from the FEE's on the same log)
+    fee = plant_loop_unit(FEEEnvPlant(sensor_noise=0.0), "ours", "gravel", cycles=1, seed=0, cache=tmp_path / "f",
+                          failure_angle="min_weight_force", prior="held", payload=payload, force_model="fee-payload")
+    assert fee["records"][0]["prediction_rmse_percent"] != pytest.approx(first["prediction_rmse_percent"])
+
+
 def _need_taichi():
     try:
         import taichi  # noqa: F401
