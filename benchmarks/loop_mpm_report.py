@@ -59,15 +59,33 @@ def lifted(energy_j: float, fill_m3: float, log: Any, z_ref: float, soil: str) -
     return lifted_work(energy_j, fill_m3, log, z_ref, soil)
 
 
-def floor_percent(log: Any, failure_angle: str) -> float:
-    """F_R RMSE [%] of the cycle's own fit on it (filtered as the loop filters): the model's floor there."""
+def floor_percent(log: Any, failure_angle: str, force_model: str = "fee", payload: Any = None) -> float:
+    """F_R RMSE [%] of the cycle's own fit on it (filtered as the loop filters): the model's floor there.
+    ``force_model``, ``payload``: the model the strategy calibrated and predicted with (the loop's
+    ``--force-model`` and ``--payload``; a :class:`~wheelloader.estimator.PayloadOptions` or None, the model's
+    own)."""
     from wheelloader.estimator import CalibrationOptions, ModelOptions, calibrate, predict
     from wheelloader.references.filtering import filtered
 
     options = ModelOptions(failure_angle=failure_angle)
     smooth = filtered(log)
-    params = calibrate(smooth, options=CalibrationOptions(model_options=options)).params
-    return float(predict(params, smooth, options=options).quality.percent_r)
+    model = {} if force_model == "fee" else {"force_model": force_model, "payload": payload}
+    fit = calibrate(smooth, options=CalibrationOptions(model_options=options, **model))
+    model = {} if force_model == "fee" else {"force_model": fit.force_model, "payload": fit.payload}
+    return float(predict(fit.params, smooth, options=options, **model).quality.percent_r)
+
+
+def ours_model(settings: dict[str, Any]) -> tuple[str, Any]:
+    """The force model and payload ``ours`` calibrated and predicted with in a ``plant_adaptation.py`` run
+    (its ``settings``: ``force_model``, and ``payload``, a JSON file as ``--payload`` reads it; None: the
+    model's own)."""
+    from wheelloader.estimator import PayloadOptions
+
+    name, source = settings.get("force_model", "fee"), settings.get("payload")
+    if name == "fee" or source is None:
+        return name, None
+    data = json.loads(Path(source).read_text(encoding="utf-8"))
+    return name, PayloadOptions.from_dict(data.get("payload", data) if isinstance(data, dict) else data)
 
 
 #: The folders of loop_mpm.sh's phases under OUT, in the order they run (``rl``: its RL_POLICY loops; ``rl_closed``:
@@ -129,6 +147,7 @@ def collect(out: Path, cycles: Path, policies: list[tuple[str, Path, Path]] | No
     z_ref = dump_height()
     loops = _latest_loops(out)
     failure_angle = loops["settings"].get("failure_angle", "min_n_gamma")
+    model, payload = ours_model(loops["settings"])
     rows = []
     sources = [(r, cycles / "loops", None) for r in loops["rows"]] + policy_loops(policies or [])
     for r, saved, label in sources:
@@ -148,7 +167,9 @@ def collect(out: Path, cycles: Path, policies: list[tuple[str, Path, Path]] | No
         row["z_end"] = float(log.path.z[-1])
         row["capacity_m3"] = log.bucket.capacity
         if r["strategy"] in ("ours", "oracle") and r["cycle"] >= 3:
-            row["floor_percent"] = floor_percent(log, failure_angle)
+            # the oracle plans with the FEE; ours with the run's --force-model
+            row["floor_percent"] = (floor_percent(log, failure_angle, model, payload) if r["strategy"] == "ours"
+                                    else floor_percent(log, failure_angle))
         rows.append(row)
     paired_json = out / "paired" / "plant_paired.json"
     paired = []
@@ -334,7 +355,9 @@ def markdown(data: dict[str, Any], summary: dict[str, Any]) -> str:
                      f"{v['kept_fill_difference_points']:+.1f} points vs the oracle) | {yes[v['verdict']]} |")
     if "error" in summary:
         s = summary["loops"]["ours"]
-        lines.append(f"| next-cycle F_R error from cycle 3 ≤ 15 % (FEE; the new model is not in the loop) | "
+        model = data["settings"].get("force_model", "fee")
+        which = ("FEE; the new model is not in the loop" if model == "fee" else f"ours with `{model}`")
+        lines.append(f"| next-cycle F_R error from cycle 3 ≤ 15 % ({which}) | "
                      f"{s['error_from_cycle3_percent']:.1f} % | {yes[summary['error']['verdict_target']]} |")
         lines.append(f"| … ≤ 5 points above the run's floor | floor {s['floor_percent']:.1f} % | "
                      f"{yes[summary['error']['verdict_floor']]} |")

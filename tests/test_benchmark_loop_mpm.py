@@ -143,3 +143,25 @@ def test_the_whole_run_at_a_coarse_grid(tmp_path):
     for p in result["fixed_on_ours"]:  # cycle 1 of every loop starts on the untouched pile: the same dig
         assert p["energy_J"] == fixed_loop[(p["soil"], p["seed"])]["energy_J"]
     assert (out / "acceptance.md").is_file() and (out / "acceptance.png").is_file()
+
+
+def test_floor_is_the_runs_model_fitted_to_the_cycle_itself():
+    """With ``--force-model fee-learned`` ours' floor is the learned model's own fit on each cycle: no worse there
+    than that model at the nominal soil, and not the FEE's floor; the run's payload is read from its --payload."""
+    report = load_benchmark("loop_mpm_report")
+    from wheelloader.adaptation import NOMINAL_SOIL
+    from wheelloader.estimator import ModelOptions, predict, preset
+    from wheelloader.references.filtering import filtered
+    from wheelloader.saved_loops import load_saved_cycle
+
+    transfer = "docs/results/transfer/transfer.json"
+    name, payload = report.ours_model({"force_model": "fee-learned", "payload": str(ROOT / transfer)})
+    assert name == "fee-learned"
+    assert payload.to_dict() == pytest.approx(json.loads((ROOT / transfer).read_text())["payload"])
+    assert report.ours_model({"payload": str(ROOT / transfer)}) == ("fee", None)
+    log = load_saved_cycle(ROOT / "data/results/loop_mpm_v3/cycles/loops/gravel/seed0/ours", 3, check=False)
+    learned = report.floor_percent(log, "min_weight_force", name, payload)
+    nominal = predict(preset(NOMINAL_SOIL), filtered(log), options=ModelOptions(failure_angle="min_weight_force"),
+                      force_model=name, payload=payload).quality.percent_r
+    assert learned <= nominal
+    assert learned != pytest.approx(report.floor_percent(log, "min_weight_force"), abs=0.1)
