@@ -375,6 +375,36 @@ def markdown(data: dict[str, Any], summary: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def beside(summary: dict[str, Any], other: dict[str, Any], label: str) -> str:
+    """A table of ours' figures in this run beside another run's (its ``acceptance.json`` summary, e.g. the same
+    loop with another ``--force-model``): paired energy and kept fill, the loop's, the next-cycle error and its floor,
+    failed plans and the time between cycles; a figure a run lacks is a dash."""
+    def fig(s: dict[str, Any], *keys: str, fmt: str = "{:.3f}") -> str:
+        for key in keys:
+            if not isinstance(s, dict) or key not in s:
+                return "–"
+            s = s[key]
+        return "–" if isinstance(s, float) and math.isnan(s) else fmt.format(s)
+
+    rows = [("paired cycles", ("paired", "ours", "cycles"), "{:d}"),
+            ("paired energy per m³, ours / fixed (lifted)", ("paired", "ratio"), "{:.3f}"),
+            ("paired kept fill, ours", ("paired", "ours", "kept_fill"), "{:.1%}"),
+            ("paired kept fill, fixed", ("paired", "fixed", "kept_fill"), "{:.1%}"),
+            ("paired cycles ours keeps ≥ fixed", ("paired", "cycles_kept_ge_fixed"), "{:d}"),
+            ("ours' loops: energy per m³ lifted", ("loops", "ours", "lifted_energy_per_m3_kJ"), "{:.1f} kJ/m³"),
+            ("ours' loops vs the fixed path's loops", ("loop_vs_fixed", "ratio"), "{:.3f}"),
+            ("ours vs the hindsight oracle", ("vs_oracle", "ratio"), "{:.3f}"),
+            ("next-cycle F_R error from cycle 3 (median)", ("loops", "ours", "error_from_cycle3_percent"),
+             "{:.1f} %"),
+            ("its floor (median)", ("loops", "ours", "floor_percent"), "{:.1f} %"),
+            ("failed plans", ("loops", "ours", "failed_plans"), "{:d}"),
+            ("above the loader's limits", ("loops", "ours", "above_limits"), "{:d}"),
+            ("between cycles (median, wall)", ("loops", "ours", "between_cycles_s_median"), "{:.1f} s")]
+    lines = [f"| ours | this run | {label} |", "|---|---|---|"]
+    lines += [f"| {name} | {fig(summary, *keys, fmt=f)} | {fig(other, *keys, fmt=f)} |" for name, keys, f in rows]
+    return "\n".join(lines) + "\n"
+
+
 def headline(data: dict[str, Any], summary: dict[str, Any]) -> str:
     """The README's short table (#33 item 4): the paired comparison pooled, with its spread over the loops, and
     beside it every other loop of the run on its own piles (the fixed path's, the trained policies'); empty
@@ -443,6 +473,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="another trained policy's loops: DIR/rl and DIR/rl_closed (plant_adaptation.py --out), "
                              "DIR/fee_env_rl (the FEE env plant), their cycles under CYCLES/loops and "
                              "CYCLES/fee_env; rows named 'STRATEGY (LABEL)' (repeatable)")
+    parser.add_argument("--beside", nargs=2, default=None, metavar=("LABEL", "DIR"),
+                        help="a table of ours' figures beside another run's (DIR/acceptance.json, written by this "
+                             "script), e.g. the FEE's run beside the learned model's")
     parser.add_argument("--write", default=None, metavar="DIR",
                         help="write acceptance.json/.md/.png here (default OUT)")
     args = parser.parse_args(argv)
@@ -463,6 +496,10 @@ def main(argv: list[str] | None = None) -> int:
     target.mkdir(parents=True, exist_ok=True)
     (target / "acceptance.json").write_text(json.dumps({**data, "summary": summary}, indent=1, default=str))
     text = markdown(data, summary)
+    if args.beside is not None:
+        label, folder = args.beside
+        other = json.loads((Path(folder) / "acceptance.json").read_text())["summary"]
+        text += "\n" + beside(summary, other, label)
     (target / "acceptance.md").write_text(text)
     short = headline(data, summary)
     if short:

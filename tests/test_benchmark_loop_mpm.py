@@ -165,3 +165,21 @@ def test_floor_is_the_runs_model_fitted_to_the_cycle_itself():
                       force_model=name, payload=payload).quality.percent_r
     assert learned <= nominal
     assert learned != pytest.approx(report.floor_percent(log, "min_weight_force"), abs=0.1)
+
+
+def test_beside_puts_another_runs_figures_next_to_ours():
+    report = load_benchmark("loop_mpm_report")
+    rows = [_row("fixed", k, 0.10, 5000.0) for k in (1, 2, 3)]
+    rows += [_row("ours", k, 0.11, 4000.0, error=12.0, floor=9.0) for k in (1, 2, 3)]
+    paired = [{"soil": "gravel", "seed": 0, "cycle": k, "fill_m3": 0.10, "energy_J": 5500.0, "lifted_J": 5500.0,
+               "z_end": 1.2, "capacity_m3": 0.2} for k in (1, 2, 3)]
+    summary = report.summarise({"rows": rows, "fixed_on_ours": paired})
+    other = {"paired": {"ratio": 1.026, "ours": {"cycles": 20, "kept_fill": 0.531}, "fixed": {"kept_fill": 0.537}},
+             "loops": {"ours": {"error_from_cycle3_percent": 31.6, "floor_percent": 13.1, "failed_plans": 5}}}
+    text = report.beside(summary, other, "FEE (v3)")
+    assert text.splitlines()[0] == "| ours | this run | FEE (v3) |"
+    assert "| paired energy per m³, ours / fixed (lifted) | 0.661 | 1.026 |" in text
+    assert "| paired kept fill, ours | 55.0% | 53.1% |" in text
+    assert "| next-cycle F_R error from cycle 3 (median) | 12.0 % | 31.6 % |" in text
+    assert "| failed plans | 0 | 5 |" in text
+    assert "| ours vs the hindsight oracle | – | – |" in text  # neither run has an oracle here
