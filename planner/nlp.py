@@ -61,7 +61,7 @@ from dataclasses import replace
 import casadi as ca
 
 from wheelloader.envs.bookkeeping import step_work
-from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, Loader, PlanningError
+from wheelloader.estimator import DEFAULT_OPTIONS, GRAVITY, Bucket, Loader
 from wheelloader.estimator.payload import kept_volume
 from wheelloader.estimator.validity import alpha_lower_limit
 
@@ -69,6 +69,7 @@ from . import codegen, lanes, nlp_cache
 from .casadi_model import casadi_forces, casadi_learned, learned_trust, smooth_max, smooth_min, smooth_pos
 from .interrupt import guarded
 from .kept import KEPT_OBJECTIVE_SCALE, kept_terms, smooth_lift
+from .nlp_rules import RULES, compiled_if_present, hold_margin_variants
 from .nlp_solver import make_solver, solver_settings
 from .options import PlannerOptions
 
@@ -184,7 +185,7 @@ def _build(bucket: Bucket, loader: Loader, options: PlannerOptions):
     if entry is None:
         # with hold_margin_variants(False) a margin variant of this NLP (the loop's wider-margin re-plans) takes the
         # place of the one in memory (~150 MB each): released before the build, so two are never held at once
-        if not _POLICY["hold_margin_variants"]:
+        if not RULES["hold_margin_variants"]:
             for key in [key for key in _CACHE if key[:2] == (bucket, loader) and _margin_family(key[2])
                         == _margin_family(structural)]:
                 del _CACHE[key]
@@ -204,7 +205,7 @@ def _build(bucket: Bucket, loader: Loader, options: PlannerOptions):
         derivatives = entry["derivatives"].get(plugin)
         from_library = False
         if lane != 0:
-            use_library = options.compiled or _POLICY["compiled_if_present"]
+            use_library = options.compiled or RULES["compiled_if_present"]
             from_library = bool(use_library and entry.get(f"compiled {plugin}"))
             derivatives = entry[f"compiled {plugin}"] if from_library else derivatives
         elif options.compiled and options.solver == "sqp":  # the derivatives as compiled C (once per machine)
@@ -221,7 +222,7 @@ def _build(bucket: Bucket, loader: Loader, options: PlannerOptions):
                     dict(_DERIVATIVES[plugin]), lambda: _virtual_derivatives(bucket, loader, options, plugin),
                     f"planner_{plugin}")
             derivatives = entry[f"compiled {plugin}"] or _virtual_derivatives(bucket, loader, options, plugin)
-        elif plugin == "ipopt" and _POLICY["compiled_if_present"] and derivatives is None:
+        elif plugin == "ipopt" and RULES["compiled_if_present"] and derivatives is None:
             # the library a compiled run made for this NLP, if this machine has one (nothing is compiled here)
             found = entry.get(f"compiled {plugin}") or guarded(
                 codegen.present_by_key, nlp_cache.cache_key(bucket, loader, structural), dict(_DERIVATIVES[plugin]),
@@ -276,41 +277,6 @@ def handle(bucket: Bucket, loader: Loader, options: PlannerOptions) -> Callable[
         return solver, functions, entry["layout"]
 
     return get
-
-
-#: This process's memory rule for the NLPs (:func:`hold_margin_variants`) and its use of compiled derivatives
-#: found on disk (:func:`compiled_if_present`).
-_POLICY = {"hold_margin_variants": True, "compiled_if_present": False}
-
-
-def compiled_if_present(use: bool) -> bool:
-    """Whether IPOPT solvers of ``compiled=False`` settings evaluate the NLP's derivatives from the compiled
-    library that a ``compiled=True`` run left on this machine (:func:`.codegen.present_by_key`, found by the NLP's
-    key, so never a stale one) when it is there; returns the previous rule. Nothing is ever compiled for it:
-    without the library the solver differentiates in CasADi's virtual machine as before. The derivatives are the
-    same numbers either way, so the plans are too. ``wheelloader demo`` turns it on."""
-    if not isinstance(use, bool):
-        raise PlanningError(f"use must be True or False, got {use!r}")
-    previous = _POLICY["compiled_if_present"]
-    _POLICY["compiled_if_present"] = use
-    return previous
-
-
-def hold_margin_variants(hold: bool) -> bool:
-    """Whether the NLPs of one margin family (the plan's and the wider-margin re-plans' of
-    :func:`~wheelloader.planner.cycle.cautious_options`) stay in memory side by side; returns the previous rule.
-
-    ``True`` (the default): each is built once per process. ``False``: a variant takes the place of the NLP of
-    its family in memory (one of them at a time, ~150 MB each for 40 intervals), and the next solve of the other
-    builds it again (the same plans, bit for bit, at ~1.3-1.6 s of CPU per build): ``wheelloader demo``'s memory
-    budget. Measured on the replayed MPM loop (``benchmarks/between_cycles.py``): a re-planned cycle made the next
-    cycle rebuild its plan's NLP, the longest time between cycles after the re-plan itself.
-    """
-    if not isinstance(hold, bool):
-        raise PlanningError(f"hold must be True or False, got {hold!r}")
-    previous = _POLICY["hold_margin_variants"]
-    _POLICY["hold_margin_variants"] = hold
-    return previous
 
 
 def release() -> int:
