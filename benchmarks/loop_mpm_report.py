@@ -69,10 +69,9 @@ def floor_percent(log: Any, failure_angle: str, force_model: str = "fee", payloa
 
     options = ModelOptions(failure_angle=failure_angle)
     smooth = filtered(log)
-    model = {} if force_model == "fee" else {"force_model": force_model, "payload": payload}
-    fit = calibrate(smooth, options=CalibrationOptions(model_options=options, **model))
-    model = {} if force_model == "fee" else {"force_model": fit.force_model, "payload": fit.payload}
-    return float(predict(fit.params, smooth, options=options, **model).quality.percent_r)
+    fit = calibrate(smooth, options=CalibrationOptions(model_options=options, force_model=force_model, payload=payload))
+    return float(predict(fit.params, smooth, options=options, force_model=fit.force_model,
+                         payload=fit.payload).quality.percent_r)
 
 
 def ours_model(settings: dict[str, Any]) -> tuple[str, Any]:
