@@ -199,6 +199,7 @@ def write_cycle(case: LearnCase, log: CycleLog, out: Path) -> dict[str, Any]:
     """Save ``log`` as ``NAME.csv.xz`` and enter it in the manifest."""
     log.save(out / f"{case.name}.csv.xz", overwrite=True)
     m = log.metadata
+    machine = machine_info()
     entry = {"name": case.name, "csv": f"{case.name}.csv.xz", "case": asdict(case),
              "max_depth_over_length": round(max_depth(log) / log.bucket.floor_length, 4),
              "max_resultant_N": round(float(np.max(log.resultant)), 1),
@@ -206,11 +207,11 @@ def write_cycle(case: LearnCase, log: CycleLog, out: Path) -> dict[str, Any]:
              "seed": m.get("seed"), "resolution": m.get("resolution"), "particles": m.get("particles"),
              "steps": m.get("steps"), "wall_s": m.get("wall_s"), "cpu_s": m.get("cpu_s"),
              "taichi_threads": m.get("taichi_threads"), "loadavg_start": m.get("loadavg_start"),
-             "loadavg_end": m.get("loadavg_end"), "command": m.get("regenerate"), "git": machine_info()["git"]}
+             "loadavg_end": m.get("loadavg_end"), "command": m.get("regenerate"), "git": machine["git"]}
     manifest = _manifest(out)
     manifest["cycles"] = sorted([e for e in manifest["cycles"] if e["name"] != case.name] + [entry],
                                 key=lambda e: e["name"])
-    manifest["generated_with"] = {k: v for k, v in machine_info().items() if k != "loadavg_1_5_15min"}
+    manifest["generated_with"] = {k: v for k, v in machine.items() if k != "loadavg_1_5_15min"}
     _write_manifest(out, manifest)
     return entry
 
