@@ -61,12 +61,15 @@ BOUNDS: dict[str, tuple[float, float]] = {
     "duration_s": (3.5, 6.0),        # the speed
 }
 DESIGN_SEED = 33
+#: The local design's box: :data:`BOUNDS` shrunk by this factor around :data:`FIXED` (``--local``).
+LOCAL_SCALE = 0.35
 PILE_CHOICES = ("gravel", "sand")
 
 
-def design(count: int, seed: int = DESIGN_SEED) -> list[dict[str, float]]:
+def design(count: int, seed: int = DESIGN_SEED, scale: float = 1.0) -> list[dict[str, float]]:
     """The first ``count`` points of the scrambled Sobol design over :data:`BOUNDS` (a larger count keeps the
-    smaller design as its prefix)."""
+    smaller design as its prefix); ``scale`` < 1: the box shrunk by that factor around :data:`FIXED` (the
+    same unit points)."""
     from scipy.stats import qmc
 
     if count <= 0:
@@ -74,8 +77,9 @@ def design(count: int, seed: int = DESIGN_SEED) -> list[dict[str, float]]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # balance properties need a power of 2; a prefix is wanted
         unit = qmc.Sobol(len(BOUNDS), scramble=True, seed=seed).random(count)
-    lows = np.array([b[0] for b in BOUNDS.values()])
-    highs = np.array([b[1] for b in BOUNDS.values()])
+    centre = np.array([FIXED[k] for k in BOUNDS])
+    lows = centre + scale * (np.array([b[0] for b in BOUNDS.values()]) - centre)
+    highs = centre + scale * (np.array([b[1] for b in BOUNDS.values()]) - centre)
     points = lows + unit * (highs - lows)
     return [{k: float(round(v, 4)) for k, v in zip(BOUNDS, p, strict=True)} for p in points]
 
@@ -268,11 +272,15 @@ def markdown(result: dict[str, Any]) -> str:
                          f"{r['lifted_per_m3_kJ'] / base:.3f} | {r['kept_fill']:.1%} | {r['z_end_m']:.2f} m | "
                          f"{r['energy_per_m3_kJ']:.1f} kJ/m³ | {r['peak_F_T_N'] / 1e3:.1f} / "
                          f"{r['peak_F_N_N'] / 1e3:.1f} kN | {'yes' if r['name'] in s['frontier'] else ''} | {geo} |")
-    st = result["settings"]
-    lines += ["", f"*`python benchmarks/plant_frontier.py --count {st['count']} --piles {' '.join(st['piles'])}` "
-              f"({st['plant']} plant, dx {st['resolution']} m, seed {st['seed']}, design seed {st['design_seed']}) at "
-              f"{commit_label(result['machine'])}; {result['dig_s'] / 60:.0f} min of digging in this invocation, load "
-              f"average at the end {load_label(result['machine'])}. Energy per m³ lifted: the plant's work along the "
+    lines.append("")
+    for run in result.get("invocations") or [result]:
+        st = run["settings"]
+        local = f" --local {st['local']}" if st.get("local") else ""
+        lines.append(f"*`python benchmarks/plant_frontier.py --count {st['count']}{local} --piles "
+                     f"{' '.join(st['piles'])}` ({st['plant']} plant, dx {st['resolution']} m, seed {st['seed']}, "
+                     f"design seed {st['design_seed']}) at {commit_label(run['machine'])}; {run['dig_s'] / 60:.0f} min "
+                     f"of digging, load average at the end {load_label(run['machine'])}.*")
+    lines += ["", f"*Energy per m³ lifted: the plant's work along the "
               f"path plus the lift of the kept load from the path's end to {result['z_ref_m']:.2f} m, over the kept "
               "fill (soil inside the bucket at the path's end, % of the nominal 0.2 m³). References: the loops' own "
               "cycles on the same pile, read back.*"]
@@ -319,13 +327,25 @@ def figure(result: dict[str, Any], target: Path) -> None:
 
 def write(result: dict[str, Any], out: Path) -> None:
     result["summary"] = summarise(result["rows"])
-    (out / "plant_frontier.json").write_text(json.dumps(result, indent=1, default=str))
+    tmp = out / "plant_frontier.json.tmp"  # whole or not at all: a run stopped while writing keeps the old JSON
+    tmp.write_text(json.dumps(result, indent=1, default=str))
+    tmp.replace(out / "plant_frontier.json")
     (out / "plant_frontier.md").write_text(markdown(result))
     figure(result, out / "plant_frontier.png")
 
 
-def run(args: argparse.Namespace, out: Path, piles: list[tuple[str, Any, str]]) -> dict[str, Any]:
+def placement(pile: Any) -> float:
+    """The shift along x [m] by which the loop places the fixed path on ``pile``
+    (:func:`wheelloader.planner.bezier_on_face`; the very float of its search grid, so that the fixed path placed
+    here is the loop's bit for bit)."""
     from wheelloader.planner import bezier_on_face
+
+    offset = float(bezier_on_face(pile).x[0] - START[0])
+    grid = np.arange(0.0, 3.0 + 1e-9, 0.02)  # bezier_on_face's default search (max_shift 3 m, step 2 cm)
+    return float(grid[int(np.argmin(np.abs(grid - offset)))])
+
+
+def run(args: argparse.Namespace, out: Path, piles: list[tuple[str, Any, str]]) -> dict[str, Any]:
     from wheelloader.planner.kept import dump_height
     from wheelloader.references import make_plant
 
@@ -341,17 +361,26 @@ def run(args: argparse.Namespace, out: Path, piles: list[tuple[str, Any, str]]) 
     rows: list[dict[str, Any]] = []
     for spec, (_, _, label) in zip(args.piles, piles, strict=True):
         rows += references(spec, label, args.references or [], z_ref)
+    settings = {"count": args.count, "piles": args.piles, "plant": args.plant, "resolution": args.resolution,
+                "threads": args.threads, "seed": args.seed, "design_seed": args.design_seed,
+                "references": args.references, "local": args.local, "local_scale": LOCAL_SCALE}
+    # the other piles' rows of an earlier invocation into the same OUT stay (one JSON for every pile)
+    saved = out / "plant_frontier.json"
+    earlier = json.loads(saved.read_text()) if saved.is_file() else {}
+    labels = {label for _, _, label in piles}
+    rows = [r for r in earlier.get("rows", []) if r["pile"] not in labels] + rows
+    invocations = [i for i in earlier.get("invocations", []) if not labels & set(i.get("labels", []))]
+    this = {"settings": settings, "labels": sorted(labels), "machine": machine_info(), "dig_s": 0.0}
     result = {"benchmark": "plant_frontier", "plant": args.plant, "z_ref_m": z_ref, "bounds": BOUNDS, "fixed": FIXED,
-              "settings": {"count": args.count, "piles": args.piles, "plant": args.plant,
-                           "resolution": args.resolution, "threads": args.threads, "seed": args.seed,
-                           "design_seed": args.design_seed, "references": args.references},
-              "machine": machine_info(), "rows": rows, "dig_s": 0.0}
+              "settings": settings, "invocations": [*invocations, this], "machine": this["machine"], "rows": rows,
+              "dig_s": 0.0}
     started = time.perf_counter()
     points = [("fixed", FIXED)] + [(f"v{i + 1:02d}", p) for i, p in enumerate(design(args.count, args.design_seed))]
+    points += [(f"l{i + 1:02d}", p) for i, p in enumerate(design(args.local, args.design_seed, LOCAL_SCALE))]
     # interleave the piles: each pile's design grows together, so a run cut short leaves every pile a prefix
     for name, params in points:
         for soil, pile, label in piles:
-            shift = float(bezier_on_face(pile).x[0] - START[0])
+            shift = placement(pile)
             path, duration = variant_path(params, name=name)
             path = path.shifted(dx=shift)
             folder = cycles / label.replace(" ", "_").replace("'", "")
@@ -367,8 +396,9 @@ def run(args: argparse.Namespace, out: Path, piles: list[tuple[str, Any, str]]) 
             print(line, flush=True)
             with progress.open("a") as f:
                 f.write(line + "\n")
-            result["dig_s"] = time.perf_counter() - started
-            result["machine"] = machine_info() if not resumed else result["machine"]
+            result["dig_s"] = this["dig_s"] = time.perf_counter() - started
+            if not resumed:
+                result["machine"] = this["machine"] = machine_info()
             write(result, out)
     return result
 
@@ -378,6 +408,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default="results/plant_frontier", help="output directory")
     parser.add_argument("--cycles-dir", default=None, metavar="DIR", help="dug cycles (resume cache; OUT/cycles)")
     parser.add_argument("--count", type=int, default=8, help="design points per pile (besides the fixed path)")
+    parser.add_argument("--local", type=int, default=0,
+                        help=f"further points (named lNN) of the design in the box shrunk by {LOCAL_SCALE} around "
+                             "the fixed path, dug after the others")
     parser.add_argument("--design-seed", type=int, default=DESIGN_SEED, help="seed of the scrambled Sobol design")
     parser.add_argument("--piles", nargs="+", default=["gravel", "sand"],
                         help="SOIL (the fresh pile) or SOIL:CYCLES_DIR:K (ours' cycle-K start pile of a saved loop)")
@@ -391,8 +424,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="plant seed")
     parser.add_argument("--report", action="store_true", help="only regenerate the table and PNG from the JSON")
     args = parser.parse_args(argv)
-    if args.count < 0:
-        parser.exit(2, "wheelloader: error: --count must be >= 0\n")
+    if args.count < 0 or args.local < 0:
+        parser.exit(2, "wheelloader: error: --count and --local must be >= 0\n")
     out = Path(args.out)
     if args.report:
         saved = out / "plant_frontier.json"

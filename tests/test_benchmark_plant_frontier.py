@@ -33,6 +33,13 @@ def test_design_is_seeded_inside_its_box_and_a_larger_count_keeps_the_smaller_as
         assert low <= value <= high
 
 
+def test_the_local_design_is_the_same_points_in_a_box_shrunk_around_the_fixed_path(pf):
+    wide, local = pf.design(6), pf.design(6, scale=pf.LOCAL_SCALE)
+    for w, q in zip(wide, local, strict=True):
+        for key in pf.BOUNDS:
+            assert q[key] - pf.FIXED[key] == pytest.approx(pf.LOCAL_SCALE * (w[key] - pf.FIXED[key]), abs=2e-4)
+
+
 def test_the_fixed_parameters_give_the_fixed_path_and_variants_keep_within_the_loaders_limits(pf):
     path, duration = pf.variant_path(pf.FIXED)
     assert duration == pf.FIXED["duration_s"]
@@ -96,6 +103,13 @@ def test_runs_end_to_end_in_the_fee_env_plant_and_resumes(pf, tmp_path, capsys):
     assert "| sand | fixed |" in table and "v03" in table
     assert pf.main(["--report", "--out", str(out)]) == 0
     assert (out / "plant_frontier.md").read_text() == table
+    # another pile into the same OUT joins the first pile's rows; --local adds points of the shrunk box
+    assert pf.main(["--plant", "fee-env", "--count", "0", "--local", "1", "--piles", "gravel", "--out", str(out)]) == 0
+    both = json.loads((out / "plant_frontier.json").read_text())
+    assert [(r["pile"], r["name"]) for r in both["rows"]][-2:] == [("gravel", "fixed"), ("gravel", "l01")]
+    assert len([r for r in both["rows"] if r["pile"] == "sand"]) == 4
+    assert [i["labels"] for i in both["invocations"]] == [["sand"], ["gravel"]]
+    assert set(both["summary"]) == {"sand", "gravel"}
 
 
 @pytest.mark.parametrize("argv", [["--count", "-1"], ["--piles", "clay"], ["--piles", "sand:/nonexistent:3"],
