@@ -99,3 +99,121 @@ def test_the_shipped_weights_keep_the_payload_the_transfer_benchmark_chooses():
     chosen = json.loads((ROOT / "docs" / "results" / "transfer" / "transfer.json").read_text())["payload"]
     assert default_learned_model().payload == PayloadOptions.from_dict(chosen)
     assert manifest["payload_source"]["recipe"]["cycles"] == "train + extra"
+
+
+def _net(rng, h=5):
+    return rng.normal(size=(len(INPUT_NAMES), h)), rng.normal(size=h), rng.normal(size=(h, 2))
+
+
+@pytest.mark.parametrize(("slope", "curvature"), [(1.0, 0.0), (0.0, 1.0), (0.7, 0.3)])
+def test_the_smoothness_penalty_is_the_jacobian_and_hessian_norm_with_its_exact_gradient(slope, curvature):
+    fl = load_benchmark("fee_learned")
+    rng = np.random.default_rng(5)
+    z = rng.normal(size=(40, len(INPUT_NAMES)))
+    pw = rng.uniform(size=40)
+    pw /= pw.sum()
+    w1, b1, w2 = _net(rng)
+    rows = np.array([0.0 if n in fl.SOIL_INPUTS else 1.0 for n in INPUT_NAMES])
+    value, grads = fl.smoothness_penalty(z, pw, w1, b1, w2, rows, slope, curvature)
+    a = np.tanh(z @ w1 + b1)
+    s, t = 1.0 - a * a, -2.0 * a * (1.0 - a * a)
+    p = rows > 0
+    jac = np.einsum("jh,nh,hk->njk", w1[p], s, w2)
+    hess = np.einsum("jh,lh,nh,hk->njlk", w1[p], w1[p], t, w2)
+    brute = slope * np.sum(pw * np.sum(jac ** 2, axis=(1, 2))) + curvature * np.sum(pw * np.sum(hess ** 2,
+                                                                                                    axis=(1, 2, 3)))
+    assert value == pytest.approx(brute, rel=1e-12)
+    for k, arr in enumerate((w1, b1, w2)):
+        numeric = np.zeros_like(arr)
+        for i in np.ndindex(arr.shape):
+            old = arr[i]
+            arr[i] = old + 1e-6
+            up = fl.smoothness_penalty(z, pw, w1, b1, w2, rows, slope, curvature)[0]
+            arr[i] = old - 1e-6
+            down = fl.smoothness_penalty(z, pw, w1, b1, w2, rows, slope, curvature)[0]
+            arr[i] = old
+            numeric[i] = (up - down) / 2e-6
+        np.testing.assert_allclose(grads[k], numeric, rtol=1e-5, atol=1e-6 * np.abs(numeric).max())
+
+
+def test_the_penalised_training_has_an_exact_gradient(monkeypatch):
+    import scipy.optimize
+
+    fl = load_benchmark("fee_learned")
+    captured = {}
+    real = scipy.optimize.minimize
+
+    def once(fun, x0, **kwargs):
+        captured["fun"], captured["x0"] = fun, x0
+        return real(fun, x0, **{**kwargs, "options": {"maxiter": 1}})
+
+    monkeypatch.setattr(scipy.optimize, "minimize", once)
+    rng = np.random.default_rng(6)
+    x = rng.uniform(-1.0, 1.0, (60, len(INPUT_NAMES)))
+    x[:, 1] = rng.uniform(0.05, 2.0, len(x))
+    mask = np.ones(len(INPUT_NAMES))
+    mask[INPUT_NAMES.index("kept_fill_fraction")] = 0.0
+    fl.train_mlp(x, rng.normal(size=(60, 2)), np.full(60, 1 / 60), hidden=3, l2=1e-3, mask=mask, slope=0.3,
+                 curvature=0.2, box=0.5)
+    fun = captured["fun"]
+    theta = captured["x0"] + rng.normal(0.0, 0.3, captured["x0"].shape)
+    grad = fun(theta)[1]
+    numeric = np.array([(fun(theta + e)[0] - fun(theta - e)[0]) / 2e-6 for e in np.eye(len(theta)) * 1e-6])
+    np.testing.assert_allclose(grad, numeric, rtol=1e-5, atol=1e-7 * np.abs(numeric).max())
+
+
+def test_the_smoothness_and_box_penalties_flatten_the_network_where_the_planner_moves():
+    fl = load_benchmark("fee_learned")
+    rng = np.random.default_rng(7)
+    x = rng.uniform(-1.0, 1.0, (300, len(INPUT_NAMES)))
+    x[:, 1] = 1.0
+    r = np.column_stack([np.sin(4.0 * x[:, 0]), np.cos(3.0 * x[:, 2])]) + 0.1 * rng.normal(size=(300, 2))
+    w = np.full(len(x), 1.0 / len(x))
+    rows = np.array([0.0 if n in fl.SOIL_INPUTS else 1.0 for n in INPUT_NAMES])
+
+    def steepness(m):
+        z = (np.clip(x, m.low, m.high) - m.mean) / m.std
+        return fl.smoothness_penalty(z, w, m.w1, m.b1, m.w2, rows, 1.0, 0.0)[0]
+
+    free = fl.train_mlp(x, r, w, hidden=6, l2=1e-4, max_iter=200)
+    smooth = fl.train_mlp(x, r, w, hidden=6, l2=1e-4, max_iter=200, slope=1.0)
+    boxed = fl.train_mlp(x, r, w, hidden=6, l2=1e-4, max_iter=200, box=10.0)
+    assert steepness(smooth) < 0.5 * steepness(free)
+    assert np.mean(boxed.ungated(x) ** 2) < np.mean(free.ungated(x) ** 2)
+
+
+def test_the_planner_gate():
+    fl = load_benchmark("fee_learned")
+    fee = {"iterations_median": 70.0}
+
+    def plans(iterations, status="Solve_Succeeded", ok=True):
+        return {"iterations_median": float(iterations), "plans": [{"status": status, "check_ok": ok}] * 3}
+
+    form = fl.Form(8, 1e-3, 0.2)
+    assert fl.plannable(form, plans(70), fee)
+    assert not fl.plannable(form, plans(71), fee)
+    assert not fl.plannable(form, plans(50, status="Maximum_Iterations_Exceeded"), fee)
+    assert not fl.plannable(form, plans(50, ok=False), fee)
+    assert not fl.plannable(form._replace(drop=()), plans(50), fee)
+
+
+def test_cold_plans_use_the_given_network_and_leave_the_shipped_one_in_place():
+    import os
+
+    import wheelloader.estimator.learned as learned_module
+
+    fl = load_benchmark("fee_learned")
+    shipped = default_learned_model()
+    cache = os.environ.get("WHEELLOADER_NLP_CACHE")
+    calls = []
+    model = shipped
+
+    class Spy:
+        def __getattr__(self, name):
+            calls.append(name)
+            return getattr(model, name)
+
+    out = fl.cold_plans("fee-learned", Spy(), soils=("gravel",))
+    assert calls and out["plans"][0]["iterations"] > 0
+    assert learned_module.default_learned_model() is shipped
+    assert os.environ.get("WHEELLOADER_NLP_CACHE") == cache
