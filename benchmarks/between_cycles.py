@@ -24,7 +24,13 @@ prior, payload, descend clearance, look-ahead, ...; its saved cycles unless ``--
 arm of ``benchmarks/lookahead_mpm.sh``; ``--single`` replays the current version only. Each plan's CPU is split
 into its IPOPT solves (``TrajectoryOptimizer.solve``: IPOPT with its iteration callback's NumPy checks, the
 look-ahead's candidates and second cycles included) and the rest (the kept target, the final check, NLP builds,
-the look-ahead's scoring).
+the look-ahead's scoring). ``--compiled DIR`` adds a third variant, ``compiled``: the current package with the
+IPOPT derivatives compiled as C (``plant_adaptation.py --compiled``; every loop uses such libraries where present,
+:func:`wheelloader.planner.nlp.compiled_if_present`). Before the rounds it replays cycle 1 of the first loop with
+``compiled=True`` and the NLP disk cache ``DIR`` (the compile, recorded with its CPU and peak memory; nothing to
+compile when ``DIR`` has the libraries already); in each round the variant starts from an empty NLP disk cache with
+``DIR``'s libraries copied in. Only the NLPs that the compile step planned with are compiled (the plan's; the
+wider-margin re-plans' NLPs are compiled only when that cycle re-plans), the others stay in CasADi's VM.
 """
 
 from __future__ import annotations
@@ -33,6 +39,7 @@ import argparse
 import json
 import math
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -51,6 +58,8 @@ CYCLES = ROOT / "data" / "results" / "loop_mpm" / "cycles" / "loops"
 ORACLE_PARAMS = ROOT / "docs" / "results" / "loop_mpm" / "phase2" / "plant_adaptation.json"
 #: The issue's target: the median time between cycles [s] (#33).
 TARGET_S = 1.0
+#: Set to "1" in the worker of ``--compiled``'s compile step: its loop plans with ``compiled=True``.
+COMPILE_ENV = "WHEELLOADER_BETWEEN_CYCLES_COMPILE"
 
 
 def run_settings(run: Path) -> tuple[dict, Path]:
@@ -141,8 +150,9 @@ def worker(loops: list[str], cycles_dir: Path, out: Path, cycles: int = LOOP_SET
         tic = time.process_time()
         extra = {"oracle_params": SoilParams.from_dict(oracle[soil]["params"])} if strategy == "oracle" else {}
         event["folder"] = cycles_dir / soil / f"seed{seed}" / strategy
+        compiled = os.environ.get(COMPILE_ENV) == "1"
         plant_loop_unit(plant, strategy, soil, seed=int(seed), stale="keep", planner=True, cache=event["folder"],
-                        **{**settings, "cycles": cycles}, **extra)
+                        **{**settings, "cycles": cycles}, **extra, **({"compiled": True} if compiled else {}))
         result["loops"][loop] = {"cpu_s": time.process_time() - tic, "events": list(rows)}
     out.write_text(json.dumps(result), encoding="utf-8")
     return 0
@@ -169,10 +179,14 @@ def between(events: list[dict]) -> list[dict]:
 
 
 def run_worker(variant: str, pythonpath: str | None, loops: list[str], cycles_dir: Path, tmp: Path,
-               cycles: int = LOOP_SETTINGS["cycles"], run: Path | None = None) -> dict:
-    """One replay in a fresh process (NLP disk cache ``tmp/nlp-VARIANT``); its rows and its CPU, wall, peak memory
-    and load."""
-    env = dict(os.environ, WHEELLOADER_NLP_CACHE=str(tmp / f"nlp-{variant}"))
+               cycles: int = LOOP_SETTINGS["cycles"], run: Path | None = None, nlp_cache: Path | None = None,
+               compile_: bool = False) -> dict:
+    """One replay in a fresh process (NLP disk cache ``nlp_cache`` or ``tmp/nlp-VARIANT``; ``compile_``: the loop
+    plans with ``compiled=True``); its rows and its CPU, wall, peak memory and load."""
+    env = dict(os.environ, WHEELLOADER_NLP_CACHE=str(nlp_cache or tmp / f"nlp-{variant}"))
+    env.pop(COMPILE_ENV, None)
+    if compile_:
+        env[COMPILE_ENV] = "1"
     env.pop("PYTHONPATH", None)
     if pythonpath:
         env["PYTHONPATH"] = pythonpath
@@ -279,9 +293,24 @@ def side_by_side(args: argparse.Namespace) -> dict:
         current, current_pkg = package_at_revision(ROOT, args.current, tmp / "current")
         reference = None
         variants = (("current", current_pkg),) if args.single else (("baseline", pkg), ("current", current_pkg))
+        compile_step = None
+        if args.compiled is not None:
+            variants += (("compiled", current_pkg),)
+            compile_step = run_worker("compile", str(current_pkg), args.loops[:1], args.cycles_dir, tmp, 1, args.run,
+                                      nlp_cache=args.compiled.resolve(), compile_=True)
+            compile_step["libraries"] = sorted(p.name for p in (args.compiled / "compiled").glob("*.so"))
+            print(f"compile step: {compile_step['process_cpu_s']:.1f} s CPU, {compile_step['wall_s']:.1f} s wall, "
+                  f"peak {compile_step['max_rss_mb']:.0f} MB, libraries {compile_step['libraries']}", flush=True)
         for rnd in range(1, args.rounds + 1):
             for variant, path in variants:
-                run = run_worker(variant, str(path), args.loops, args.cycles_dir, tmp, args.cycles, args.run)
+                cache = None
+                if variant == "compiled":
+                    cache = tmp / f"nlp-compiled-{rnd}"
+                    (cache / "compiled").mkdir(parents=True)
+                    for library in (args.compiled / "compiled").glob("*.so"):
+                        shutil.copy2(library, cache / "compiled" / library.name)
+                run = run_worker(variant, str(path), args.loops, args.cycles_dir, tmp, args.cycles, args.run,
+                                 nlp_cache=cache)
                 reference = reference or run
                 run.update(round=rnd, nlp_cache="empty" if rnd == 1 else "filled", summary=summarise(run))
                 run["summary"]["plans_as_first_baseline"] = same_plans(run, reference)
@@ -292,7 +321,7 @@ def side_by_side(args: argparse.Namespace) -> dict:
                       f"{s['iterations_median']:.0f} it., NLPs built {s['nlp_builds']} "
                       f"({s['nlp_build_cpu_s']:.1f} s), load {run['load_before'][0]:.1f}", flush=True)
     return {"baseline": args.baseline, "baseline_commit": commit, "current": args.current, "current_commit": current,
-            "loops": list(args.loops), "runs": runs,
+            "loops": list(args.loops), "runs": runs, "compile_step": compile_step,
             "settings": {**(LOOP_SETTINGS if args.run is None else run_settings(args.run)[0]), "cycles": args.cycles},
             **({} if args.run is None else {"run": str(args.run)})}
 
@@ -312,6 +341,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--run", type=Path, default=None, metavar="JSON",
                         help="replay with the loop settings of this plant_adaptation.py run (its JSON)")
     parser.add_argument("--single", action="store_true", help="replay the current version only (no baseline)")
+    parser.add_argument("--compiled", type=Path, default=None, metavar="DIR",
+                        help="add the current version with compiled derivatives (compiled into DIR's NLP cache "
+                             "first when not there: minutes of CPU)")
     parser.add_argument("--out", type=Path, default=None, help="write between_cycles.json and table.md here")
     parser.add_argument("--from-json", action="store_true", help="rewrite --out's table.md from its JSON")
     parser.add_argument("--worker", type=Path, default=None, help=argparse.SUPPRESS)

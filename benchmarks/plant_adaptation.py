@@ -124,7 +124,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                    "failure_angle": args.failure_angle, "objective": args.objective, "lookahead": args.lookahead,
                    "rl_policy": args.rl_policy, "prior": args.prior,
                    "descend_clearance": args.descend_clearance, "payload": payload_from(args.payload),
-                   "force_model": args.force_model, **planner_physics(args)}
+                   "force_model": args.force_model, "compiled": args.compiled, **planner_physics(args)}
     learning = [s for s in args.strategies if s != "oracle"]
     keys = [(soil, seed, name) for soil in args.soils for seed in range(args.seeds) for name in learning]
     units = [Unit(plant_loop_unit, {**loop_kwargs, "strategy": name, "soil": soil, "seed": seed, "stale": args.stale,
@@ -360,6 +360,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--force-model", choices=FORCE_MODELS, default="fee",
                         help="the force model ours calibrates and plans with (wheelloader.estimator.FORCE_MODELS; "
                              "fee-learned: the learned correction on fee-payload-depth; default fee)")
+    parser.add_argument("--compiled", action="store_true",
+                        help="the planner's IPOPT derivatives as C, compiled once per machine and NLP (minutes of "
+                             "CPU and about 1 GB each the first time, the same plans); later runs without the flag "
+                             "use those libraries too")
     add_ray_arguments(parser)
     parser.add_argument("--report", action="store_true",
                         help="only rewrite the Markdown and the figure from OUT/plant_adaptation.json")

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from wheelloader.estimator import Bucket, BucketPath, Loader, PayloadOptions, Pile, SoilParams, as_soil
+from wheelloader.estimator.checks import check_int
 from wheelloader.estimator.errors import PlanningError
 from wheelloader.estimator.payload import exit_angle_profile
 from wheelloader.estimator.quantise import better, quantise_pile, quantise_soil
@@ -71,7 +72,7 @@ class PlanOutcome:
 CHECK_EVERY = 10
 #: The solve stops once the best iterate that passes the check has improved the objective (in bucket fills)
 #: by less than STALL_TOLERANCE over the last STALL_CHECKS checks.
-STALL_CHECKS = 3
+STALL_CHECKS = 2
 STALL_TOLERANCE = 0.01
 #: An iterate is kept only once it loads this fraction of the bucket (by the NumPy check).
 ITERATE_MIN_FILL = 0.5
@@ -107,7 +108,8 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
                     replan_every: int = 6, replan_within: float | None = None,
                     replan_within_iterations: int | None = None, energy_weight: float | None = None,
                     initial_guess: Any = None, exit_min_fill: float = 0.0, force_model: str | None = None,
-                    payload: PayloadOptions | None = None) -> PlanOutcome:
+                    payload: PayloadOptions | None = None,
+                    give_up_iterations: int | None = None) -> PlanOutcome:
     """Plan the next cycle on ``pile`` with ``params``; return a ``PlanOutcome`` for the adaptation loop.
 
     The plan is accepted only when the NumPy re-simulation
@@ -128,6 +130,12 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     iterations spent so far exceed it (an iteration budget: with
     ``options.max_iter`` it bounds the planning work, the same on any
     machine), or the opt-in wall-time cap ``replan_within`` [s] has passed.
+    ``give_up_iterations``: a re-plan with wider margins in which no iterate
+    has passed the check after this many IPOPT iterations (counted at the
+    checks, every :data:`CHECK_EVERY`) stops there, as if at its iteration
+    limit: a plan that will fail ends in the loop's fallback sooner (an
+    iteration count, the same on any machine; the first solve is never cut);
+    None: re-plans run to their limit.
     ``energy_weight`` overrides ``options.energy_weight`` (lambda per kJ).
     ``initial_guess`` (a ``BucketPath``, or a function of the pile returning
     one) is where IPOPT starts; default :func:`~wheelloader.planner.guess.surface_dig`
@@ -144,6 +152,8 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     differences of the calibration (another CPU's BLAS kernels) then give the same plan.
     """
     tic = time.perf_counter()
+    if give_up_iterations is not None:
+        give_up_iterations = check_int("give_up_iterations", give_up_iterations, error=PlanningError)
     if force_model is not None or payload is not None:
         base = options or PlannerOptions()
         options = replace(base, force_model=base.force_model if force_model is None else force_model,
@@ -162,7 +172,8 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     try:
         found = _search(opt, options, params, pile, start, duration, energy_weight=energy_weight,
                         initial_guess=initial_guess, exit_min_fill=exit_min_fill, control_rate=control_rate,
-                        kept_objective=kept_objective, min_kept=min_kept, over_budget=over_budget)
+                        kept_objective=kept_objective, min_kept=min_kept, over_budget=over_budget,
+                        give_up_iterations=give_up_iterations)
     except PlanningError as exc:
         return PlanOutcome(None, False, f"planning failed: {exc}", time.perf_counter() - tic)
     opt, plan, check, best = found.opt, found.plan, found.check, found.best
@@ -212,7 +223,7 @@ class _Search:
 def _search(opt: TrajectoryOptimizer, options: PlannerOptions | None, params: SoilParams, pile: Pile,
             start: StartState, duration: float, *, energy_weight: float | None, initial_guess: Any,
             exit_min_fill: float, control_rate: float, kept_objective: bool, min_kept: float,
-            over_budget: Callable[[int], bool]) -> _Search:
+            over_budget: Callable[[int], bool], give_up_iterations: int | None = None) -> _Search:
     """Solve, keep the best iterate that passes the NumPy check, re-plan with wider margins when none does."""
     retried = ""
     first_failures: list[str] = []
@@ -226,6 +237,7 @@ def _search(opt: TrajectoryOptimizer, options: PlannerOptions | None, params: So
                            exit_min_fill=share * exit_min_fill)
 
     lam = opt.options.energy_weight if energy_weight is None else energy_weight
+    give_up: list[int | None] = [None]  # the first solve runs to its limit; the re-plans give up (see above)
     best: dict[str, Any] = {}
     scores: list[float] = []
 
@@ -243,9 +255,12 @@ def _search(opt: TrajectoryOptimizer, options: PlannerOptions | None, params: So
 
     def checkpoint(plan) -> bool:
         # every CHECK_EVERY iterations: keep the best iterate that passes the check; stop once it has gained
-        # less than STALL_TOLERANCE over the last STALL_CHECKS checkpoints
+        # less than STALL_TOLERANCE over the last STALL_CHECKS checkpoints, or (a re-plan, give_up_iterations)
+        # once this solve has run that many iterations without an iterate that passes
         consider(plan, checked(plan, opt), iterate=True)
         scores.append(best.get("score", math.inf))
+        if not best and give_up[0] is not None and len(scores) * CHECK_EVERY >= give_up[0]:
+            return True
         return len(scores) > STALL_CHECKS and scores[-1 - STALL_CHECKS] - scores[-1] < STALL_TOLERANCE
 
     guess = initial_guess(pile) if callable(initial_guess) else initial_guess
@@ -264,6 +279,7 @@ def _search(opt: TrajectoryOptimizer, options: PlannerOptions | None, params: So
         first_failures = first_failures or list(check.failures)
         opt = optimizer_for(opt.bucket, opt.loader, cautious_options(options or PlannerOptions(), level))
         scores.clear()
+        give_up[0] = give_up_iterations
         plan = opt.solve(params, pile, start, duration, energy_weight=energy_weight, initial_guess=plan,
                          exit_min_fill=exit_min_fill, checkpoint=checkpoint, checkpoint_every=CHECK_EVERY,
                      min_kept=min_kept)

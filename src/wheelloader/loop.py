@@ -262,7 +262,8 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
                     midpoints: bool | None = None, objective: str = "fill_energy",
                     lookahead: bool | str = False, rl_policy: str | None = None,
                     prior: str = "none", descend_clearance: float | None = None,
-                    payload: Mapping[str, float] | None = None, force_model: str = "fee") -> dict[str, Any]:
+                    payload: Mapping[str, float] | None = None, force_model: str = "fee",
+                    compiled: bool = False) -> dict[str, Any]:
     """One loop of :func:`run_loop` on the trapezoid pile as a unit of :mod:`wheelloader.sweep` (picklable
     arguments only).
 
@@ -289,9 +290,14 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
     fields): the payload state of the kept objective, e.g. one with a ``curl_gain`` fitted to the plant's kept
     fill (``benchmarks/transfer.py``), for every strategy that plans; ``force_model``: the model ``ours``
     calibrates and plans with (:data:`~wheelloader.estimator.FORCE_MODELS`; under the payload models with
-    ``payload``).
+    ``payload``). ``compiled``: the planner's IPOPT derivatives as C compiled once per machine
+    (:class:`~wheelloader.planner.PlannerOptions` ``compiled``: minutes of CPU per NLP the first time, the same
+    plans). Every loop, with or without it, uses the libraries a compiled run left on this machine for its NLPs
+    (:func:`~wheelloader.planner.nlp.compiled_if_present` is on while it runs; found by the NLP's key, never a
+    stale one).
     """
     from wheelloader.adaptation import default_planner, make_strategy
+    from wheelloader.planner.nlp import compiled_if_present
 
     model = ModelOptions(failure_angle=failure_angle)
     learning = strategy in ("ours", "oracle")
@@ -300,7 +306,7 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
                             fill_limit=fill_limit, heel_clearance=heel_clearance,
                             end_blade_angle=end_blade_angle, curl_out_intervals=curl_out_intervals,
                             midpoints=midpoints, objective=objective, lookahead=lookahead,
-                            descend_clearance=descend_clearance, payload=kept_payload)
+                            descend_clearance=descend_clearance, payload=kept_payload, compiled=compiled)
             if planner else None)
     ours_model = {} if force_model == "fee" else {"force_model": force_model, "payload": kept_payload}
     if strategy == "oracle":
@@ -313,9 +319,15 @@ def plant_loop_unit(plant: Plant, strategy: str, soil: SoilParams | str, *, cycl
     else:
         chosen = make_strategy(strategy, plan, rl_policy=rl_policy)
     name = soil if isinstance(soil, str) else "custom soil"
-    records, logs = run_loop(plant, chosen, Pile.trapezoid(), soil, cycles=cycles, seed=seed, cache=cache,
-                             sigma_s=sigma_s, stale=stale,
-                             progress=lambda line: print(f"[{name}, seed {seed}]{line}", flush=True))
+    # the derivatives a compiled run left on this machine for the loop's NLPs, where there are any (found by the
+    # NLP's key, never stale; the same plans), as wheelloader demo does
+    found = compiled_if_present(True)
+    try:
+        records, logs = run_loop(plant, chosen, Pile.trapezoid(), soil, cycles=cycles, seed=seed, cache=cache,
+                                 sigma_s=sigma_s, stale=stale,
+                                 progress=lambda line: print(f"[{name}, seed {seed}]{line}", flush=True))
+    finally:
+        compiled_if_present(found)
     return {"records": [r.to_dict() for r in records], "logs": logs}
 
 

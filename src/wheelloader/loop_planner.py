@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
+from dataclasses import replace
 
 from wheelloader.estimator import PayloadOptions, Pile, SoilParams, WheelloaderError
 from wheelloader.planner import LOOP_EXIT_MIN_FILL, PlannerOptions, PlanOutcome, optimizer_for, plan_next_cycle
@@ -20,6 +21,12 @@ BETWEEN_CYCLES_MAX_ITER = 130
 #: ``benchmarks/adaptation.py``, cycles 4-5: with 130 each was re-planned once and none passed; with 260 one
 #: passed, with 400 no more). Plans that pass at once spend no more.
 BETWEEN_CYCLES_REPLAN_ITER = 2 * BETWEEN_CYCLES_MAX_ITER
+#: A re-plan with wider margins in which no iterate has passed the NumPy check after this many IPOPT iterations
+#: stops there (``plan_next_cycle(give_up_iterations=...)``): the plan ends in the Bezier fallback sooner. In the
+#: committed loop runs a re-plan that rescued a plan had an iterate passing by iteration 50 of the re-plan (or
+#: ended itself by 61); on the 20 replayed situations of docs/results/between_cycles.md no re-plan rescued one,
+#: so every plan stays the same and a failing plan spends at most 130 + 2 x 70 iterations instead of 390.
+BETWEEN_CYCLES_GIVE_UP_ITER = 70
 #: The loop's planner constrains forces and the validity domain at every interval's midpoint too
 #: (``PlannerOptions.midpoints``). On the piles the loop carves, plans that the NLP solved at its nodes failed
 #: the NumPy check at 1-5 samples between them (blade too flat to a carved step, slope clamped). Measured on
@@ -73,14 +80,18 @@ def default_planner(mpc: bool = False, failure_angle: str = "min_n_gamma", cut_a
                              curl_out_intervals=curl_out_intervals, midpoints=midpoints, objective=objective,
                              descend_clearance=descend_clearance, payload=payload, compiled=compiled, **extra)
     # build the plan's NLP before the loop's timings start; those of the two wider-margin re-plans are built
-    # when a plan first fails its check (once per process: planner.optimizer_for)
-    optimizer_for(options=options)
+    # when a plan first fails its check (once per process: planner.optimizer_for). Compiled derivatives are
+    # made at the first plan that needs them: a loop that plans with another force model (the calibration's)
+    # does not compile this NLP for nothing
+    optimizer_for(options=replace(options, compiled=False))
     if lookahead:
         from wheelloader.planner.lookahead import FAST, KEPT_CANDIDATES, plan_with_lookahead
 
         setting = {"fast": FAST, "kept": {"candidates": KEPT_CANDIDATES}}.get(lookahead, {})
         return functools.partial(plan_with_lookahead, mpc=mpc, options=options,
                                  replan_within_iterations=BETWEEN_CYCLES_REPLAN_ITER,
+                                 give_up_iterations=BETWEEN_CYCLES_GIVE_UP_ITER,
                                  exit_min_fill=LOOP_EXIT_MIN_FILL, **setting)
     return functools.partial(plan_next_cycle, mpc=mpc, options=options,
-                             replan_within_iterations=BETWEEN_CYCLES_REPLAN_ITER, exit_min_fill=LOOP_EXIT_MIN_FILL)
+                             replan_within_iterations=BETWEEN_CYCLES_REPLAN_ITER,
+                             give_up_iterations=BETWEEN_CYCLES_GIVE_UP_ITER, exit_min_fill=LOOP_EXIT_MIN_FILL)
