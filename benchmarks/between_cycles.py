@@ -273,10 +273,23 @@ def markdown(data: dict) -> str:
             lines.append(f"| {run['round']} | {run['variant']} | {s['cpu_s_median']:.2f} s | "
                          f"{s['calibration_cpu_s_median']:.2f} s | {s['plan_cpu_s_median']:.2f} s | "
                          f"{s['solve_cpu_s_median']:.2f} s | {s['plan_rest_cpu_s_median']:.2f} s |")
-    command = (f"--baseline {data['baseline']}" if "run" not in data else
-               f"--run {data['run']} --single --cycles {data['settings']['cycles']} --loops {' '.join(data['loops'])}")
-    versions = (f"current = {data['current_commit'][:10]}" if "run" in data else
+    single = all(run["variant"] != "baseline" for run in data["runs"])
+    step = data.get("compile_step")
+    command = " ".join(part for part in (
+        "" if single else f"--baseline {data['baseline']}",
+        "" if single or data.get("current", "HEAD") == "HEAD" else f"--current {data['current']}",
+        "" if "run" not in data else f"--run {data['run']}", "--single" if single else "",
+        "" if step is None else "--compiled DIR",
+        "" if "run" not in data else f"--cycles {data['settings']['cycles']} --loops {' '.join(data['loops'])}",
+        "" if max(r['round'] for r in data['runs']) == 2 else f"--rounds {max(r['round'] for r in data['runs'])}")
+        if part)
+    versions = (f"current = {data['current_commit'][:10]}" if single else
                 f"baseline = {data['baseline_commit'][:10]}, current = {data['current_commit'][:10]}")
+    if step is not None:
+        lines += ["", f"Compile step (`compiled=True`, cycle 1 of {next(iter(step['loops']))}, NLP disk cache DIR): "
+                  f"{step['process_cpu_s']:.0f} s CPU, {step['wall_s']:.0f} s wall, peak {step['max_rss_mb']:.0f} MB, "
+                  f"load {step['load_before'][0]:.1f}-{step['load_after'][0]:.1f}; libraries "
+                  + ", ".join(f"`{name}`" for name in step.get("libraries", [])) + "."]
     lines += ["", f"*`python benchmarks/between_cycles.py {command}` ({versions}); CPU seconds of this "
               f"process (`time.process_time`); target {TARGET_S:g} s median (#33).*"]
     return "\n".join(lines)

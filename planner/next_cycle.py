@@ -108,8 +108,7 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
                     replan_every: int = 6, replan_within: float | None = None,
                     replan_within_iterations: int | None = None, energy_weight: float | None = None,
                     initial_guess: Any = None, exit_min_fill: float = 0.0, force_model: str | None = None,
-                    payload: PayloadOptions | None = None,
-                    give_up_iterations: int | None = None) -> PlanOutcome:
+                    payload: PayloadOptions | None = None, give_up_iterations: int | None = None) -> PlanOutcome:
     """Plan the next cycle on ``pile`` with ``params``; return a ``PlanOutcome`` for the adaptation loop.
 
     The plan is accepted only when the NumPy re-simulation
@@ -130,12 +129,9 @@ def plan_next_cycle(params: SoilParams | str | dict, pile: Pile, *, start: Start
     iterations spent so far exceed it (an iteration budget: with
     ``options.max_iter`` it bounds the planning work, the same on any
     machine), or the opt-in wall-time cap ``replan_within`` [s] has passed.
-    ``give_up_iterations``: a re-plan with wider margins in which no iterate
-    has passed the check after this many IPOPT iterations (counted at the
-    checks, every :data:`CHECK_EVERY`) stops there, as if at its iteration
-    limit: a plan that will fail ends in the loop's fallback sooner (an
-    iteration count, the same on any machine; the first solve is never cut);
-    None: re-plans run to their limit.
+    ``give_up_iterations``: a re-plan (never the first solve) with no iterate passing the check after this many
+    IPOPT iterations (counted at the checks) stops there, as at its limit: a plan that will fail ends sooner in
+    the loop's fallback (an iteration count, the same on any machine); None: re-plans run to their limit.
     ``energy_weight`` overrides ``options.energy_weight`` (lambda per kJ).
     ``initial_guess`` (a ``BucketPath``, or a function of the pile returning
     one) is where IPOPT starts; default :func:`~wheelloader.planner.guess.surface_dig`
