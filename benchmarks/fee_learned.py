@@ -462,6 +462,13 @@ def cold_plans(force_model: str, model: LearnedModel | None = None, soils: tuple
             "passing": sum(r["check_ok"] for r in rows), "plans": rows}
 
 
+def with_payload(model: LearnedModel, payload: PayloadOptions) -> LearnedModel:
+    """``model`` carrying ``payload`` (:attr:`LearnedModel.payload`, what ``"fee-learned"``'s planner and env keep;
+    a network without a manifest keeps the default payload)."""
+    return LearnedModel(model.w1, model.b1, model.w2, model.b2, model.mean, model.std, model.low, model.high,
+                        version=model.version, manifest={**(model.manifest or {}), "payload": payload.to_dict()})
+
+
 def plannable(form: Form, plans: dict, fee_plans: dict) -> bool:
     """The planner's gate of the build (docs/results/learned.md, "v7"): a form may ship only if it leaves the
     kept-fill input out (with it the cold plan took 2.57x the FEE's, weights v4), all its cold plans
@@ -535,6 +542,44 @@ def learning_curve(train: list[dict], loops: list[dict], form: Form, val: list[d
     return out
 
 
+def forms_table(report: dict) -> str:
+    """The side-by-side table of the forms (markdown) from a build's ``report.json``: validation (one cycle /
+    floor), the R2 of the transfer residual (training, validation; F_T / F_N), the planner's cold plans (IPOPT
+    iterations per soil, median; CPU median against the FEE's in the same build) and the gate. Test rows are not
+    in it (they are in the report; the form is chosen without them)."""
+    fee = report["fee_cold_plans"]
+    lines = ["| form | validation, one cycle / floor | R2 train | R2 validation | cold plan iterations (gravel, sand, "
+             "dirt; median) | cold plan CPU vs fee | planner gate | chosen |", "|---|---|---|---|---|---|---|---|"]
+    fee_its = ", ".join(str(p["iterations"]) for p in fee["plans"])
+    lines.append(f"| fee (the planner gate's reference) | | | | {fee_its}; {fee['iterations_median']:.0f} | 1.00x "
+                 "| | |")
+    for name, f in report["forms"].items():
+        val = f"{f['validation']['one_cycle']:.1f} / {f['validation']['floor']:.1f} %"
+        if "planner" not in f:
+            lines.append(f"| {name} | {val} | | | | | | |")
+            continue
+        r2s = f["r2_tangential_normal_transfer"]
+        plans = f["planner"]
+        its = ", ".join(str(p["iterations"]) + ("" if p["status"] in SOLVED else " (not solved)")
+                        for p in plans["plans"])
+        lines.append(f"| {name} | {val} | {r2s['train'][0]:.2f} / {r2s['train'][1]:.2f} | "
+                     f"{r2s['validation'][0]:.2f} / {r2s['validation'][1]:.2f} | {its}; "
+                     f"{plans['iterations_median']:.0f} | {plans['cpu_median_s'] / fee['cpu_median_s']:.2f}x | "
+                     f"{'passes' if f['plannable'] else 'fails'} | {'yes' if name == report['chosen'] else ''} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_report(out: Path, fields: dict, argv: list[str] | None, t0: float) -> dict:
+    """Write ``report.json`` (``fields``, the command, the CPU seconds since ``t0``, the machine) and ``forms.md``
+    (:func:`forms_table`) into ``out``; return the report."""
+    report = {"benchmark": "fee_learned", **fields,
+              "command": " ".join(["python benchmarks/fee_learned.py", *(argv if argv is not None else sys.argv[1:])]),
+              "cpu_s": time.process_time() - t0, "machine": machine_info()}
+    (out / "report.json").write_text(json.dumps(report, indent=1) + "\n")
+    (out / "forms.md").write_text(forms_table(report))
+    return report
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, required=True, help="output folder (estimator/learned_weights ships)")
@@ -566,12 +611,15 @@ def main(argv: list[str] | None = None) -> int:
                                           "validation_loops": transfer_errors(val_loops, payload, None)}}
     print(f"{base_name}: {json.dumps(forms[base_name])}", flush=True)
     fee_plans = cold_plans("fee")
+    (args.out / "forms").mkdir(parents=True, exist_ok=True)
     print(f"fee's cold plans: {json.dumps(fee_plans)}", flush=True)
     models = {}
     for name, form in FORMS.items():
         x, r, w = stack(train, loops=loops, loop_share=form.share)
-        m = form.train(x, r, w)
+        # the network with the build's payload (what the planner's "fee-learned" keeps; without it, its default)
+        m = with_payload(form.train(x, r, w), payload)
         models[name] = m
+        m.save(args.out / "forms" / f"form{len(models) - 1}.json")  # each form's network, to measure again
         rows = {"train": r2(m.correction(x), r)}
         for label, groups in (("validation", val), *((TEST_ROWS[g["group"]], [g]) for g in test)):
             gx, gr, _ = stack(groups, ("cross",))
@@ -585,9 +633,11 @@ def main(argv: list[str] | None = None) -> int:
     # never shipped (plannable: no kept-fill input, every cold plan solved and checked, no more IPOPT iterations
     # than the FEE's); among the rest, validation decides (docs/results/learned.md, "v7", the rule stated first)
     eligible = [k for k in FORMS if forms[k]["plannable"]]
-    if not eligible:
-        print("wheelloader: error: no form the planner can carry; nothing written", file=sys.stderr)
-        return 1
+    if not eligible:  # the side-by-side is the result: no weights are written (the shipped ones stay)
+        write_report(args.out, {"forms": forms, "chosen": None, "beats_base_on_validation": None,
+                                "fee_cold_plans": fee_plans, "learning_curve": []}, argv, t0)
+        print(f"no form passes the planner gate: no weights written; the forms compared in {args.out}", flush=True)
+        return 0
     chosen = min(eligible, key=lambda k: forms[k]["validation"]["one_cycle"])
     beats_base = forms[chosen]["validation"]["one_cycle"] < forms[base_name]["validation"]["one_cycle"]
     model = models[chosen]
@@ -612,15 +662,11 @@ def main(argv: list[str] | None = None) -> int:
                 "stride": STRIDE, "cross": CROSS}
     model = LearnedModel(model.w1, model.b1, model.w2, model.b2, model.mean, model.std, model.low, model.high,
                          version=VERSION, manifest=manifest)
-    args.out.mkdir(parents=True, exist_ok=True)
     model.save(args.out / "fee-learned.json")
     (args.out / "manifest.json").write_text(json.dumps(manifest, indent=1) + "\n")
     curve = learning_curve(train, loops, form, val, payload, args.learning_curve)
-    report = {"benchmark": "fee_learned", "forms": forms, "chosen": chosen, "beats_base_on_validation": beats_base,
-              "fee_cold_plans": fee_plans, "learning_curve": curve,
-              "command": " ".join(["python benchmarks/fee_learned.py", *(argv if argv is not None else sys.argv[1:])]),
-              "cpu_s": time.process_time() - t0, "machine": machine_info()}
-    (args.out / "report.json").write_text(json.dumps(report, indent=1) + "\n")
+    report = write_report(args.out, {"forms": forms, "chosen": chosen, "beats_base_on_validation": beats_base,
+                                     "fee_cold_plans": fee_plans, "learning_curve": curve}, argv, t0)
     print(f"wrote {args.out} ({chosen}) in {report['cpu_s']:.0f} s CPU", flush=True)
     return 0
 

@@ -217,3 +217,19 @@ def test_cold_plans_use_the_given_network_and_leave_the_shipped_one_in_place():
     assert calls and out["plans"][0]["iterations"] > 0
     assert learned_module.default_learned_model() is shipped
     assert os.environ.get("WHEELLOADER_NLP_CACHE") == cache
+
+
+def test_the_forms_table_has_a_row_per_form_and_no_test_rows():
+    fl = load_benchmark("fee_learned")
+    plan = {"iterations": 60, "status": "Solve_Succeeded", "check_ok": True, "cpu_s": 0.5}
+    planner = {"iterations_median": 60.0, "cpu_median_s": 0.5, "plans": [plan] * 3}
+    report = {"fee_cold_plans": {"iterations_median": 70.0, "cpu_median_s": 0.4, "plans": [plan] * 3},
+              "chosen": "a",
+              "forms": {"base": {"validation": {"one_cycle": 28.4, "floor": 12.6}},
+                        "a": {"validation": {"one_cycle": 26.0, "floor": 12.0}, "planner": planner, "plannable": True,
+                              "r2_tangential_normal_transfer": {"train": [0.3, 0.6], "validation": [0.0, 0.1],
+                                                                "gravel": [0.9, 0.9]}}}}
+    table = fl.forms_table(report)
+    assert len(table.splitlines()) == 5
+    assert "| a | 26.0 / 12.0 % | 0.30 / 0.60 | 0.00 / 0.10 | 60, 60, 60; 60 | 1.25x | passes | yes |" in table
+    assert "0.90" not in table
