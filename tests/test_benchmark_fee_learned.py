@@ -233,3 +233,16 @@ def test_the_forms_table_has_a_row_per_form_and_no_test_rows():
     assert len(table.splitlines()) == 5
     assert "| a | 26.0 / 12.0 % | 0.30 / 0.60 | 0.00 / 0.10 | 60, 60, 60; 60 | 1.25x | passes | yes |" in table
     assert "0.90" not in table
+
+
+def test_a_form_s_network_carries_the_build_s_payload():
+    from wheelloader.estimator.payload import PayloadOptions
+
+    fl = load_benchmark("fee_learned")
+    shipped = default_learned_model()
+    bare = type(shipped)(shipped.w1, shipped.b1, shipped.w2, shipped.b2, shipped.mean, shipped.std, shipped.low,
+                         shipped.high)
+    assert bare.payload != shipped.payload  # a bare network keeps the default payload
+    carried = fl.with_payload(bare, shipped.payload)
+    assert carried.payload == shipped.payload and isinstance(carried.payload, PayloadOptions)
+    np.testing.assert_array_equal(carried.w1, shipped.w1)
