@@ -59,12 +59,22 @@ def test_bad_arguments_are_refused(argv, message):
     assert done.returncode == 2 and message in done.stderr
 
 
-@pytest.mark.skipif(not (RESULTS / "between_cycles.json").is_file(), reason="no committed between-cycles results")
-def test_table_regenerates_from_json(tmp_path):
-    shutil.copy(RESULTS / "between_cycles.json", tmp_path / "between_cycles.json")
+@pytest.mark.parametrize("results", [RESULTS, RESULTS / "learned", RESULTS / "fee", RESULTS / "compiled"],
+                         ids=["round1", "learned", "fee", "compiled"])
+def test_table_regenerates_from_json(tmp_path, results):
+    """Each committed table (round 1; round 2's side-by-side runs and the compiled variant with its compile step)
+    is what ``--from-json`` writes from its JSON."""
+    if not (results / "between_cycles.json").is_file():
+        pytest.skip(f"no committed between-cycles results in {results}")
+    shutil.copy(results / "between_cycles.json", tmp_path / "between_cycles.json")
     subprocess.run([sys.executable, str(SCRIPT), "--from-json", "--out", str(tmp_path)], check=True,
                    capture_output=True)
-    assert (tmp_path / "table.md").read_text() == (RESULTS / "table.md").read_text()
+    assert (tmp_path / "table.md").read_text() == (results / "table.md").read_text()
+    data = json.loads((results / "between_cycles.json").read_text())
+    if data.get("compile_step"):  # the compiled variant: its compile and flag are in the table
+        table = (results / "table.md").read_text()
+        assert "Compile step" in table and "--compiled DIR" in table
+        assert {run["variant"] for run in data["runs"]} == {"baseline", "current", "compiled"}
 
 
 @pytest.mark.slow
