@@ -121,12 +121,12 @@ def test_plant_loop_unit_plans_with_compiled_derivatives_where_present(tmp_path,
 @pytest.mark.skipif(codegen.compiler() is None, reason="no C compiler")
 def test_the_loops_plan_with_compiled_derivatives_is_the_virtual_machines(tmp_path, monkeypatch):
     """The loop's plan (the kept objective, ``fee-learned``, its check, stall and give-up rules) on a 10-interval
-    NLP: compiled once (about a minute of CPU), then found by its key under the loop's rule: the same path, bit for
+    NLP: compiled once (minutes of CPU), then found by its key under the loop's rule: the same path, bit for
     bit, and the same message."""
     import numpy as np
 
     from wheelloader.estimator.learned import default_learned_model
-    from wheelloader.planner import nlp
+    from wheelloader.planner import cycle, nlp
 
     monkeypatch.setenv("WHEELLOADER_NLP_CACHE", str(tmp_path))
     payload = default_learned_model().payload
@@ -134,17 +134,21 @@ def test_the_loops_plan_with_compiled_derivatives_is_the_virtual_machines(tmp_pa
                              failure_angle="min_weight_force", force_model="fee-learned", payload=payload)
     pile = Pile.trapezoid()
 
+    def fresh():  # a new process's memory: no NLP and no optimiser held (planner.optimizer_for keeps them)
+        monkeypatch.setattr(nlp, "_CACHE", {})
+        monkeypatch.setattr(cycle, "_OPTIMIZERS", {})
+
     def plan(opts):
         out = plan_next_cycle("gravel", pile, mpc=False, options=opts, replan_within_iterations=0,
                               give_up_iterations=BETWEEN_CYCLES_GIVE_UP_ITER)
         return out, (None if out.path is None else np.column_stack([out.path.x, out.path.z, out.path.blade_angle]))
 
-    monkeypatch.setattr(nlp, "_CACHE", {})
+    fresh()
     virtual, vm_path = plan(options)
-    monkeypatch.setattr(nlp, "_CACHE", {})
+    fresh()
     compiled, c_path = plan(replace(options, compiled=True))
     assert codegen.LOG[-1]["status"] == "compiled"
-    monkeypatch.setattr(nlp, "_CACHE", {})
+    fresh()
     previous = nlp.compiled_if_present(True)
     try:
         found, f_path = plan(options)
