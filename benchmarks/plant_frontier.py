@@ -231,6 +231,13 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         keep = [r for r in feasible if r["fill_m3"] >= fixed["fill_m3"] and r["name"] != "fixed"]
         best = min(keep, key=lambda r: r["lifted_per_m3_kJ"], default=None)
         dug = [r for r in sel if r["kind"] == "variant"]
+        # the frontier of the family alone (no reference) read at the fixed path's kept fill, linearly between its
+        # neighbours: what the family spends at exactly that fill
+        family = [r for r in feasible if r["kind"] == "variant"]
+        fam = [family[i] for i in pareto([(r["lifted_per_m3_kJ"], r["fill_m3"]) for r in family])]
+        fills = [r["fill_m3"] for r in fam]
+        at_fixed = (float(np.interp(fixed["fill_m3"], fills, [r["lifted_per_m3_kJ"] for r in fam]))
+                    if fam and fills[0] <= fixed["fill_m3"] <= fills[-1] else math.nan)
         out[pile] = {"fixed_lifted_per_m3_kJ": fixed["lifted_per_m3_kJ"], "fixed_kept_fill": fixed["kept_fill"],
                      "variants": len(dug), "above_limits": sum(r["above_limits"] for r in dug),
                      "frontier": [feasible[i]["name"] for i in front],
@@ -239,6 +246,7 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
                      best["lifted_per_m3_kJ"] / fixed["lifted_per_m3_kJ"],
                      "best_name": None if best is None else best["name"],
                      "reach_085": sum(1 for r in keep if r["lifted_per_m3_kJ"] <= 0.85 * fixed["lifted_per_m3_kJ"]),
+                     "family_frontier_ratio_at_fixed_fill": at_fixed / fixed["lifted_per_m3_kJ"],
                      "least_ratio_any_fill": min((r["lifted_per_m3_kJ"] for r in feasible if r["name"] != "fixed"),
                                                  default=math.nan) / fixed["lifted_per_m3_kJ"]}
     return out
@@ -247,14 +255,15 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
 def markdown(result: dict[str, Any]) -> str:
     """Per pile: the summary line, then every dig by increasing energy per m^3."""
     lines = ["| pile | digs (above the loader's limits) | fixed path: energy per m³ lifted / kept fill | best ratio "
-             "with kept ≥ fixed (dig) | digs with kept ≥ fixed | of them ≤ 0.85× | least ratio at any fill |",
-             "|---|---|---|---|---|---|---|"]
+             "with kept ≥ fixed (dig) | digs with kept ≥ fixed | of them ≤ 0.85× | the family's frontier at the fixed "
+             "path's kept fill | least ratio at any fill |",
+             "|---|---|---|---|---|---|---|---|"]
     for pile, s in result["summary"].items():
         best = ("–" if s["best_ratio_kept_ge_fixed"] is None
                 else f"{s['best_ratio_kept_ge_fixed']:.3f} ({s['best_name']})")
         lines.append(f"| {pile} | {s['variants']} ({s['above_limits']}) | {s['fixed_lifted_per_m3_kJ']:.1f} kJ/m³ / "
                      f"{s['fixed_kept_fill']:.1%} | {best} | {s['kept_ge_fixed']} | {s['reach_085']} | "
-                     f"{s['least_ratio_any_fill']:.3f} |")
+                     f"{s['family_frontier_ratio_at_fixed_fill']:.3f}× | {s['least_ratio_any_fill']:.3f} |")
     lines += ["", "| pile | dig | energy per m³ lifted | ratio to fixed | kept fill | end height | plant's energy "
               "per m³ | peak F_T / F_N | on the frontier | control point (x, z) | end (x, z) | curl from / end angle "
               "| entry angle | duration |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -310,16 +319,74 @@ def figure(result: dict[str, Any], target: Path) -> None:
         front = [next(r for r in sel if r["name"] == n) for n in s["frontier"]]
         ax.plot([100 * r["kept_fill"] for r in front], [r["lifted_per_m3_kJ"] for r in front], "-", c="tab:blue",
                 lw=1, label="Pareto frontier")
-        for r in (r for r in sel if r["kind"] == "reference"):
+        for r in (r for r in sel if r["kind"] == "reference" and not r["name"].startswith("fixed")):
             ax.scatter([100 * r["kept_fill"]], [r["lifted_per_m3_kJ"]], marker="^", s=40, label=r["name"])
         ax.scatter([100 * s["fixed_kept_fill"]], [s["fixed_lifted_per_m3_kJ"]], marker="*", s=150, c="tab:red",
                    label="fixed path", zorder=5)
         ax.axhline(0.85 * s["fixed_lifted_per_m3_kJ"], c="tab:red", ls="--", lw=1, label="0.85 × fixed")
         ax.axvline(100 * s["fixed_kept_fill"], c="tab:red", ls=":", lw=1)
-        ax.set_title(pile)
+        top = 2.0 * s["fixed_lifted_per_m3_kJ"]
+        off = sum(1 for r in sel if r["lifted_per_m3_kJ"] > top)
+        ax.set_ylim(0.5 * s["fixed_lifted_per_m3_kJ"], top)
+        ax.set_title(pile + (f" ({off} dig{'s' if off > 1 else ''} above 2 × fixed, off the scale)" if off else ""),
+                     fontsize=9)
         ax.set_xlabel("kept fill, % of the nominal bucket")
         ax.set_ylabel(f"energy per m³, lifted to {result['z_ref_m']:.2f} m [kJ/m³]")
         ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(target, dpi=110)
+    plt.close(fig)
+
+
+def path_figure(result: dict[str, Any], target: Path) -> None:
+    """Per pile, what the paths look like: the tip of the fixed path, of the loops' planned paths, of the
+    cheapest dig keeping at least the fixed path's fill and of the cheapest dig at any fill, over the start pile's
+    surface (read from the saved cycles named by the rows' ``source``)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from wheelloader.estimator import CycleLog
+    from wheelloader.estimator.cyclelog import find_cycle_log
+
+    def load(row: dict[str, Any]) -> Any:
+        where = Path(row["source"])
+        found = find_cycle_log(where.parent, where.name)
+        return None if found is None else CycleLog.load(found, check=False)
+
+    piles = list(result["summary"])
+    fig, axes = plt.subplots(1, max(1, len(piles)), figsize=(5.5 * max(1, len(piles)), 4.0), squeeze=False)
+    for ax, pile in zip(axes[0], piles, strict=False):
+        s = result["summary"][pile]
+        sel = {r["name"]: r for r in result["rows"] if r["pile"] == pile and "source" in r}
+        shown = [("fixed", "fixed path", "tab:red")]
+        shown += [(n, n, c) for n, c in zip((n for n in sel if n.startswith("ours")), ("tab:blue", "tab:green"),
+                                            strict=False)]
+        if s["best_name"] and s["best_name"] in sel and not s["best_name"].startswith("ours"):
+            shown.append((s["best_name"], f"{s['best_name']}: least energy with kept ≥ fixed", "tab:purple"))
+        variants = [r for r in sel.values() if r["kind"] == "variant" and not r["above_limits"]]
+        cheapest = min(variants, key=lambda r: r["lifted_per_m3_kJ"], default=None)
+        if cheapest is not None and cheapest["name"] not in {n for n, _, _ in shown}:
+            shown.append((cheapest["name"], f"{cheapest['name']}: least energy at any fill", "tab:gray"))
+        surface_drawn = False
+        for name, label, colour in shown:
+            log = load(sel[name]) if name in sel else None
+            if log is None:
+                continue
+            if not surface_drawn:
+                ax.fill_between(log.pile.x, log.pile.heights, color="tan", alpha=0.5, lw=0, label="start pile")
+                surface_drawn = True
+            r = sel[name]
+            ax.plot(log.path.x, log.path.z, c=colour, lw=1.5,
+                    label=f"{label} ({r['lifted_per_m3_kJ']:.1f} kJ/m³, kept {r['kept_fill']:.0%})")
+        ax.set_xlim(-0.3, 2.0)
+        ax.set_ylim(-0.1, 1.45)
+        ax.set_aspect("equal")
+        ax.set_title(f"{pile}: bucket tip paths", fontsize=9)
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("z [m]")
+        ax.legend(fontsize=6, loc="upper left")
     fig.tight_layout()
     fig.savefig(target, dpi=110)
     plt.close(fig)
@@ -332,6 +399,7 @@ def write(result: dict[str, Any], out: Path) -> None:
     tmp.replace(out / "plant_frontier.json")
     (out / "plant_frontier.md").write_text(markdown(result))
     figure(result, out / "plant_frontier.png")
+    path_figure(result, out / "plant_frontier_paths.png")
 
 
 def placement(pile: Any) -> float:
@@ -387,6 +455,7 @@ def run(args: argparse.Namespace, out: Path, piles: list[tuple[str, Any, str]]) 
             t0 = time.perf_counter()
             log, resumed = dig_or_read(plant, path, pile, soil, args.seed, folder / f"{name}.csv.xz")
             row = {"pile": label, "kind": "variant", "name": name, "params": params, "duration_used_s": duration,
+                   "source": str(folder / name),
                    "shift_m": shift, "limit_ratios": limit_ratios(path), "resumed": resumed,
                    **measure(log, soil, z_ref), **shape(path)}
             rows.append(row)

@@ -77,6 +77,9 @@ def test_summary_known_answer(pf):
     assert g["variants"] == 5 and g["above_limits"] == 1
     assert g["frontier"] == ["v02", "v01", "ours", "v04"]
     assert g["least_ratio_any_fill"] == pytest.approx(30.0 / 40.0)
+    # the family's frontier (v02 at 0.099 m^3, v01 at 0.101, v04; v01 dominates fixed): halfway between v02 and v01
+    assert g["family_frontier_ratio_at_fixed_fill"] == pytest.approx(31.5 / 40.0)
+    assert s["sand"]["family_frontier_ratio_at_fixed_fill"] == pytest.approx(1.0)  # the fixed path is its end
     assert s["sand"]["best_name"] is None and s["sand"]["reach_085"] == 0
 
 
