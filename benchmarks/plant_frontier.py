@@ -84,6 +84,56 @@ def design(count: int, seed: int = DESIGN_SEED, scale: float = 1.0) -> list[dict
     return [{k: float(round(v, 4)) for k, v in zip(BOUNDS, p, strict=True)} for p in points]
 
 
+#: The planned path's family (``--planned``): its depth below the start pile scaled, its blade angle offset before
+#: the final curl, its x stretched about its start (low, high); the base is the first ``--references`` loop's ours.
+PLANNED_BOUNDS: dict[str, tuple[float, float]] = {
+    "depth_scale": (0.80, 1.25),
+    "angle_offset_deg": (-8.0, 8.0),
+    "x_stretch": (0.92, 1.08),
+}
+
+
+def planned_design(count: int, seed: int = DESIGN_SEED) -> list[dict[str, float]]:
+    """The first ``count`` points of the scrambled Sobol design over :data:`PLANNED_BOUNDS`."""
+    from scipy.stats import qmc
+
+    if count <= 0:
+        return []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        unit = qmc.Sobol(len(PLANNED_BOUNDS), scramble=True, seed=seed).random(count)
+    lows = np.array([b[0] for b in PLANNED_BOUNDS.values()])
+    highs = np.array([b[1] for b in PLANNED_BOUNDS.values()])
+    return [{k: float(round(v, 4)) for k, v in zip(PLANNED_BOUNDS, p, strict=True)}
+            for p in lows + unit * (highs - lows)]
+
+
+def planned_variant(base: Any, pile: Any, params: dict[str, float], name: str = "planned") -> tuple[Any, float]:
+    """The planned path ``base`` with its x stretched about its start, its depth below ``pile``'s surface scaled
+    (where it is below) and its blade angle offset (fading out over the last quarter, so the end angle stays);
+    slowed down where it would exceed the loader's limits (or the base's own peak, where that is above them).
+    ``(path, duration [s])``."""
+    from wheelloader.estimator import BucketPath
+
+    x = base.x[0] + params["x_stretch"] * (base.x - base.x[0])
+    surface = np.asarray(pile.surface_height(x))
+    depth = np.asarray(pile.surface_height(base.x)) - base.z  # the base's depth, carried to the stretched x
+    z = np.where(depth > 0.0, surface - params["depth_scale"] * depth, surface - depth)
+    u = (base.t - base.t[0]) / (base.t[-1] - base.t[0])
+    fade = 1.0 - np.clip((u - 0.75) / 0.25, 0.0, 1.0)
+    angle = base.blade_angle + math.radians(params["angle_offset_deg"]) * fade
+    t = base.t - base.t[0]
+    path = BucketPath(t, x, z, angle, name)
+    # the limits, or the base's own peaks where it exceeds them (a planned path's knots make the finite-difference
+    # acceleration spike; the planner bounds it at its knots)
+    r, cap = limit_ratios(path), {k: max(1.0, v) for k, v in limit_ratios(base).items()}
+    scale = max(1.0, r["speed"] / cap["speed"], r["tilt_rate"] / cap["tilt_rate"],
+                math.sqrt(r["acceleration"] / cap["acceleration"]))
+    if scale > 1.0:
+        path = BucketPath(t * scale * 1.01, x, z, angle, name)
+    return path, float(path.t[-1])
+
+
 def limit_ratios(path: Any) -> dict[str, float]:
     """The path's peak tip speed, acceleration and tilt rate over the loader's limits
     (:class:`wheelloader.estimator.Loader`)."""
@@ -272,10 +322,15 @@ def markdown(result: dict[str, Any]) -> str:
         base = s["fixed_lifted_per_m3_kJ"]
         for r in sel:
             p = r.get("params")
-            geo = (f"({p['control_x']:.2f}, {p['control_z']:.2f}) m | ({p['end_x']:.2f}, {p['end_z']:.2f}) m | "
-                   f"{p['curl_from']:.2f} / {p['angle_end_deg']:.0f}° | {p['angle_start_deg']:.0f}° | "
-                   f"{r['duration_s']:.2f} s" if p
-                   else "the loop's saved cycle | – | – | – | " + f"{r['duration_s']:.2f} s")
+            if p and "depth_scale" in p:
+                geo = (f"the first reference's planned path, depth × {p['depth_scale']:.2f}, blade "
+                       f"{p['angle_offset_deg']:+.0f}°, x × {p['x_stretch']:.2f} | – | – | – | ")
+            elif p:
+                geo = (f"({p['control_x']:.2f}, {p['control_z']:.2f}) m | ({p['end_x']:.2f}, {p['end_z']:.2f}) m | "
+                       f"{p['curl_from']:.2f} / {p['angle_end_deg']:.0f}° | {p['angle_start_deg']:.0f}° | ")
+            else:
+                geo = "the loop's saved cycle | – | – | – | "
+            geo += f"{r['duration_s']:.2f} s"
             mark = " ⚠ above limits" if r["above_limits"] else ""
             lines.append(f"| {pile} | {r['name']}{mark} | {r['lifted_per_m3_kJ']:.1f} kJ/m³ | "
                          f"{r['lifted_per_m3_kJ'] / base:.3f} | {r['kept_fill']:.1%} | {r['z_end_m']:.2f} m | "
@@ -284,7 +339,8 @@ def markdown(result: dict[str, Any]) -> str:
     lines.append("")
     for run in result.get("invocations") or [result]:
         st = run["settings"]
-        local = f" --local {st['local']}" if st.get("local") else ""
+        local = (f" --local {st['local']}" if st.get("local") else "") + (
+            f" --planned {st['planned']}" if st.get("planned") else "")
         lines.append(f"*`python benchmarks/plant_frontier.py --count {st['count']}{local} --piles "
                      f"{' '.join(st['piles'])}` ({st['plant']} plant, dx {st['resolution']} m, seed {st['seed']}, "
                      f"design seed {st['design_seed']}) at {commit_label(run['machine'])}; {run['dig_s'] / 60:.0f} min "
@@ -336,6 +392,18 @@ def figure(result: dict[str, Any], target: Path) -> None:
     fig.tight_layout()
     fig.savefig(target, dpi=110)
     plt.close(fig)
+
+
+def _read(source: str) -> Any:
+    """The saved cycle ``source`` (a folder and a stem)."""
+    from wheelloader.estimator import CycleLog
+    from wheelloader.estimator.cyclelog import find_cycle_log
+
+    where = Path(source)
+    found = find_cycle_log(where.parent, where.name)
+    if found is None:
+        raise SystemExit(f"wheelloader: error: {source}: no saved cycle")
+    return CycleLog.load(found, check=False)
 
 
 def path_figure(result: dict[str, Any], target: Path) -> None:
@@ -431,7 +499,8 @@ def run(args: argparse.Namespace, out: Path, piles: list[tuple[str, Any, str]]) 
         rows += references(spec, label, args.references or [], z_ref)
     settings = {"count": args.count, "piles": args.piles, "plant": args.plant, "resolution": args.resolution,
                 "threads": args.threads, "seed": args.seed, "design_seed": args.design_seed,
-                "references": args.references, "local": args.local, "local_scale": LOCAL_SCALE}
+                "references": args.references, "local": args.local, "local_scale": LOCAL_SCALE,
+                "planned": args.planned}
     # the other piles' rows of an earlier invocation into the same OUT stay (one JSON for every pile)
     saved = out / "plant_frontier.json"
     earlier = json.loads(saved.read_text()) if saved.is_file() else {}
@@ -445,12 +514,24 @@ def run(args: argparse.Namespace, out: Path, piles: list[tuple[str, Any, str]]) 
     started = time.perf_counter()
     points = [("fixed", FIXED)] + [(f"v{i + 1:02d}", p) for i, p in enumerate(design(args.count, args.design_seed))]
     points += [(f"l{i + 1:02d}", p) for i, p in enumerate(design(args.local, args.design_seed, LOCAL_SCALE))]
+    points += [(f"p{i + 1:02d}", p) for i, p in enumerate(planned_design(args.planned, args.design_seed))]
+    bases = {}
+    if args.planned:
+        for spec, (_, _, label) in zip(args.piles, piles, strict=True):
+            ours = [r for r in rows if r["pile"] == label and r["kind"] == "reference" and r["name"].startswith("ours")]
+            if not ours:
+                raise SystemExit(f"wheelloader: error: --planned: no planned path of a --references loop on {spec}")
+            bases[label] = _read(ours[0]["source"]).path
     # interleave the piles: each pile's design grows together, so a run cut short leaves every pile a prefix
     for name, params in points:
         for soil, pile, label in piles:
             shift = placement(pile)
-            path, duration = variant_path(params, name=name)
-            path = path.shifted(dx=shift)
+            if name.startswith("p"):
+                path, duration = planned_variant(bases[label], pile, params, name=name)
+                shift = 0.0
+            else:
+                path, duration = variant_path(params, name=name)
+                path = path.shifted(dx=shift)
             folder = cycles / label.replace(" ", "_").replace("'", "")
             t0 = time.perf_counter()
             log, resumed = dig_or_read(plant, path, pile, soil, args.seed, folder / f"{name}.csv.xz")
@@ -480,6 +561,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--local", type=int, default=0,
                         help=f"further points (named lNN) of the design in the box shrunk by {LOCAL_SCALE} around "
                              "the fixed path, dug after the others")
+    parser.add_argument("--planned", type=int, default=0,
+                        help="further points (named pNN): the first --references loop's planned path on the pile with "
+                             "its depth, blade angle and length varied (PLANNED_BOUNDS), dug last")
     parser.add_argument("--design-seed", type=int, default=DESIGN_SEED, help="seed of the scrambled Sobol design")
     parser.add_argument("--piles", nargs="+", default=["gravel", "sand"],
                         help="SOIL (the fresh pile) or SOIL:CYCLES_DIR:K (ours' cycle-K start pile of a saved loop)")
@@ -493,8 +577,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="plant seed")
     parser.add_argument("--report", action="store_true", help="only regenerate the table and PNG from the JSON")
     args = parser.parse_args(argv)
-    if args.count < 0 or args.local < 0:
-        parser.exit(2, "wheelloader: error: --count and --local must be >= 0\n")
+    if args.count < 0 or args.local < 0 or args.planned < 0:
+        parser.exit(2, "wheelloader: error: --count, --local and --planned must be >= 0\n")
     out = Path(args.out)
     if args.report:
         saved = out / "plant_frontier.json"

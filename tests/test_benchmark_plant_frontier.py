@@ -122,3 +122,28 @@ def test_bad_input_one_line_exit_2(pf, argv, capsys):
         pf.main(["--plant", "fee-env", *argv])
     assert exc.value.code == 2
     assert capsys.readouterr().err.startswith("wheelloader: error:")
+
+
+def test_the_planned_family_varies_the_loops_planned_path(pf):
+    from pathlib import Path
+
+    from wheelloader.saved_loops import load_saved_cycle
+
+    saved = Path(__file__).resolve().parents[1] / "data/results/loop_mpm_learned/cycles/loops/gravel/seed0/ours"
+    log = load_saved_cycle(saved, 1, check=False)
+    if log is None:
+        pytest.skip("the learned loop's saved cycles are not in this checkout")
+    base, pile = log.path, log.pile
+    same, duration = pf.planned_variant(base, pile, {"depth_scale": 1.0, "angle_offset_deg": 0.0, "x_stretch": 1.0})
+    assert duration == pytest.approx(base.t[-1] - base.t[0])
+    assert same.x == pytest.approx(base.x, abs=1e-12) and same.z == pytest.approx(base.z, abs=1e-12)
+    deeper, _ = pf.planned_variant(base, pile, {"depth_scale": 1.2, "angle_offset_deg": 5.0, "x_stretch": 1.0})
+    depth = pile.surface_height(base.x) - base.z
+    below = depth > 0
+    assert (pile.surface_height(deeper.x) - deeper.z)[below] == pytest.approx(1.2 * depth[below])
+    assert deeper.blade_angle[0] == pytest.approx(base.blade_angle[0] + 5.0 * 3.141592653589793 / 180)
+    assert deeper.blade_angle[-1] == pytest.approx(base.blade_angle[-1])  # the offset fades out before the end
+    for params in pf.planned_design(8):
+        variant, _ = pf.planned_variant(base, pile, params)
+        caps = {k: max(1.0, v) for k, v in pf.limit_ratios(base).items()}
+        assert all(v <= caps[k] + 1e-9 for k, v in pf.limit_ratios(variant).items())
