@@ -218,7 +218,8 @@ def pile_for(spec: str) -> tuple[str, Any, str]:
 
 def references(spec: str, label: str, refs: list[tuple[str, str]], z_ref: float) -> list[dict[str, Any]]:
     """The loops' own cycles on this pile, read back: ours' (and the fixed path's) cycle 1 of seed 0 for a fresh
-    pile; for ``SOIL:DIR:K``, ours' cycle K and the fixed path dug on its pile (``paired/.../fixed_on_ours``)."""
+    pile; for ``SOIL:DIR:K``, ours' cycle K and the fixed path dug on its pile (``paired/.../fixed_on_ours``) of the
+    loop DIR only (another loop's cycle K started from another pile)."""
     from wheelloader.saved_loops import load_saved_cycle
 
     soil, _, rest = spec.partition(":")
@@ -226,7 +227,10 @@ def references(spec: str, label: str, refs: list[tuple[str, str]], z_ref: float)
     for name, folder in refs:
         root = Path(folder)
         if rest:
-            k = int(rest.rpartition(":")[2])
+            pile_folder, _, k_text = rest.rpartition(":")
+            if root.resolve() != Path(pile_folder).resolve():
+                continue  # another loop's cycle K started from another pile
+            k = int(k_text)
             found = [(f"ours ({name})", root / "loops" / soil / "seed0" / "ours", k),
                      (f"fixed ({name}, saved)", root / "paired" / soil / "seed0" / "fixed_on_ours" / f"cycle{k}", 1)]
         else:

@@ -147,3 +147,17 @@ def test_the_planned_family_varies_the_loops_planned_path(pf):
         variant, _ = pf.planned_variant(base, pile, params)
         caps = {k: max(1.0, v) for k, v in pf.limit_ratios(base).items()}
         assert all(v <= caps[k] + 1e-9 for k, v in pf.limit_ratios(variant).items())
+
+
+def test_a_carved_piles_references_come_from_its_own_loop_only(pf):
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1] / "data/results"
+    learned, v3 = root / "loop_mpm_learned/cycles", root / "loop_mpm_v3/cycles"
+    if not (learned / "loops/gravel/seed0/ours").is_dir() or not (v3 / "loops").is_dir():
+        pytest.skip("the saved loops are not in this checkout")
+    refs = [("learned", str(learned)), ("v3", str(v3))]
+    carved = pf.references(f"gravel:{learned}:3", "carved", refs, 1.2)
+    assert [r["name"] for r in carved] == ["ours (learned)", "fixed (learned, saved)"]
+    fresh = pf.references("gravel", "gravel", refs, 1.2)
+    assert [r["name"] for r in fresh] == ["ours (learned)", "fixed (learned, saved)", "ours (v3)", "fixed (v3, saved)"]
