@@ -37,6 +37,7 @@ import json
 import math
 import time
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -271,6 +272,25 @@ def dig_or_read(plant: Any, path: Any, pile: Any, soil: str, seed: int, csv: Pat
     return log, False
 
 
+#: The families a row belongs to: the fixed path's Bezier family (the fixed path, the wide and the local design),
+#: the loop's planned path varied (``--planned``) and the loops' own plans (the references).
+FAMILIES: dict[str, Callable[[dict[str, Any]], bool]] = {
+    "Bézier (the fixed path's)": lambda r: r["kind"] == "variant" and not r["name"].startswith("p"),
+    "the planned path varied": lambda r: r["kind"] == "variant" and r["name"].startswith("p"),
+    "the loops' own plans": lambda r: r["kind"] == "reference" and r["name"].startswith("ours"),
+}
+
+
+def frontier_at(rows: list[dict[str, Any]], fill: float) -> float:
+    """The Pareto frontier of ``rows`` read at kept ``fill`` [m^3], linearly between its neighbours (energy per
+    m^3 lifted [kJ/m^3]); NaN outside the frontier's fills."""
+    front = [rows[i] for i in pareto([(r["lifted_per_m3_kJ"], r["fill_m3"]) for r in rows])]
+    fills = [r["fill_m3"] for r in front]
+    if not front or not fills[0] <= fill <= fills[-1]:
+        return math.nan
+    return float(np.interp(fill, fills, [r["lifted_per_m3_kJ"] for r in front]))
+
+
 def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Per pile: the fixed path's figures, every dig's ratio, the Pareto frontier and the best ratio among digs
     keeping at least the fixed path's fill (within the loader's limits)."""
@@ -285,13 +305,24 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
         keep = [r for r in feasible if r["fill_m3"] >= fixed["fill_m3"] and r["name"] != "fixed"]
         best = min(keep, key=lambda r: r["lifted_per_m3_kJ"], default=None)
         dug = [r for r in sel if r["kind"] == "variant"]
-        # the frontier of the family alone (no reference) read at the fixed path's kept fill, linearly between its
-        # neighbours: what the family spends at exactly that fill
-        family = [r for r in feasible if r["kind"] == "variant"]
-        fam = [family[i] for i in pareto([(r["lifted_per_m3_kJ"], r["fill_m3"]) for r in family])]
-        fills = [r["fill_m3"] for r in fam]
-        at_fixed = (float(np.interp(fixed["fill_m3"], fills, [r["lifted_per_m3_kJ"] for r in fam]))
-                    if fam and fills[0] <= fixed["fill_m3"] <= fills[-1] else math.nan)
+        # the frontier of the digs (no reference) read at the fixed path's kept fill: what they spend at that fill
+        at_fixed = frontier_at([r for r in feasible if r["kind"] == "variant"], fixed["fill_m3"])
+        families = {}
+        for family, member in FAMILIES.items():
+            mine = [r for r in feasible if member(r)]
+            if not mine:
+                continue
+            kept = [r for r in mine if r["fill_m3"] >= fixed["fill_m3"] and r["name"] != "fixed"]
+            top = min(kept, key=lambda r: r["lifted_per_m3_kJ"], default=None)
+            families[family] = {
+                "count": sum(1 for r in sel if member(r)), "above_limits": sum(1 for r in sel if member(r)
+                                                                               and r["above_limits"]),
+                "kept_ge_fixed": len(kept),
+                "best_ratio": None if top is None else top["lifted_per_m3_kJ"] / fixed["lifted_per_m3_kJ"],
+                "best_name": None if top is None else top["name"],
+                "best_kept_fill": None if top is None else top["kept_fill"],
+                "reach_085": sum(1 for r in kept if r["lifted_per_m3_kJ"] <= 0.85 * fixed["lifted_per_m3_kJ"]),
+                "frontier_ratio_at_fixed_fill": frontier_at(mine, fixed["fill_m3"]) / fixed["lifted_per_m3_kJ"]}
         out[pile] = {"fixed_lifted_per_m3_kJ": fixed["lifted_per_m3_kJ"], "fixed_kept_fill": fixed["kept_fill"],
                      "variants": len(dug), "above_limits": sum(r["above_limits"] for r in dug),
                      "frontier": [feasible[i]["name"] for i in front],
@@ -301,24 +332,33 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, Any]:
                      "best_name": None if best is None else best["name"],
                      "reach_085": sum(1 for r in keep if r["lifted_per_m3_kJ"] <= 0.85 * fixed["lifted_per_m3_kJ"]),
                      "family_frontier_ratio_at_fixed_fill": at_fixed / fixed["lifted_per_m3_kJ"],
+                     "families": families,
                      "least_ratio_any_fill": min((r["lifted_per_m3_kJ"] for r in feasible if r["name"] != "fixed"),
                                                  default=math.nan) / fixed["lifted_per_m3_kJ"]}
     return out
 
 
 def markdown(result: dict[str, Any]) -> str:
-    """Per pile: the summary line, then every dig by increasing energy per m^3."""
-    lines = ["| pile | digs (above the loader's limits) | fixed path: energy per m³ lifted / kept fill | best ratio "
-             "with kept ≥ fixed (dig) | digs with kept ≥ fixed | of them ≤ 0.85× | the family's frontier at the fixed "
-             "path's kept fill | least ratio at any fill |",
-             "|---|---|---|---|---|---|---|---|"]
+    """Per pile and family: the best ratio to the fixed path with at least its kept fill, the frontier there."""
+    lines = ["| pile | fixed path: energy per m³ lifted / kept fill | family | digs (above the loader's limits) | "
+             "best ratio with kept ≥ fixed (dig, kept fill) | digs with kept ≥ fixed / of them ≤ 0.85× | the "
+             "family's frontier at the fixed path's kept fill |", "|---|---|---|---|---|---|---|"]
     for pile, s in result["summary"].items():
-        best = ("–" if s["best_ratio_kept_ge_fixed"] is None
-                else f"{s['best_ratio_kept_ge_fixed']:.3f} ({s['best_name']})")
-        lines.append(f"| {pile} | {s['variants']} ({s['above_limits']}) | {s['fixed_lifted_per_m3_kJ']:.1f} kJ/m³ / "
-                     f"{s['fixed_kept_fill']:.1%} | {best} | {s['kept_ge_fixed']} | {s['reach_085']} | "
-                     f"{s['family_frontier_ratio_at_fixed_fill']:.3f}× | {s['least_ratio_any_fill']:.3f} |")
-    lines += ["", "| pile | dig | energy per m³ lifted | ratio to fixed | kept fill | end height | plant's energy "
+        fixed = f"{s['fixed_lifted_per_m3_kJ']:.1f} kJ/m³ / {s['fixed_kept_fill']:.1%}"
+        for family, f in s.get("families", {}).items():
+            best = ("–" if f["best_ratio"] is None
+                    else f"**{f['best_ratio']:.3f}** ({f['best_name']}, {f['best_kept_fill']:.1%})")
+            ratio = f["frontier_ratio_at_fixed_fill"]
+            front = "–" if math.isnan(ratio) else f"{ratio:.3f}×"
+            lines.append(f"| {pile} | {fixed} | {family} | {f['count']} ({f['above_limits']}) | {best} | "
+                         f"{f['kept_ge_fixed']} / {f['reach_085']} | {front} |")
+    return "\n".join(lines + footer(result)) + "\n"
+
+
+def digs_markdown(result: dict[str, Any]) -> str:
+    """Every dig and reference by pile, by increasing energy per m^3."""
+    lines: list[str] = []
+    lines += ["| pile | dig | energy per m³ lifted | ratio to fixed | kept fill | end height | plant's energy "
               "per m³ | peak F_T / F_N | on the frontier | control point (x, z) | end (x, z) | curl from / end angle "
               "| entry angle | duration |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for pile, s in result["summary"].items():
@@ -340,7 +380,12 @@ def markdown(result: dict[str, Any]) -> str:
                          f"{r['lifted_per_m3_kJ'] / base:.3f} | {r['kept_fill']:.1%} | {r['z_end_m']:.2f} m | "
                          f"{r['energy_per_m3_kJ']:.1f} kJ/m³ | {r['peak_F_T_N'] / 1e3:.1f} / "
                          f"{r['peak_F_N_N'] / 1e3:.1f} kN | {'yes' if r['name'] in s['frontier'] else ''} | {geo} |")
-    lines.append("")
+    return "\n".join(lines + footer(result)) + "\n"
+
+
+def footer(result: dict[str, Any]) -> list[str]:
+    """The commands that made the result, their commit and load, and what the figures are."""
+    lines = [""]
     for run in result.get("invocations") or [result]:
         st = run["settings"]
         local = (f" --local {st['local']}" if st.get("local") else "") + (
@@ -353,7 +398,7 @@ def markdown(result: dict[str, Any]) -> str:
               f"path plus the lift of the kept load from the path's end to {result['z_ref_m']:.2f} m, over the kept "
               "fill (soil inside the bucket at the path's end, % of the nominal 0.2 m³). References: the loops' own "
               "cycles on the same pile, read back.*"]
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 def figure(result: dict[str, Any], target: Path) -> None:
@@ -470,6 +515,7 @@ def write(result: dict[str, Any], out: Path) -> None:
     tmp.write_text(json.dumps(result, indent=1, default=str))
     tmp.replace(out / "plant_frontier.json")
     (out / "plant_frontier.md").write_text(markdown(result))
+    (out / "plant_frontier_digs.md").write_text(digs_markdown(result))
     figure(result, out / "plant_frontier.png")
     path_figure(result, out / "plant_frontier_paths.png")
 

@@ -69,17 +69,22 @@ def _row(name, lifted, fill, pile="gravel", above=False, kind="variant"):
 def test_summary_known_answer(pf):
     rows = [_row("fixed", 40.0, 0.100), _row("v01", 33.0, 0.101), _row("v02", 30.0, 0.099),
             _row("v03", 20.0, 0.120, above=True), _row("v04", 36.0, 0.110), _row("ours", 35.0, 0.104, kind="reference"),
-            _row("fixed", 50.0, 0.1, pile="sand"), _row("v01", 49.0, 0.09, pile="sand")]
+            _row("p01", 34.0, 0.102), _row("fixed", 50.0, 0.1, pile="sand"), _row("v01", 49.0, 0.09, pile="sand")]
     s = pf.summarise(rows)
     g = s["gravel"]
     assert g["best_name"] == "v01" and g["best_ratio_kept_ge_fixed"] == pytest.approx(33.0 / 40.0)
-    assert g["reach_085"] == 1 and g["kept_ge_fixed"] == 3  # v01, v04 and ours; v03 is above the limits
-    assert g["variants"] == 5 and g["above_limits"] == 1
-    assert g["frontier"] == ["v02", "v01", "ours", "v04"]
+    assert g["reach_085"] == 2 and g["kept_ge_fixed"] == 4  # v01, p01, v04 and ours; v03 is above the limits
+    assert g["variants"] == 6 and g["above_limits"] == 1
+    assert g["frontier"] == ["v02", "v01", "p01", "ours", "v04"]
     assert g["least_ratio_any_fill"] == pytest.approx(30.0 / 40.0)
     # the family's frontier (v02 at 0.099 m^3, v01 at 0.101, v04; v01 dominates fixed): halfway between v02 and v01
     assert g["family_frontier_ratio_at_fixed_fill"] == pytest.approx(31.5 / 40.0)
     assert s["sand"]["family_frontier_ratio_at_fixed_fill"] == pytest.approx(1.0)  # the fixed path is its end
+    bezier, planned = g["families"]["Bézier (the fixed path's)"], g["families"]["the planned path varied"]
+    assert (bezier["best_name"], bezier["count"], bezier["kept_ge_fixed"]) == ("v01", 5, 2)
+    assert bezier["frontier_ratio_at_fixed_fill"] == pytest.approx(31.5 / 40.0)
+    assert (planned["best_name"], planned["reach_085"]) == ("p01", 1)
+    assert g["families"]["the loops' own plans"]["best_ratio"] == pytest.approx(35.0 / 40.0)
     assert s["sand"]["best_name"] is None and s["sand"]["reach_085"] == 0
 
 
@@ -102,10 +107,12 @@ def test_runs_end_to_end_in_the_fee_env_plant_and_resumes(pf, tmp_path, capsys):
     assert pf.main(argv[:3] + ["3"] + argv[4:]) == 0  # a larger design digs only the new point
     again = json.loads((out / "plant_frontier.json").read_text())
     assert [r["resumed"] for r in again["rows"]] == [True, True, True, False]
-    table = (out / "plant_frontier.md").read_text()
-    assert "| sand | fixed |" in table and "v03" in table
+    table, digs = (out / "plant_frontier.md").read_text(), (out / "plant_frontier_digs.md").read_text()
+    assert "| sand | fixed |" in digs and "v03" in digs
+    assert "| sand |" in table and "Bézier" in table
     assert pf.main(["--report", "--out", str(out)]) == 0
     assert (out / "plant_frontier.md").read_text() == table
+    assert (out / "plant_frontier_digs.md").read_text() == digs
     # another pile into the same OUT joins the first pile's rows; --local adds points of the shrunk box
     assert pf.main(["--plant", "fee-env", "--count", "0", "--local", "1", "--piles", "gravel", "--out", str(out)]) == 0
     both = json.loads((out / "plant_frontier.json").read_text())
