@@ -392,8 +392,9 @@ def footer(result: dict[str, Any]) -> list[str]:
             f" --planned {st['planned']}" if st.get("planned") else "")
         lines.append(f"*`python benchmarks/plant_frontier.py --count {st['count']}{local} --piles "
                      f"{' '.join(st['piles'])}` ({st['plant']} plant, dx {st['resolution']} m, seed {st['seed']}, "
-                     f"design seed {st['design_seed']}) at {commit_label(run['machine'])}; {run['dig_s'] / 60:.0f} min "
-                     f"of digging, load average at the end {load_label(run['machine'])}.*")
+                     f"design seed {st['design_seed']}) at {commit_label(run['machine'])}; {run.get('dug', '?')} digs "
+                     f"(the others read back) in {run['dig_s'] / 60:.0f} min, load average at the end "
+                     f"{load_label(run['machine'])}.*")
     lines += ["", f"*Energy per m³ lifted: the plant's work along the "
               f"path plus the lift of the kept load from the path's end to {result['z_ref_m']:.2f} m, over the kept "
               "fill (soil inside the bucket at the path's end, % of the nominal 0.2 m³). References: the loops' own "
@@ -599,6 +600,7 @@ def run(args: argparse.Namespace, out: Path, piles: list[tuple[str, Any, str]]) 
             result["dig_s"] = this["dig_s"] = time.perf_counter() - started
             if not resumed:
                 result["machine"] = this["machine"] = machine_info()
+                this["dug"] = this.get("dug", 0) + 1
             write(result, out)
     return result
 
