@@ -392,8 +392,9 @@ def footer(result: dict[str, Any]) -> list[str]:
             f" --planned {st['planned']}" if st.get("planned") else "")
         lines.append(f"*`python benchmarks/plant_frontier.py --count {st['count']}{local} --piles "
                      f"{' '.join(st['piles'])}` ({st['plant']} plant, dx {st['resolution']} m, seed {st['seed']}, "
-                     f"design seed {st['design_seed']}) at {commit_label(run['machine'])}; {run.get('dug', '?')} digs "
-                     f"(the others read back) in {run['dig_s'] / 60:.0f} min, load average at the end "
+                     f"design seed {st['design_seed']}) at {commit_label(run['machine'])}; "
+                     + (f"{run['dug']} digs (the others read back) in " if "dug" in run else "")
+                     + f"{run['dig_s'] / 60:.0f} min, load average at the end "
                      f"{load_label(run['machine'])}.*")
     lines += ["", f"*Energy per m³ lifted: the plant's work along the "
               f"path plus the lift of the kept load from the path's end to {result['z_ref_m']:.2f} m, over the kept "
